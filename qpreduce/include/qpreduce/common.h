@@ -1,0 +1,80 @@
+// qpreduce — common types, status codes and argument checks.
+//
+// Three layers of errors (../../../shared/STYLE.md §4):
+//   * `assert` on hot-path contracts (sizes inside per-frame loops);
+//   * `std::invalid_argument` at the API boundary, with "expected N, got M";
+//   * numerical outcomes (not positive definite, rank deficient, infeasible)
+//     as a `Status` plus a message in a summary struct, never a silent zero.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+
+#include <stdexcept>
+#include <string>
+
+namespace qpreduce {
+
+using Index = Eigen::Index;
+
+template <typename Scalar>
+using SparseMatrix = Eigen::SparseMatrix<Scalar, Eigen::ColMajor, int>;
+template <typename Scalar>
+using Matrix = Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic>;
+template <typename Scalar>
+using Vector = Eigen::Matrix<Scalar, Eigen::Dynamic, 1>;
+
+// Outcome of a numerical step. Every summary starts at NotRun.
+enum class Status {
+  NotRun,
+  Success,
+  // Hard constraints could not all hold (over-determined or inconsistent):
+  // the answer satisfies them in the least-squares sense.
+  ConstraintsLeastSquares,
+  // C (the constraint design space) does not have full column rank.
+  RankDeficientC,
+  // Some combination of D's columns lies in Span(C) (U·D is rank deficient).
+  DependentCD,
+  // H is not positive semi-definite.
+  IndefiniteH,
+  // The KKT matrix [[H, C], [Cᵀ, 0]] (or a reduced one) is singular: H is not
+  // positive definite on ker(Cᵀ).
+  SingularKKT,
+  // The (reduced) problem has no unique minimiser.
+  Unbounded,
+  // Anything else a factorization reported.
+  NumericalFailure,
+};
+
+const char* to_string(Status status);
+
+// True for Success and for answers that are usable but qualified
+// (ConstraintsLeastSquares).
+inline bool usable(Status status) {
+  return status == Status::Success || status == Status::ConstraintsLeastSquares;
+}
+
+namespace detail {
+
+// Throws std::invalid_argument("<what>: expected <expected>, got <got>").
+void check_size(const char* what, Index expected, Index got);
+// Throws std::invalid_argument when any stored entry is NaN or infinite.
+template <typename Derived>
+void check_finite(const char* what, const Eigen::MatrixBase<Derived>& m) {
+  if (!m.allFinite()) {
+    throw std::invalid_argument(std::string(what) + ": contains NaN or infinite entries");
+  }
+}
+template <typename Scalar>
+void check_finite(const char* what, const SparseMatrix<Scalar>& m) {
+  const Eigen::Map<const Vector<Scalar>> values(m.valuePtr(), m.nonZeros());
+  if (!values.allFinite()) {
+    throw std::invalid_argument(std::string(what) + ": contains NaN or infinite entries");
+  }
+}
+// Throws when ‖H − Hᵀ‖_F > tolerance·‖H‖_F.
+template <typename Scalar>
+void check_symmetric(const char* what, const SparseMatrix<Scalar>& H, double tolerance);
+
+}  // namespace detail
+}  // namespace qpreduce

@@ -1,0 +1,56 @@
+// qpreduce — sparse factorization backends behind one small interface.
+//
+// Every backend speaks Eigen's vocabulary: analyzePattern / factorize / info,
+// plus a blocked multi-right-hand-side solve. Factorizations always run in
+// double precision, whatever Scalar the caller uses for its results: CHOLMOD
+// only supports double, and a float Cholesky of a 10⁵-row Laplacian loses
+// every digit of the small eigen-directions the subspace depends on.
+//
+//   Backend::Cholmod        CHOLMOD supernodal LLᵀ (symmetric positive definite;
+//                           BLAS-3 solves over whole right-hand-side blocks).
+//   Backend::SimplicialLDLT Eigen SimplicialLDLT with AMD ordering
+//                           (symmetric positive definite; OpenMP over column
+//                           blocks); reports the inertia of its pivots.
+//   Backend::SparseLU       Eigen SparseLU with COLAMD (any nonsingular square
+//                           matrix; used for the KKT matrix itself).
+#pragma once
+
+#include "qpreduce/common.h"
+
+#include <memory>
+#include <string>
+
+namespace qpreduce {
+
+enum class Backend { Auto, Cholmod, SimplicialLDLT, SparseLU };
+
+const char* to_string(Backend backend);
+
+class SparseFactorization {
+ public:
+  virtual ~SparseFactorization() = default;
+
+  // A is square; symmetric backends read its lower triangle only.
+  virtual void analyzePattern(const SparseMatrix<double>& A) = 0;
+  virtual void factorize(const SparseMatrix<double>& A) = 0;
+  // Eigen::Success, or NumericalIssue with message() saying why.
+  virtual Eigen::ComputationInfo info() const = 0;
+  virtual const std::string& message() const = 0;
+  // Overwrites B (rows = A.rows(), any column count) with A⁻¹B. Columns are
+  // solved in blocks of `block_size`.
+  virtual void solveInPlace(Matrix<double>& B, Index block_size) const = 0;
+  virtual Backend backend() const = 0;
+  // Number of structurally nonzero entries in the factor(s), for reports.
+  virtual Index factorNonZeros() const = 0;
+
+  void compute(const SparseMatrix<double>& A) {
+    analyzePattern(A);
+    if (info() == Eigen::Success) factorize(A);
+  }
+};
+
+// Backend::Auto gives Cholmod. For SPD backends a matrix that is not positive
+// definite gives NumericalIssue with a message naming the failure.
+std::unique_ptr<SparseFactorization> make_factorization(Backend backend);
+
+}  // namespace qpreduce

@@ -1,0 +1,121 @@
+// qpreduce — the linear variational subspace (Ye & Yan, Section 2, Eq. 4–5).
+//
+// Problem family (Eq. 1):  min_X ½ XᵀHX − qᵀX   s.t.  AᵀX = b,
+// with H (n×n) sparse symmetric positive semi-definite and fixed, and demands
+// (A n×m, b m×1, q n×1) that change on site. The designer picks
+//   C (n×d): the space constraint columns are expected in, A ≈ C·A_c,
+//   D (n×k): the space linear terms are expected in,     q ≈ D·Y.
+// The first-stage problem  min ½XᵀHX − YᵀDᵀX  s.t. CᵀX = Z  has the KKT system
+//
+//     [ H   C ] [X]   [D·Y]
+//     [ Cᵀ  0 ] [Λ] = [ Z ]                                         (Eq. 4)
+//
+// whose solution is affine in the on-site parameters:
+//
+//     X*(Z, Y) = N·Z + UD·Y,   N: n×d,  UD: n×k.                     (Eq. 5)
+//
+// The KKT matrix is nonsingular iff C has full column rank and H is positive
+// definite on ker(Cᵀ). Then, for any ρ > 0 and any column selection P (d×p)
+// such that H_ρ = H + ρ·(CP)(CP)ᵀ is positive definite, adding
+// ρ·CP·((CP)ᵀX − PᵀZ) = 0 to the first row gives, with μ = ρPPᵀZ − Λ,
+//     X = F·Y + G·μ,  G = H_ρ⁻¹C (n×d),  F = H_ρ⁻¹D (n×k),  S = CᵀG (d×d, SPD),
+//     N  = G·S⁻¹,
+//     UD = F − G·S⁻¹·(CᵀF).
+// So ONE sparse Cholesky of H_ρ and d + k solves give the subspace. When the
+// augmentation would fill in too much (C with long columns) or the caller asks
+// for it, the KKT matrix itself is factored with SparseLU instead.
+//
+// Checks reported in the summary:
+//   * S is SPD iff C has full column rank            → Status::RankDeficientC;
+//   * (UD)ᵀH(UD) = Dᵀ·UD is SPD iff no combination of D's columns lies in
+//     Span(C)                                        → Status::DependentCD;
+//   * H_ρ not positive definite                      → Status::SingularKKT;
+//   * optional PSD check of H (LDLᵀ inertia of H + τI) → Status::IndefiniteH;
+//   * the relative KKT residual of the result.
+#pragma once
+
+#include "qpreduce/common.h"
+#include "qpreduce/factorization.h"
+
+#include <string>
+#include <vector>
+
+namespace qpreduce {
+
+struct SubspaceOptions {
+  // Factorization backend. Auto: CHOLMOD on H_ρ, or SparseLU on the KKT matrix
+  // when the augmentation fill exceeds max_augmentation_fill.
+  Backend backend = Backend::Auto;
+  // ρ = rho_scale · mean(diag H) / mean(‖c_j‖²) over the augmenting columns:
+  // the augmentation then has the scale of H, so H_ρ is no worse conditioned
+  // than the KKT matrix.
+  double rho_scale = 1.0;
+  // Columns of C used for the augmentation (indices into 0..d−1). Empty: all
+  // of them. One column per connected component of H's null space suffices;
+  // pick short columns to limit fill.
+  std::vector<Index> augment_columns;
+  // Auto backend: when Σ_j nnz(c_j)² over the augmenting columns exceeds this
+  // multiple of nnz(H), factor the KKT matrix with SparseLU instead.
+  double max_augmentation_fill = 4.0;
+  // Right-hand sides solved per block (CHOLMOD BLAS-3 block, or OpenMP task).
+  Index block_size = 64;
+  // H is rejected as asymmetric when ‖H − Hᵀ‖_F > symmetry_tolerance·‖H‖_F.
+  double symmetry_tolerance = 1e-10;
+  // Check that H is PSD: LDLᵀ of H + τI with τ = psd_shift·max|H_ii| must have
+  // no negative pivot (Sylvester's law of inertia). Costs one extra
+  // factorization of H; off for callers that know H is PSD by construction.
+  bool check_psd = true;
+  double psd_shift = 1e-8;
+  // S and Dᵀ·UD count as singular when λ_min < rank_tolerance·λ_max.
+  double rank_tolerance = 1e-12;
+  // After factoring, one solve with a known answer checks the factor: a
+  // relative error above this means the KKT matrix is singular to working
+  // precision (Status::SingularKKT).
+  double max_probe_error = 1e-6;
+  // Set to false to skip the KKT residual (saves one product with H).
+  bool compute_residual = true;
+  // Report Status::DependentCD when a combination of D's columns lies in
+  // Span(C). Off for callers that use D as a plain right-hand side (the
+  // full-space solve, where q ∈ Span(A) is legitimate).
+  bool check_dependent_cd = true;
+
+  bool is_valid(std::string* why) const;
+};
+
+struct SubspaceSummary {
+  Status status = Status::NotRun;
+  std::string message;
+  Backend backend_used = Backend::Auto;
+  Index n = 0, d = 0, k = 0;
+  double rho = 0.0;                // augmentation weight (0 on the KKT route)
+  Index factor_nonzeros = 0;
+  // max of ‖(I − P_C)(H·[N UD] − [0 D])‖_F / (‖H‖_F‖[N UD]‖_F + ‖D‖_F) and
+  // ‖Cᵀ[N UD] − [I 0]‖_F / √d, where P_C is the orthogonal projector onto Span(C).
+  double kkt_residual = -1.0;
+  double probe_error = -1.0;       // relative error of the known-answer solve
+  double s_condition = 0.0;        // λ_max/λ_min of S (or of CᵀN⁻¹ on the KKT route)
+  double ud_condition = 0.0;       // λ_max/λ_min of Dᵀ·UD (0 when k = 0)
+  double check_psd_seconds = 0.0, factorize_seconds = 0.0, solve_seconds = 0.0,
+         total_seconds = 0.0;
+
+  bool ok() const { return status == Status::Success; }
+  std::string report() const;  // one-line human summary
+};
+
+// The subspace X = N·Z + UD·Y. Columns are in the order of C's and D's columns.
+template <typename Scalar>
+struct VariationalSubspace {
+  Matrix<Scalar> N;   // n × d
+  Matrix<Scalar> UD;  // n × k
+};
+
+// Builds N and UD from one factorization. Throws std::invalid_argument on
+// wrong sizes, NaN/Inf entries, an asymmetric H, d = 0, or invalid options.
+// Numerical failures come back as a status with a message; `out` is then
+// left empty (never NaN).
+template <typename Scalar>
+SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H, const SparseMatrix<Scalar>& C,
+                               const SparseMatrix<Scalar>& D, const SubspaceOptions& options,
+                               VariationalSubspace<Scalar>* out);
+
+}  // namespace qpreduce

@@ -1,0 +1,117 @@
+// qpreduce — the reduced solver: precompute once, then any demand (A, b, q).
+//
+// With the variational subspace X = N·z + UD·y = B·w  (B = [N UD], n×p,
+// p = d + k, w = [z; y]; Eq. 5), a demand of Eq. 1
+//     min_X ½XᵀHX − qᵀX   s.t.  AᵀX = b          (A n×m, b m×1, q n×1)
+// becomes, substituting X = B·w (A and q need NOT lie in Span(C), Span(D)),
+//     min_w ½wᵀH_r w − q_rᵀw   s.t.  A_r w = b,
+//     H_r = BᵀHB (p×p, precomputed),  A_r = AᵀB (m×p),  q_r = Bᵀq (p×1).
+//
+// Hard constraints (Eq. 17 form). Null-space method on a rank-revealing QR of
+// A_rᵀ: w = A_r⁺b + Z·u with Z (p×(p−r)) a basis of ker(A_r) and
+//     (ZᵀH_rZ)·u = Zᵀ(q_r − H_r A_r⁺ b).
+// When rank(A_r) = r < m the constraints cannot all hold for every b: the
+// answer satisfies them in the least-squares sense (min ‖A_r w − b‖, then the
+// energy) and the summary says Status::ConstraintsLeastSquares.
+//
+// Soft constraints (Eq. 18 form), weight δ > 0:
+//     min_w ½wᵀH_r w − q_rᵀw + δ‖A_r w − b‖²
+//     ⇔ (H_r + 2δA_rᵀA_r)·w = q_r + 2δA_rᵀb.
+//
+// Either way the answer is linear in (b, q_r):  w = M_b·b + M_q·q_r, and with
+// q = D·Y also w = M_b·b + M_Y·Y (M_Y = M_q·BᵀD, p×k). `set_constraints` (the
+// paper's on-site preconditioning, "OP") forms these small dense matrices at a
+// cost independent of n beyond AᵀB (nnz(A)·p for sparse A); `solve` is two
+// matrix–vector products into caller-owned storage, with no heap allocation.
+#pragma once
+
+#include "qpreduce/common.h"
+#include "qpreduce/subspace.h"
+
+#include <string>
+
+namespace qpreduce {
+
+struct ConstraintOptions {
+  // false: hard constraints (Eq. 17); true: soft constraints (Eq. 18).
+  bool soft = false;
+  // Soft-constraint weight δ (Eq. 18). Relative to H_r's scale: the system
+  // solved is H_r + 2·δ·A_rᵀA_r, so δ ≫ ‖H_r‖/‖A_r‖² approaches hard constraints.
+  double delta = 1e3;
+  // Singular values of A_r (and eigenvalues of the reduced Hessian on the
+  // constraint set) below rank_tolerance × the largest count as zero.
+  double rank_tolerance = 1e-10;
+
+  bool is_valid(std::string* why) const;
+};
+
+struct ConstraintSummary {
+  Status status = Status::NotRun;
+  std::string message;
+  Index m = 0;            // number of constraints
+  Index rank = 0;         // numerical rank of A_r = AᵀB
+  double condition = 0.0; // σ_max/σ_min(A_r) over its rank
+  double seconds = 0.0;
+
+  bool ok() const { return usable(status); }
+};
+
+template <typename Scalar>
+class SubspaceSolver {
+ public:
+  using VectorS = Vector<Scalar>;
+  using MatrixS = Matrix<Scalar>;
+  using ConstRef = Eigen::Ref<const VectorS>;
+  using Ref = Eigen::Ref<VectorS>;
+
+  // Builds the subspace from one factorization (build_subspace) and the
+  // reduced matrices H_r = BᵀHB and BᵀD. Throws std::invalid_argument on bad
+  // input (see build_subspace); numerical failures come back in the summary
+  // and leave the solver unusable (ready() == false).
+  SubspaceSummary precompute(const SparseMatrix<Scalar>& H, const SparseMatrix<Scalar>& C,
+                             const SparseMatrix<Scalar>& D, const SubspaceOptions& options = {});
+
+  // The on-site step for a new constraint set A (n×m, sparse). m may be 0.
+  // Throws std::invalid_argument on a wrong row count, NaN, or when called
+  // before a successful precompute.
+  ConstraintSummary set_constraints(const SparseMatrix<Scalar>& A, const ConstraintOptions& options = {});
+
+  // q_r = Bᵀq for a general linear term q (n). Cost O(n·p).
+  void reduce_linear_term(const ConstRef& q, Ref q_r) const;
+  // q_r = BᵀD·Y for q = D·Y (Y: k). Cost O(p·k).
+  void reduce_linear_term_in_D(const ConstRef& Y, Ref q_r) const;
+
+  // w = M_b·b + M_q·q_r. b: m, q_r: p, w: p. No heap allocation.
+  void solve(const ConstRef& b, const ConstRef& q_r, Ref w) const;
+  // Same with q = D·Y (Y: k). No heap allocation.
+  void solve_in_D(const ConstRef& b, const ConstRef& Y, Ref w) const;
+  // X = N·z + UD·y for w = [z; y]. X: n. Cost O(n·p).
+  void reconstruct(const ConstRef& w, Ref X) const;
+
+  bool ready() const { return ready_; }
+  bool constrained() const { return constrained_; }
+  Index n() const { return n_; }
+  Index d() const { return subspace_.N.cols(); }
+  Index k() const { return subspace_.UD.cols(); }
+  Index p() const { return d() + k(); }
+  Index m() const { return m_; }
+  const VariationalSubspace<Scalar>& subspace() const { return subspace_; }
+  const MatrixS& reduced_hessian() const { return Hr_; }  // H_r = BᵀHB, p×p
+  const MatrixS& reduced_constraints() const { return Ar_; }  // A_r = AᵀB, m×p
+
+ private:
+  void require_ready(const char* what) const;
+  void require_constrained(const char* what) const;
+
+  VariationalSubspace<Scalar> subspace_;
+  MatrixS Hr_;   // p × p
+  MatrixS BtD_;  // p × k
+  MatrixS Ar_;   // m × p
+  MatrixS Mb_;   // p × m
+  MatrixS Mq_;   // p × p
+  MatrixS MY_;   // p × k
+  Index n_ = 0, m_ = 0;
+  bool ready_ = false, constrained_ = false;
+};
+
+}  // namespace qpreduce

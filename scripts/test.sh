@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Installs what is missing, builds, and runs every test:
+#   1. the Release build and its full Catch2 suite (ctest);
+#   2. the same suite built with AddressSanitizer + UBSan (./build-asan);
+#   3. a tiny consumer project built against the installed package config.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+jobs="$(nproc 2>/dev/null || echo 2)"
+bash "$root/scripts/build.sh"
+
+echo "== tests (Release)"
+ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
+
+echo "== tests (ASan + UBSan)"
+cmake -S "$root" -B "$root/build-asan" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DQPREDUCE_SANITIZE=ON \
+  -DQPREDUCE_BUILD_BENCH=OFF -DQPREDUCE_BUILD_EXAMPLES=OFF >/dev/null
+cmake --build "$root/build-asan" -j "$jobs"
+ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
+  ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
+
+echo "== installed package consumer"
+prefix="$root/build/install-test"
+rm -rf "$prefix" "$root/build/consumer"
+cmake --install "$root/build" --prefix "$prefix" >/dev/null
+cmake -S "$root/tests/packaging/consumer" -B "$root/build/consumer" -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+cmake --build "$root/build/consumer" -j "$jobs"
+"$root/build/consumer/consumer"
