@@ -98,6 +98,7 @@ class SubspaceSolver {
   const VariationalSubspace<Scalar>& subspace() const { return subspace_; }
   const MatrixS& reduced_hessian() const { return Hr_; }  // H_r = BᵀHB, p×p
   const MatrixS& reduced_constraints() const { return Ar_; }  // A_r = AᵀB, m×p
+  const MatrixS& reduced_linear_map() const { return BtD_; }   // BᵀD, p×k (q_r = BᵀD·Y)
 
  private:
   void require_ready(const char* what) const;

@@ -1,0 +1,87 @@
+// qpreduce — the alternating scheme of Section 3.1: Phase 1 (a reduced QP in
+// the linear coordinates z with the other coordinates y held fixed) and
+// Phase 2 (a plugin's projection of y onto its manifold), warm-started.
+//
+// In the deformation model the linear term of the energy is q = D·S and the
+// subspace coordinates of U·D are the same S: X = N·z + UD·y with y = S.
+// Phase 1 (Eq. 16–17) therefore minimises over z alone, y = Y given:
+//
+//     min_z ½zᵀH_zz z + zᵀH_zy Y − (NᵀD·Y)ᵀz   s.t.  A_z z = b − A_y Y
+//
+// with H_r = [[H_zz, H_zy], [H_yz, H_yy]] = BᵀHB (B = [N UD]), A_r = AᵀB =
+// [A_z A_y] (m×d, m×k), NᵀD the first d rows of BᵀD. With G = NᵀD − H_zy (d×k)
+// and c = b − A_y Y, the answer is z = M_c·c + M_g·G·Y, i.e.
+//
+//     z = M_b·b + M_Y·Y,   M_b = M_c (d×m),  M_Y = M_g·G − M_c·A_y (d×k).
+//
+// `FixedCoordinateSolver::set_constraints` forms M_b, M_Y (cost independent of
+// n beyond AᵀB); `solve` is two GEMVs with no heap allocation. Soft
+// constraints (Eq. 18 form) work the same way.
+#pragma once
+
+#include "qpreduce/common.h"
+#include "qpreduce/subspace_solver.h"
+
+namespace qpreduce {
+
+template <typename Scalar>
+class FixedCoordinateSolver {
+ public:
+  using VectorS = Vector<Scalar>;
+  using ConstRef = Eigen::Ref<const VectorS>;
+  using Ref = Eigen::Ref<VectorS>;
+
+  // A: n×m sparse constraint columns (AᵀX = b). `solver` must be ready; it is
+  // read here and not kept. Throws std::invalid_argument on bad sizes/NaN.
+  ConstraintSummary set_constraints(const SubspaceSolver<Scalar>& solver, const SparseMatrix<Scalar>& A,
+                                    const ConstraintOptions& options = {});
+
+  // z = M_b·b + M_Y·Y. b: m, Y: k, z: d. No heap allocation.
+  void solve(const ConstRef& b, const ConstRef& Y, Ref z) const;
+
+  bool ready() const { return ready_; }
+  Index d() const { return Mb_.rows(); }
+  Index k() const { return MY_.cols(); }
+  Index m() const { return Mb_.cols(); }
+
+ private:
+  Matrix<Scalar> Mb_;  // d × m
+  Matrix<Scalar> MY_;  // d × k
+  bool ready_ = false;
+};
+
+// Phase 2: a plugin's projection of the fixed coordinates onto its manifold
+// (rotations, scaled rotations, rigid patches), given the current z and y.
+template <typename Scalar>
+class Phase2Projection {
+ public:
+  virtual ~Phase2Projection() = default;
+  // Overwrites y (size k) in place and returns ‖y_new − y_old‖. Called once
+  // per alternating iteration; implementations should not allocate.
+  virtual double project(const Eigen::Ref<const Vector<Scalar>>& z, Eigen::Ref<Vector<Scalar>> y) = 0;
+};
+
+struct AlternatingOptions {
+  // Phase 1/Phase 2 rounds per call (the paper uses a fixed 8 per frame, so a
+  // frame's cost does not depend on the pose).
+  int iterations = 8;
+  // Stop early when ‖Δy‖ ≤ tolerance·max(1, ‖y‖). 0: always run `iterations`.
+  double tolerance = 0.0;
+
+  bool is_valid(std::string* why) const;
+};
+
+struct AlternatingSummary {
+  int iterations = 0;
+  double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
+};
+
+// Runs Phase 1 then Phase 2, `options.iterations` times, starting from the
+// given y (warm start) and ending with a Phase 1, so z is optimal for the
+// returned y. z: d, y: k.
+template <typename Scalar>
+AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2Projection<Scalar>& phase2,
+                             const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
+                             Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
+
+}  // namespace qpreduce

@@ -1,0 +1,86 @@
+#include "qpreduce/alternating.h"
+
+#include "qpreduce/detail/qp_operators.h"
+#include "qpreduce/detail/timer.h"
+
+#include <fmt/format.h>
+
+namespace qpreduce {
+
+bool AlternatingOptions::is_valid(std::string* why) const {
+  if (iterations < 1) {
+    if (why) *why = fmt::format("iterations must be at least 1, got {}", iterations);
+    return false;
+  }
+  if (!(tolerance >= 0.0)) {
+    if (why) *why = "tolerance must be non-negative";
+    return false;
+  }
+  return true;
+}
+
+template <typename Scalar>
+ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceSolver<Scalar>& solver,
+                                                                 const SparseMatrix<Scalar>& A,
+                                                                 const ConstraintOptions& options) {
+  using MatD = Matrix<double>;
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  if (!solver.ready()) {
+    throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
+  }
+  detail::check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
+  detail::check_finite("FixedCoordinateSolver::set_constraints: A", A);
+  const detail::Timer timer;
+  ready_ = false;
+  const Index d = solver.d(), k = solver.k();
+  const MatD Hr = solver.reduced_hessian().template cast<double>();
+  const MatD Az = (A.transpose() * solver.subspace().N).template cast<double>();
+  const MatD Ay = (A.transpose() * solver.subspace().UD).template cast<double>();
+  const MatD G = solver.reduced_linear_map().topRows(d).template cast<double>() - Hr.topRightCorner(d, k);
+
+  ConstraintSummary summary;
+  const detail::QpOperators ops = detail::qp_operators(Hr.topLeftCorner(d, d), Az, options, &summary);
+  Mb_ = ops.Mc.template cast<Scalar>();
+  MY_ = (ops.Mg * G - ops.Mc * Ay).template cast<Scalar>();
+  ready_ = true;
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::solve(const ConstRef& b, const ConstRef& Y, Ref z) const {
+  assert(ready_ && b.size() == m() && Y.size() == k() && z.size() == d());
+  z.noalias() = Mb_ * b;
+  z.noalias() += MY_ * Y;
+}
+
+template <typename Scalar>
+AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2Projection<Scalar>& phase2,
+                             const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
+                             Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y) {
+  assert(options.is_valid(nullptr));
+  assert(phase1.ready() && z.size() == phase1.d() && y.size() == phase1.k() && b.size() == phase1.m());
+  AlternatingSummary summary;
+  double change = 0.0;
+  for (int it = 0; it < options.iterations; ++it) {
+    phase1.solve(b, y, z);
+    change = phase2.project(z, y);
+    summary.iterations = it + 1;
+    if (options.tolerance > 0 && change <= options.tolerance * std::max(1.0, static_cast<double>(y.norm()))) break;
+  }
+  phase1.solve(b, y, z);
+  summary.last_change = change;
+  return summary;
+}
+
+template class FixedCoordinateSolver<double>;
+template class FixedCoordinateSolver<float>;
+template AlternatingSummary alternate<double>(const FixedCoordinateSolver<double>&, Phase2Projection<double>&,
+                                              const Eigen::Ref<const Vector<double>>&, const AlternatingOptions&,
+                                              Eigen::Ref<Vector<double>>, Eigen::Ref<Vector<double>>);
+template AlternatingSummary alternate<float>(const FixedCoordinateSolver<float>&, Phase2Projection<float>&,
+                                             const Eigen::Ref<const Vector<float>>&, const AlternatingOptions&,
+                                             Eigen::Ref<Vector<float>>, Eigen::Ref<Vector<float>>);
+
+}  // namespace qpreduce
