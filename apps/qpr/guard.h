@@ -1,0 +1,28 @@
+// qpr — run a subcommand body, turning failures into a message on stderr and
+// an exit code (CLI::RuntimeError), never an uncaught exception.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+#include <exception>
+#include <functional>
+
+namespace qpr {
+
+// body returns the exit code; 0 returns normally. Exceptions other than
+// CLI11's own print "qpr <name>: error: <what>" and exit with code 2.
+inline void run_guarded(const char* name, const std::function<int()>& body) {
+  int code = 0;
+  try {
+    code = body();
+  } catch (const CLI::Error&) {
+    throw;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "qpr %s: error: %s\n", name, e.what());
+    throw CLI::RuntimeError(2);
+  }
+  if (code != 0) throw CLI::RuntimeError(code);
+}
+
+}  // namespace qpr

@@ -1,0 +1,174 @@
+// qpreduce::deform — the reduced ARAP deformer session (paper Section 3.2):
+// precompute → set handles (on-site preconditioning, "OP") → frames.
+//
+// Unknowns. Vertices split into free ones and affine patches (Appendix,
+// Eq. 47): a vertex of patch s moves as v′ = t_s·v + d_s. The control layer
+// is u = [V′_free (3·n_free); for each patch s: t_s row-major (9), d_s (3)],
+// and V′ = P·u with P (3n × n_u) sparse. With Q eliminated (arap_energy.h)
+// the energy in u is
+//     E(u, S) = ½ uᵀ(PᵀHP)u − Sᵀ(PᵀD_s)ᵀu + c(S).
+// The engine builds the variational subspace (Eq. 14–15) of
+//     H_u = PᵀHP (n_u × n_u),  C = [Pᵀ(Ŵ ⊗ I₃)ᵀ | patch selections] (n_u × (3m + 12s)),
+//     D = PᵀD_s (n_u × 9d),
+// so u = N·X + UD·S with X the linear proxies (3 per proxy, 12 per patch) and S
+// the rotational proxies (9 per cluster). Only V′ = P·[N UD] is kept for
+// reconstruction, in float, row-interleaved (3n × (3m + 12s + 9d)).
+//
+// Per frame, k rounds of
+//   Phase 1 (Eq. 17): X = M_b·b + M_S·S   (engine FixedCoordinateSolver), and
+//   Phase 2 (Eq. 19): s_i = nearest rotation of G_i, G = M_N·X + M_U·S with
+//                     M_N = D_Vᵀ·P·N, M_U = D_Vᵀ·P·UD (9d × ·, precomputed),
+// warm-started from the previous frame, with the global rotation adaptation
+// of the appendix: r₀ = nearest rotation of Σ_i a_i s_i is factored out before
+// the rounds (targets and S rotated by r₀ᵀ) and put back after.
+#pragma once
+
+#include "qpreduce/deform/arap_energy.h"
+#include "qpreduce/deform/mesh.h"
+#include "qpreduce/deform/proxies.h"
+#include "qpreduce/deform/scene.h"
+
+#include <qpreduce/alternating.h>
+#include <qpreduce/subspace_solver.h>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace qpreduce::deform {
+
+// What precompute needs. Exactly one of F (surface) and T (solid) is set.
+struct DeformableModel {
+  Vertices V;    // n × 3 rest positions
+  Triangles F;   // surface triangles, or empty
+  Tetrahedra T;  // tetrahedra, or empty
+  // Rotational cluster per rotation element (vertices for surfaces, tets for
+  // solids). Empty: computed (rotation_clusters, DeformerOptions::rotational_proxies).
+  std::vector<int> clusters;
+  // Linear proxies. Empty (count() == 0): farthest-point samples
+  // (DeformerOptions::linear_proxies). Vertices inside patches are dropped
+  // from the groups (a patch has its own 12 proxies).
+  LinearProxies linear;
+  // Affine patches (Eq. 47): patch_of_vertex has n entries, −1 for a free
+  // vertex, else the patch index in [0, patch_types.size()). Fixed patches
+  // are constrained to the rest pose at every frame; Rigid and Affine patches
+  // move with their own transform (prescribed by a handle, or free).
+  std::vector<int> patch_of_vertex;
+  std::vector<PatchType> patch_types;
+
+  bool is_tet() const { return T.rows() > 0; }
+};
+
+struct DeformerOptions {
+  EnergyParameters energy;
+  // Automatic proxy counts, used when the model does not give them. The
+  // paper's Table 1 uses 20–60 of each; 27 rotational clusters and 33 linear
+  // proxies are its Cactus/Bumpy Plane setting.
+  Index rotational_proxies = 27;
+  Index linear_proxies = 33;
+  ClusterOptions clustering;
+  // Rounds of Phase 1/Phase 2 per frame (the paper uses 8).
+  int iterations = 8;
+  // Factor out a global rotation each frame (appendix "Global rotation adaptation").
+  bool global_rotation = true;
+  SubspaceOptions subspace;
+
+  bool is_valid(std::string* why) const;
+};
+
+// Called during precompute with a stage name and the overall fraction done.
+using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
+
+struct PrecomputeSummary {
+  Status status = Status::NotRun;
+  std::string message;
+  Index vertices = 0, elements = 0, rotational_proxies = 0, linear_proxies = 0, patches = 0;
+  Index reduced_size = 0;  // 3m + 12s + 9d
+  SubspaceSummary subspace;
+  double clustering_seconds = 0.0, assembly_seconds = 0.0, subspace_seconds = 0.0, reduction_seconds = 0.0,
+         total_seconds = 0.0;
+
+  bool ok() const { return status == Status::Success; }
+};
+
+// A point handle: one vertex, or the weighted point Σ w_i v_i of a group.
+struct PointHandle {
+  std::vector<Index> vertices;
+  std::vector<double> weights;  // empty: a single vertex (vertices.size() == 1)
+};
+
+// The handle set of the on-site step.
+struct Handles {
+  std::vector<PointHandle> points;
+  // Non-fixed patches whose transform is prescribed each frame.
+  std::vector<Index> patches;
+};
+
+// Targets of one frame, matching the Handles given to set_handles.
+struct HandleTargets {
+  Vertices points;  // one row per point handle
+  // One per prescribed patch: p ↦ A·p + t, stored as [A | t] (3 × 4).
+  std::vector<Eigen::Matrix<double, 3, 4>> patch_transforms;
+};
+
+struct FrameSummary {
+  int iterations = 0;
+  double last_change = 0.0;        // ‖ΔS‖ of the last Phase 2
+  double solve_seconds = 0.0;      // the alternating rounds
+  double reconstruct_seconds = 0.0;
+  double total_seconds = 0.0;
+};
+
+class Deformer {
+ public:
+  Deformer();
+  ~Deformer();
+  Deformer(Deformer&&) noexcept;
+  Deformer& operator=(Deformer&&) noexcept;
+
+  // Throws std::invalid_argument on an invalid model or options (sizes,
+  // labels out of range, degenerate elements, a component without a linear
+  // proxy or patch). Numerical failures come back in the summary.
+  PrecomputeSummary precompute(const DeformableModel& model, const DeformerOptions& options = {},
+                               const ProgressFn& progress = {});
+
+  // The on-site step: forms the reduced constraint operators for this handle
+  // set. Fixed patches are always included. Cost independent of n (a few rows
+  // of the subspace per handle).
+  ConstraintSummary set_handles(const Handles& handles, const ConstraintOptions& options = {});
+
+  // One frame: alternation warm-started from the previous frame, then
+  // reconstruction into *out (n × 3, resized once).
+  FrameSummary frame(const HandleTargets& targets, Vertices* out);
+
+  // Back to the rest rotations (S = identity, r₀ = identity).
+  void reset_pose();
+
+  bool ready() const;
+  Index vertex_count() const;
+  Index rotational_proxies() const;
+  Index linear_proxies() const;
+  Index patch_count() const;
+  Index handle_rows() const;  // constraint rows of the current handle set
+  const std::vector<int>& clusters() const;          // per rotation element
+  const std::vector<int>& patch_of_vertex() const;
+  const RotationElements& elements() const;
+  const Eigen::VectorXd& rotations() const;  // S, 9d (world frame)
+  const Eigen::Matrix3d& global_rotation() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// Builds the model, handles and targets of a Botsch–Sorkine scenario: `sel`
+// (0 fixed, 1 free, 2 handle) gives a Fixed patch and an Affine handle patch
+// whose transform is `def` (4 × 4, column vectors).
+struct SelDefScenario {
+  Handles handles;
+  HandleTargets targets;
+};
+SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableModel* model);
+
+}  // namespace qpreduce::deform

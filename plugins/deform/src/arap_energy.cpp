@@ -1,0 +1,312 @@
+#include "qpreduce/deform/arap_energy.h"
+
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+#include <fmt/format.h>
+
+#include <cmath>
+
+namespace qpreduce::deform {
+
+namespace {
+
+using Triplets = std::vector<Eigen::Triplet<double>>;
+using Vec3 = Eigen::Vector3d;
+
+Vec3 row(const Vertices& V, Index i) { return V.row(i).transpose(); }
+
+// J(e) = [e, −[e]×]: q·e = q0·e + ω × e = J(e)·(q0, ω).
+Eigen::Matrix<double, 3, 4> J_of(const Vec3& e) {
+  Eigen::Matrix<double, 3, 4> J;
+  J.col(0) = e;
+  J(0, 1) = 0.0;   J(0, 2) = e(2);  J(0, 3) = -e(1);
+  J(1, 1) = -e(2); J(1, 2) = 0.0;   J(1, 3) = e(0);
+  J(2, 1) = e(1);  J(2, 2) = -e(0); J(2, 3) = 0.0;
+  return J;
+}
+
+// Regulariser Hessian block (Eq. 10): 2α·a·diag(3, 2, 2, 2) + 2β·a·[[1, 0], [0, I − nnᵀ]].
+Eigen::Matrix4d regulariser(double a, const EnergyParameters& p, bool surface, const Vec3& n) {
+  Eigen::Matrix4d R = Eigen::Matrix4d::Zero();
+  R.diagonal() << 3.0, 2.0, 2.0, 2.0;
+  R *= 2.0 * p.alpha * a;
+  if (surface && p.beta > 0.0) {
+    Eigen::Matrix4d B = Eigen::Matrix4d::Zero();
+    B(0, 0) = 1.0;
+    B.bottomRightCorner<3, 3>() = Eigen::Matrix3d::Identity() - n * n.transpose();
+    R += 2.0 * p.beta * a * B;
+  }
+  return R;
+}
+
+void push_edge(RotationElements& el, int i, int j, double c) {
+  el.edge_i.push_back(i);
+  el.edge_j.push_back(j);
+  el.weight.push_back(c);
+}
+
+
+void check_element_index(const char* what, Index element, int v, Index n) {
+  if (v < 0 || v >= n) {
+    throw std::invalid_argument(
+        fmt::format("{}: element {} has vertex index {} outside [0, {})", what, element, v, n));
+  }
+}
+
+}  // namespace
+
+bool EnergyParameters::is_valid(std::string* why) const {
+  if (!(alpha >= 0.0) || !std::isfinite(alpha)) {
+    if (why) *why = fmt::format("alpha must be finite and non-negative, got {}", alpha);
+    return false;
+  }
+  if (!(beta >= 0.0) || !std::isfinite(beta)) {
+    if (why) *why = fmt::format("beta must be finite and non-negative, got {}", beta);
+    return false;
+  }
+  if (alpha == 0.0 && beta == 0.0) {
+    if (why) *why = "alpha and beta cannot both be zero: the linearised rotations q_k would be unconstrained";
+    return false;
+  }
+  return true;
+}
+
+RotationElements spokes_and_rims_elements(const Vertices& V, const Triangles& F) {
+  const Index n = V.rows(), m = F.rows();
+  // Faces incident to each vertex.
+  std::vector<std::vector<Index>> faces_of(static_cast<size_t>(n));
+  for (Index f = 0; f < m; ++f)
+    for (int c = 0; c < 3; ++c) {
+      check_element_index("spokes_and_rims_elements", f, F(f, c), n);
+      faces_of[static_cast<size_t>(F(f, c))].push_back(f);
+    }
+  // Per-face half-cotangent weights of the edge opposite each corner, and areas.
+  Eigen::Matrix<double, Eigen::Dynamic, 3> cot(m, 3);
+  Eigen::VectorXd area(m);
+  for (Index f = 0; f < m; ++f) {
+    const Vec3 p[3] = {row(V, F(f, 0)), row(V, F(f, 1)), row(V, F(f, 2))};
+    const double a2 = (p[1] - p[0]).cross(p[2] - p[0]).norm();
+    const double lmax = std::max({(p[1] - p[0]).norm(), (p[2] - p[1]).norm(), (p[0] - p[2]).norm()});
+    if (!(a2 > 1e-12 * lmax * lmax) || !std::isfinite(a2)) {
+      throw std::invalid_argument(fmt::format(
+          "spokes_and_rims_elements: triangle {} ({}, {}, {}) is degenerate (area {:.3e})", f, F(f, 0), F(f, 1),
+          F(f, 2), 0.5 * a2));
+    }
+    area(f) = 0.5 * a2;
+    for (int c = 0; c < 3; ++c) {
+      const Vec3 u = p[(c + 1) % 3] - p[c], w = p[(c + 2) % 3] - p[c];
+      cot(f, c) = 0.5 * u.dot(w) / a2;  // ½ cot(angle at corner c)
+    }
+  }
+  RotationElements el;
+  el.is_surface = true;
+  el.measure = Eigen::VectorXd::Zero(n);
+  el.normal = Vertices::Zero(n, 3);
+  el.offsets.reserve(static_cast<size_t>(n) + 1);
+  for (Index k = 0; k < n; ++k) {
+    Vec3 normal = Vec3::Zero();
+    for (Index f : faces_of[static_cast<size_t>(k)]) {
+      for (int c = 0; c < 3; ++c) push_edge(el, F(f, (c + 1) % 3), F(f, (c + 2) % 3), cot(f, c));
+      el.measure(k) += area(f) / 3.0;
+      const Vec3 p0 = row(V, F(f, 0)), p1 = row(V, F(f, 1)), p2 = row(V, F(f, 2));
+      normal += 0.5 * (p1 - p0).cross(p2 - p0);
+    }
+    if (normal.norm() > 0) el.normal.row(k) = normal.normalized().transpose();
+    el.offsets.push_back(static_cast<Index>(el.weight.size()));
+  }
+  return el;
+}
+
+RotationElements tet_elements(const Vertices& V, const Tetrahedra& T) {
+  const Index n = V.rows(), m = T.rows();
+  RotationElements el;
+  el.is_surface = false;
+  el.measure.resize(m);
+  el.offsets.reserve(static_cast<size_t>(m) + 1);
+  static const int edges[6][2] = {{0, 1}, {0, 2}, {0, 3}, {1, 2}, {1, 3}, {2, 3}};
+  for (Index t = 0; t < m; ++t) {
+    for (int c = 0; c < 4; ++c) check_element_index("tet_elements", t, T(t, c), n);
+    const Vec3 p0 = row(V, T(t, 0));
+    Eigen::Matrix3d E;
+    E.col(0) = row(V, T(t, 1)) - p0;
+    E.col(1) = row(V, T(t, 2)) - p0;
+    E.col(2) = row(V, T(t, 3)) - p0;
+    const double det = E.determinant();
+    const double lmax = E.colwise().norm().maxCoeff();
+    if (!(std::abs(det) > 1e-12 * lmax * lmax * lmax) || !std::isfinite(det)) {
+      throw std::invalid_argument(fmt::format("tet_elements: tet {} is degenerate (volume {:.3e})", t, det / 6.0));
+    }
+    const double vol = std::abs(det) / 6.0;
+    // Gradients of the barycentric functions: rows of E⁻¹ for φ1..φ3, φ0 = −Σ.
+    const Eigen::Matrix3d Einv = E.inverse();
+    Eigen::Matrix<double, 4, 3> grad;
+    grad.row(1) = Einv.row(0);
+    grad.row(2) = Einv.row(1);
+    grad.row(3) = Einv.row(2);
+    grad.row(0) = -(grad.row(1) + grad.row(2) + grad.row(3));
+    for (const auto& e : edges) {
+      // w_ij = −vol·∇φ_i·∇φ_j = (1/6)·ℓ_kl·cot θ_kl.
+      const double w = -vol * grad.row(e[0]).dot(grad.row(e[1]));
+      push_edge(el, T(t, e[0]), T(t, e[1]), w);
+    }
+    el.measure(t) = vol;
+    el.offsets.push_back(static_cast<Index>(el.weight.size()));
+  }
+  return el;
+}
+
+ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& el,
+                                          const std::vector<int>& cluster, Index d,
+                                          const EnergyParameters& params) {
+  std::string why;
+  if (!params.is_valid(&why)) throw std::invalid_argument("EnergyParameters: " + why);
+  const Index n = V.rows(), r = el.size();
+  detail::check_size("assemble_modified_arap: cluster labels", r, static_cast<Index>(cluster.size()));
+  if (d < 1) throw std::invalid_argument("assemble_modified_arap: need at least one rotational cluster");
+  for (Index k = 0; k < r; ++k) {
+    if (cluster[k] < 0 || cluster[k] >= d) {
+      throw std::invalid_argument(
+          fmt::format("assemble_modified_arap: element {} has cluster {} outside [0, {})", k, cluster[k], d));
+    }
+  }
+  const Index nv = 3 * n, nu = nv + 4 * r;
+  Triplets tl, td;
+  tl.reserve(static_cast<size_t>(el.weight.size()) * 60 + static_cast<size_t>(r) * 16);
+  td.reserve(static_cast<size_t>(el.weight.size()) * 54);
+  for (Index k = 0; k < r; ++k) {
+    const Index qk = nv + 4 * k;
+    const Index col0 = 9 * static_cast<Index>(cluster[k]);
+    Eigen::Matrix4d Lqq = regulariser(el.measure(k), params, el.is_surface,
+                                      el.is_surface ? Vec3(row(el.normal, k)) : Vec3::Zero());
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Index i = el.edge_i[e], j = el.edge_j[e];
+      const double c = el.weight[e];
+      const Vec3 ev = row(V, i) - row(V, j);
+      const Eigen::Matrix<double, 3, 4> J = J_of(ev);
+      for (int a = 0; a < 3; ++a) {
+        tl.emplace_back(3 * i + a, 3 * i + a, c);
+        tl.emplace_back(3 * j + a, 3 * j + a, c);
+        tl.emplace_back(3 * i + a, 3 * j + a, -c);
+        tl.emplace_back(3 * j + a, 3 * i + a, -c);
+        for (int b = 0; b < 4; ++b) {
+          const double v = c * J(a, b);
+          tl.emplace_back(3 * i + a, qk + b, -v);
+          tl.emplace_back(qk + b, 3 * i + a, -v);
+          tl.emplace_back(3 * j + a, qk + b, v);
+          tl.emplace_back(qk + b, 3 * j + a, v);
+        }
+      }
+      Lqq.noalias() += c * J.transpose() * J;
+      // Linear term: coefficient of s(rr, cc) is c·e_cc·(e′ − J·Q)_rr.
+      for (int cc = 0; cc < 3; ++cc) {
+        const double ce = c * ev(cc);
+        if (ce == 0.0) continue;
+        for (int rr = 0; rr < 3; ++rr) {
+          const Index col = col0 + 3 * cc + rr;
+          td.emplace_back(3 * i + rr, col, ce);
+          td.emplace_back(3 * j + rr, col, -ce);
+          for (int b = 0; b < 4; ++b) td.emplace_back(qk + b, col, -ce * J(rr, b));
+        }
+      }
+    }
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) tl.emplace_back(qk + a, qk + b, Lqq(a, b));
+  }
+  ModifiedArapSystem sys;
+  sys.n = n;
+  sys.r = r;
+  sys.d = d;
+  sys.L.resize(nu, nu);
+  sys.L.setFromTriplets(tl.begin(), tl.end());
+  sys.D.resize(nu, 9 * d);
+  sys.D.setFromTriplets(td.begin(), td.end());
+  return sys;
+}
+
+EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sys) {
+  const Index nv = 3 * sys.n, nq = 4 * sys.r;
+  const SparseMatrix<double> LVV = sys.L.topLeftCorner(nv, nv);
+  const SparseMatrix<double> LVQ = sys.L.block(0, nv, nv, nq);
+  const SparseMatrix<double> LQQ = sys.L.bottomRightCorner(nq, nq);
+  // Invert the 4×4 diagonal blocks of L_QQ.
+  Triplets tb;
+  tb.reserve(static_cast<size_t>(nq) * 4);
+  for (Index k = 0; k < sys.r; ++k) {
+    Eigen::Matrix4d B = Eigen::Matrix4d::Zero();
+    for (int b = 0; b < 4; ++b)
+      for (SparseMatrix<double>::InnerIterator it(LQQ, 4 * k + b); it; ++it) B(it.row() - 4 * k, b) = it.value();
+    const Eigen::LLT<Eigen::Matrix4d> llt(B);
+    if (llt.info() != Eigen::Success || !(B.diagonal().minCoeff() > 0)) {
+      throw std::invalid_argument(fmt::format(
+          "eliminate_rotation_corrections: the 4×4 block of element {} is not positive definite (alpha = 0 and "
+          "an element with too few edges?)",
+          k));
+    }
+    const Eigen::Matrix4d Binv = llt.solve(Eigen::Matrix4d::Identity());
+    for (int a = 0; a < 4; ++a)
+      for (int b = 0; b < 4; ++b) tb.emplace_back(4 * k + a, 4 * k + b, Binv(a, b));
+  }
+  SparseMatrix<double> Binv(nq, nq);
+  Binv.setFromTriplets(tb.begin(), tb.end());
+  const SparseMatrix<double> DV = sys.D.topRows(nv);
+  const SparseMatrix<double> DQ = sys.D.bottomRows(nq);
+  const SparseMatrix<double> LVQ_Binv = LVQ * Binv;
+  EliminatedArapSystem out;
+  SparseMatrix<double> H = LVV - SparseMatrix<double>(LVQ_Binv * LVQ.transpose());
+  // Symmetrise exactly (the product is symmetric up to round-off).
+  const SparseMatrix<double> Ht = H.transpose();
+  out.H = (0.5 * (H + Ht)).pruned(1e-300);
+  out.Ds = (DV - SparseMatrix<double>(LVQ_Binv * DQ)).pruned(1e-300);
+  out.DV = DV;
+  return out;
+}
+
+double modified_arap_energy(const Vertices& V, const RotationElements& el, const std::vector<int>& cluster,
+                            const EnergyParameters& params, const Vertices& Vp, const Eigen::VectorXd& Q,
+                            const Eigen::VectorXd& S) {
+  double energy = 0.0;
+  for (Index k = 0; k < el.size(); ++k) {
+    const Eigen::Map<const Eigen::Matrix3d> s(S.data() + 9 * cluster[k]);
+    const Eigen::Vector4d q = Q.segment<4>(4 * k);
+    Eigen::Matrix3d qm;
+    qm << q(0), -q(3), q(2), q(3), q(0), -q(1), -q(2), q(1), q(0);  // Eq. 9
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Index i = el.edge_i[e], j = el.edge_j[e];
+      const Vec3 ev = row(V, i) - row(V, j), epv = row(Vp, i) - row(Vp, j);
+      energy += 0.5 * el.weight[e] * (epv - (s + qm) * ev).squaredNorm();
+    }
+    energy += params.alpha * el.measure(k) * qm.squaredNorm();
+    if (el.is_surface) energy += params.beta * el.measure(k) * (qm * Vec3(row(el.normal, k))).squaredNorm();
+  }
+  return energy;
+}
+
+Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(G, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU();
+  const Eigen::Matrix3d Vm = svd.matrixV();
+  if ((U * Vm.transpose()).determinant() < 0) U.col(2) *= -1.0;  // flip the smallest singular direction
+  return U * Vm.transpose();
+}
+
+double arap_energy(const Vertices& V, const RotationElements& el, const Vertices& Vp) {
+  detail::check_size("arap_energy: deformed vertex count", V.rows(), Vp.rows());
+  double energy = 0.0;
+  for (Index k = 0; k < el.size(); ++k) {
+    Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Vec3 ev = row(V, el.edge_i[e]) - row(V, el.edge_j[e]);
+      const Vec3 epv = row(Vp, el.edge_i[e]) - row(Vp, el.edge_j[e]);
+      G.noalias() += el.weight[e] * epv * ev.transpose();
+    }
+    const Eigen::Matrix3d R = fit_rotation(G);
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Vec3 ev = row(V, el.edge_i[e]) - row(V, el.edge_j[e]);
+      const Vec3 epv = row(Vp, el.edge_i[e]) - row(Vp, el.edge_j[e]);
+      energy += 0.5 * el.weight[e] * (epv - R * ev).squaredNorm();
+    }
+  }
+  return energy;
+}
+
+}  // namespace qpreduce::deform

@@ -1,0 +1,505 @@
+#include "qpreduce/deform/deformer.h"
+
+#include "qpreduce/deform/geometry.h"
+
+#include <qpreduce/detail/timer.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+namespace qpreduce::deform {
+
+namespace {
+
+using Triplets = std::vector<Eigen::Triplet<double>>;
+using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, G = M_N·X + M_U·S.
+class RotationProjection final : public Phase2Projection<double> {
+ public:
+  Matrix<double> MN;  // 9d × nx
+  Matrix<double> MU;  // 9d × 9d
+  Eigen::VectorXd g;  // 9d workspace
+
+  double project(const Eigen::Ref<const Vector<double>>& x, Eigen::Ref<Vector<double>> s) override {
+    g.noalias() = MN * x;
+    g.noalias() += MU * s;
+    double change2 = 0.0;
+    const Index d = s.size() / 9;
+    for (Index i = 0; i < d; ++i) {
+      const Eigen::Map<const Eigen::Matrix3d> G(g.data() + 9 * i);
+      Eigen::Map<Eigen::Matrix3d> si(s.data() + 9 * i);
+      const Eigen::Matrix3d R = fit_rotation(G);
+      change2 += (R - si).squaredNorm();
+      si = R;
+    }
+    return std::sqrt(change2);
+  }
+};
+
+}  // namespace
+
+bool DeformerOptions::is_valid(std::string* why) const {
+  auto fail = [why](std::string msg) {
+    if (why) *why = std::move(msg);
+    return false;
+  };
+  std::string sub;
+  if (!energy.is_valid(&sub)) return fail("energy: " + sub);
+  if (rotational_proxies < 1) return fail(fmt::format("rotational_proxies must be ≥ 1, got {}", rotational_proxies));
+  if (linear_proxies < 0) return fail(fmt::format("linear_proxies must be ≥ 0, got {}", linear_proxies));
+  if (iterations < 1) return fail(fmt::format("iterations must be ≥ 1, got {}", iterations));
+  if (!clustering.is_valid(&sub)) return fail("clustering: " + sub);
+  if (!subspace.is_valid(&sub)) return fail("subspace: " + sub);
+  return true;
+}
+
+struct Deformer::State {
+  // Model.
+  Vertices rest;
+  RotationElements elements;
+  std::vector<int> clusters;
+  std::vector<int> patch_of_vertex;
+  std::vector<PatchType> patch_types;
+  Index n = 0, d = 0, m = 0, s = 0;
+  Index nu = 0;                     // control-layer size
+  std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
+  Eigen::VectorXd cluster_measure;  // Σ a_k per cluster (global rotation weights)
+  // Subspace and reduced operators.
+  SubspaceSolver<double> solver;
+  RotationProjection projection;
+  RowMatrixF basis;                 // 3n × (nx + 9d): rows of P·[N UD], float
+  Index nx = 0;                     // 3m + 12s
+  // On-site.
+  FixedCoordinateSolver<double> phase1;
+  Handles handles;
+  std::vector<Index> fixed_patches;
+  Index rows = 0;
+  // Pose.
+  Eigen::VectorXd S;   // 9d, world frame
+  Eigen::VectorXd x;   // nx
+  Eigen::Matrix3d r0 = Eigen::Matrix3d::Identity();
+  // Frame workspaces (sized once).
+  Eigen::VectorXd b, s_local, w;
+  Eigen::VectorXf wf, vf;
+  AlternatingOptions alternating;
+  bool global_rotation = true;
+  bool ready = false;
+
+  // Row of V′ coordinate (vertex v, axis a) in the control layer, as a sparse
+  // combination: free vertices map to one control entry; patch vertices to
+  // t_s(a, ·)·v + d_s(a).
+  void control_row(Index v, int a, double scale, Index col, Triplets* t) const {
+    const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
+    if (p < 0) {
+      t->emplace_back(control_of_free[v] + a, col, scale);
+      return;
+    }
+    const Index base = nu - 12 * s + 12 * p;
+    for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
+    t->emplace_back(base + 9 + a, col, scale);
+  }
+};
+
+Deformer::Deformer() : state_(std::make_unique<State>()) {}
+Deformer::~Deformer() = default;
+Deformer::Deformer(Deformer&&) noexcept = default;
+Deformer& Deformer::operator=(Deformer&&) noexcept = default;
+
+bool Deformer::ready() const { return state_->ready; }
+Index Deformer::vertex_count() const { return state_->n; }
+Index Deformer::rotational_proxies() const { return state_->d; }
+Index Deformer::linear_proxies() const { return state_->m; }
+Index Deformer::patch_count() const { return state_->s; }
+Index Deformer::handle_rows() const { return state_->rows; }
+const std::vector<int>& Deformer::clusters() const { return state_->clusters; }
+const std::vector<int>& Deformer::patch_of_vertex() const { return state_->patch_of_vertex; }
+const RotationElements& Deformer::elements() const { return state_->elements; }
+const Eigen::VectorXd& Deformer::rotations() const { return state_->S; }
+const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->r0; }
+
+PrecomputeSummary Deformer::precompute(const DeformableModel& model, const DeformerOptions& options,
+                                       const ProgressFn& progress) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+  const bool tet = model.is_tet();
+  if (tet == (model.F.rows() > 0)) {
+    throw std::invalid_argument("DeformableModel: give exactly one of F (surface) and T (tetrahedra)");
+  }
+  if (tet) {
+    check_mesh("DeformableModel", TetMesh{model.V, model.T, {}});
+  } else {
+    check_mesh("DeformableModel", TriangleMesh{model.V, model.F});
+  }
+  auto report = [&](const char* stage, double f) {
+    if (progress) progress(stage, f);
+  };
+  const detail::Timer total;
+  auto st = std::make_unique<State>();
+  State& S = *st;
+  PrecomputeSummary summary;
+  S.rest = model.V;
+  S.n = model.V.rows();
+  const Index n = S.n;
+  const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
+
+  // Patches.
+  S.patch_of_vertex = model.patch_of_vertex;
+  S.patch_types = model.patch_types;
+  if (!S.patch_of_vertex.empty()) {
+    detail::check_size("DeformableModel::patch_of_vertex size", n, static_cast<Index>(S.patch_of_vertex.size()));
+    for (Index v = 0; v < n; ++v) {
+      const int p = S.patch_of_vertex[v];
+      if (p < -1 || p >= static_cast<int>(S.patch_types.size())) {
+        throw std::invalid_argument(fmt::format("DeformableModel::patch_of_vertex: vertex {} has patch {} outside "
+                                                "[-1, {})",
+                                                v, p, S.patch_types.size()));
+      }
+    }
+  }
+  S.s = static_cast<Index>(S.patch_types.size());
+  std::vector<Index> patch_size(static_cast<size_t>(S.s), 0);
+  for (int p : S.patch_of_vertex)
+    if (p >= 0) ++patch_size[static_cast<size_t>(p)];
+  for (Index p = 0; p < S.s; ++p) {
+    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableModel: patch {} has no vertex", p));
+    if (S.patch_types[p] == PatchType::Fixed) S.fixed_patches.push_back(p);
+  }
+  S.control_of_free.assign(static_cast<size_t>(n), -1);
+  Index free_count = 0;
+  for (Index v = 0; v < n; ++v)
+    if (S.patch_of_vertex.empty() || S.patch_of_vertex[v] < 0) S.control_of_free[v] = 3 * free_count++;
+  S.nu = 3 * free_count + 12 * S.s;
+
+  // Rotation elements and clusters.
+  report("clusters", 0.0);
+  detail::Timer t;
+  S.elements = tet ? tet_elements(model.V, model.T) : spokes_and_rims_elements(model.V, model.F);
+  const Index r = S.elements.size();
+  if (!model.clusters.empty()) {
+    detail::check_size("DeformableModel::clusters size", r, static_cast<Index>(model.clusters.size()));
+    S.clusters = model.clusters;
+    S.d = 1 + *std::max_element(S.clusters.begin(), S.clusters.end());
+    std::vector<Index> count(static_cast<size_t>(S.d), 0);
+    for (Index k = 0; k < r; ++k) {
+      if (S.clusters[k] < 0) {
+        throw std::invalid_argument(fmt::format("DeformableModel::clusters: element {} has negative label {}", k,
+                                                S.clusters[k]));
+      }
+      ++count[static_cast<size_t>(S.clusters[k])];
+    }
+    for (Index c = 0; c < S.d; ++c)
+      if (count[c] == 0) throw std::invalid_argument(fmt::format("DeformableModel::clusters: cluster {} is empty", c));
+  } else {
+    Clustering clustering;
+    const ClusterSummary cs = rotation_clusters(model.V, E, tet ? ClusterElement::Element : ClusterElement::Vertex,
+                                                options.rotational_proxies, options.clustering, &clustering);
+    if (!cs.ok()) {
+      summary.status = cs.status;
+      summary.message = "rotational clusters: " + cs.message;
+      return summary;
+    }
+    S.clusters = clustering.labels;
+    S.d = clustering.count;
+  }
+  S.cluster_measure = Eigen::VectorXd::Zero(S.d);
+  for (Index k = 0; k < r; ++k) S.cluster_measure(S.clusters[k]) += S.elements.measure(k);
+  summary.clustering_seconds = t.seconds();
+
+  // Linear proxies, restricted to free vertices.
+  report("linear proxies", 0.1);
+  LinearProxies proxies = model.linear.count() > 0 ? model.linear
+                                                  : linear_proxies_fps(model.V, E, options.linear_proxies);
+  std::vector<std::vector<Index>> groups;
+  for (const auto& g : proxies.groups) {
+    std::vector<Index> kept;
+    for (Index v : g) {
+      if (v < 0 || v >= n) throw std::invalid_argument(fmt::format("linear proxies: vertex {} outside [0, {})", v, n));
+      if (S.control_of_free[v] >= 0) kept.push_back(v);
+    }
+    if (!kept.empty()) groups.push_back(std::move(kept));
+  }
+  S.m = static_cast<Index>(groups.size());
+  S.nx = 3 * S.m + 12 * S.s;
+  // Every component needs a proxy or a patch.
+  {
+    const MeshComponents comps = connected_components(n, E);
+    std::vector<char> pinned(static_cast<size_t>(comps.count), 0);
+    for (const auto& g : groups)
+      for (Index v : g) pinned[static_cast<size_t>(comps.vertex_component[v])] = 1;
+    for (Index v = 0; v < n; ++v)
+      if (S.control_of_free[v] < 0) pinned[static_cast<size_t>(comps.vertex_component[v])] = 1;
+    for (Index c = 0; c < comps.count; ++c) {
+      if (!pinned[c]) {
+        throw std::invalid_argument(fmt::format(
+            "DeformableModel: connected component {} of {} has no linear proxy and no patch; the KKT system (Eq. 14) "
+            "would be singular (use at least {} linear proxies, or patch that component)",
+            c, comps.count, comps.count));
+      }
+    }
+  }
+
+  // Energy with Q eliminated, then the control layer.
+  report("energy", 0.15);
+  t.reset();
+  const ModifiedArapSystem full = assemble_modified_arap(model.V, S.elements, S.clusters, S.d, options.energy);
+  const EliminatedArapSystem elim = eliminate_rotation_corrections(full);
+  Triplets tp;
+  tp.reserve(static_cast<size_t>(3 * n) * 4);
+  for (Index v = 0; v < n; ++v)
+    for (int a = 0; a < 3; ++a) {
+      Triplets row;
+      S.control_row(v, a, 1.0, 0, &row);
+      for (const auto& e : row) tp.emplace_back(3 * v + a, e.row(), e.value());
+    }
+  SparseMatrix<double> P(3 * n, S.nu);
+  P.setFromTriplets(tp.begin(), tp.end());
+  const SparseMatrix<double> Pt = P.transpose();
+  const SparseMatrix<double> Hu = SparseMatrix<double>(Pt * elim.H * P);
+  const SparseMatrix<double> Du = Pt * elim.Ds;
+  Triplets tc;
+  for (Index j = 0; j < S.m; ++j) {
+    const double w = 1.0 / static_cast<double>(groups[j].size());
+    for (Index v : groups[j])
+      for (int a = 0; a < 3; ++a) tc.emplace_back(S.control_of_free[v] + a, 3 * j + a, w);
+  }
+  for (Index p = 0; p < S.s; ++p)
+    for (int c = 0; c < 12; ++c) tc.emplace_back(S.nu - 12 * S.s + 12 * p + c, 3 * S.m + 12 * p + c, 1.0);
+  SparseMatrix<double> C(S.nu, S.nx);
+  C.setFromTriplets(tc.begin(), tc.end());
+  summary.assembly_seconds = t.seconds();
+
+  // Augment with the cheapest columns: every patch column (one entry each)
+  // and, when groups are long, only the shortest group's three columns.
+  SubspaceOptions sub = options.subspace;
+  // Phase 1 holds the rotational coordinates fixed (y = S), so U·D need not
+  // have full rank: rotations whose effect the linear proxies or patches
+  // already pin (all of them, with a proxy at every vertex) are legitimate.
+  sub.check_dependent_cd = false;
+  if (sub.augment_columns.empty()) {
+    double fill = 0.0;
+    for (const auto& g : groups) fill += 3.0 * static_cast<double>(g.size() * g.size());
+    if (fill > sub.max_augmentation_fill * static_cast<double>(Hu.nonZeros()) && S.m > 0) {
+      // One group per component suffices; the shortest ones of each component.
+      const MeshComponents comps = connected_components(n, E);
+      std::vector<Index> best(static_cast<size_t>(comps.count), -1);
+      for (Index j = 0; j < S.m; ++j) {
+        const int c = comps.vertex_component[groups[j].front()];
+        if (best[c] < 0 || groups[j].size() < groups[best[c]].size()) best[c] = j;
+      }
+      for (Index j : best)
+        if (j >= 0)
+          for (int a = 0; a < 3; ++a) sub.augment_columns.push_back(3 * j + a);
+      for (Index c = 3 * S.m; c < S.nx; ++c) sub.augment_columns.push_back(c);
+    }
+  }
+
+  report("subspace", 0.2);
+  t.reset();
+  summary.subspace = S.solver.precompute(Hu, C, Du, sub);
+  summary.subspace_seconds = t.seconds();
+  if (!summary.subspace.ok()) {
+    summary.status = summary.subspace.status;
+    summary.message = "variational subspace: " + summary.subspace.message;
+    return summary;
+  }
+
+  // Reconstruction basis P·[N UD] and the Phase 2 matrices D_Vᵀ·P·[N UD].
+  report("reduction", 0.9);
+  t.reset();
+  const Matrix<double>& N = S.solver.subspace().N;
+  const Matrix<double>& U = S.solver.subspace().UD;
+  {
+    Matrix<double> PB(3 * n, S.nx + 9 * S.d);
+    PB.leftCols(S.nx) = P * N;
+    PB.rightCols(9 * S.d) = P * U;
+    const SparseMatrix<double> DVt = elim.DV.transpose();
+    S.projection.MN = DVt * PB.leftCols(S.nx);
+    S.projection.MU = DVt * PB.rightCols(9 * S.d);
+    S.basis = PB.cast<float>();
+  }
+  S.projection.g.resize(9 * S.d);
+  summary.reduction_seconds = t.seconds();
+
+  S.S.resize(9 * S.d);
+  S.x = Eigen::VectorXd::Zero(S.nx);
+  S.s_local.resize(9 * S.d);
+  S.w.resize(S.nx + 9 * S.d);
+  S.wf.resize(S.nx + 9 * S.d);
+  S.vf.resize(3 * n);
+  S.alternating.iterations = options.iterations;
+  S.global_rotation = options.global_rotation;
+  S.ready = true;
+  state_ = std::move(st);
+  reset_pose();
+  report("done", 1.0);
+
+  summary.status = Status::Success;
+  summary.message = "precomputed";
+  summary.vertices = n;
+  summary.elements = r;
+  summary.rotational_proxies = state_->d;
+  summary.linear_proxies = state_->m;
+  summary.patches = state_->s;
+  summary.reduced_size = state_->nx + 9 * state_->d;
+  summary.total_seconds = total.seconds();
+  return summary;
+}
+
+void Deformer::reset_pose() {
+  State& S = *state_;
+  for (Index i = 0; i < S.d; ++i) Eigen::Map<Eigen::Matrix3d>(S.S.data() + 9 * i).setIdentity();
+  S.r0.setIdentity();
+  S.x.setZero();
+}
+
+ConstraintSummary Deformer::set_handles(const Handles& handles, const ConstraintOptions& options) {
+  State& S = *state_;
+  if (!S.ready) throw std::invalid_argument("Deformer::set_handles: call precompute first");
+  Triplets ta;
+  Index col = 0;
+  for (size_t h = 0; h < handles.points.size(); ++h) {
+    const PointHandle& ph = handles.points[h];
+    if (ph.vertices.empty()) throw std::invalid_argument(fmt::format("handle {}: no vertex", h));
+    if (!ph.weights.empty() && ph.weights.size() != ph.vertices.size()) {
+      throw std::invalid_argument(fmt::format("handle {}: {} weights for {} vertices", h, ph.weights.size(),
+                                              ph.vertices.size()));
+    }
+    if (ph.weights.empty() && ph.vertices.size() != 1) {
+      throw std::invalid_argument(fmt::format("handle {}: a group of {} vertices needs weights", h,
+                                              ph.vertices.size()));
+    }
+    for (size_t i = 0; i < ph.vertices.size(); ++i) {
+      const Index v = ph.vertices[i];
+      if (v < 0 || v >= S.n) {
+        throw std::invalid_argument(fmt::format("handle {}: vertex {} outside [0, {})", h, v, S.n));
+      }
+      const double w = ph.weights.empty() ? 1.0 : ph.weights[i];
+      if (!std::isfinite(w)) throw std::invalid_argument(fmt::format("handle {}: weight {} is not finite", h, i));
+      for (int a = 0; a < 3; ++a) S.control_row(v, a, w, col + a, &ta);
+    }
+    col += 3;
+  }
+  std::vector<Index> patches = S.fixed_patches;
+  for (Index p : handles.patches) {
+    if (p < 0 || p >= S.s) throw std::invalid_argument(fmt::format("handle patch {} outside [0, {})", p, S.s));
+    if (S.patch_types[p] == PatchType::Fixed) {
+      throw std::invalid_argument(fmt::format("patch {} is Fixed: it is always constrained to the rest pose", p));
+    }
+    patches.push_back(p);
+  }
+  for (Index p : patches) {
+    for (int c = 0; c < 12; ++c) ta.emplace_back(S.nu - 12 * S.s + 12 * p + c, col + c, 1.0);
+    col += 12;
+  }
+  SparseMatrix<double> A(S.nu, col);
+  A.setFromTriplets(ta.begin(), ta.end());
+  const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
+  S.handles = handles;
+  S.rows = col;
+  S.b.resize(col);
+  return cs;
+}
+
+FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
+  State& S = *state_;
+  if (!S.ready || !S.phase1.ready()) throw std::invalid_argument("Deformer::frame: call precompute and set_handles first");
+  detail::check_size("Deformer::frame: target points", static_cast<Index>(S.handles.points.size()),
+                     targets.points.rows());
+  detail::check_size("Deformer::frame: patch transforms", static_cast<Index>(S.handles.patches.size()),
+                     static_cast<Index>(targets.patch_transforms.size()));
+  if (targets.points.size() > 0) detail::check_finite("Deformer::frame: target points", targets.points);
+  for (const auto& T : targets.patch_transforms) detail::check_finite("Deformer::frame: patch transform", T);
+  const detail::Timer total;
+  FrameSummary summary;
+
+  // Global rotation adaptation: r₀ from the area-weighted mean of the cluster
+  // rotations; solve in the frame rotated by r₀ᵀ.
+  if (S.global_rotation) {
+    Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+    for (Index i = 0; i < S.d; ++i) G += S.cluster_measure(i) * Eigen::Map<const Eigen::Matrix3d>(S.S.data() + 9 * i);
+    S.r0 = fit_rotation(G);
+  } else {
+    S.r0.setIdentity();
+  }
+  const Eigen::Matrix3d r0t = S.r0.transpose();
+  Index row = 0;
+  for (Index h = 0; h < targets.points.rows(); ++h) {
+    S.b.segment<3>(row) = r0t * targets.points.row(h).transpose();
+    row += 3;
+  }
+  auto put_patch = [&](const Eigen::Matrix<double, 3, 4>& T) {
+    const Eigen::Matrix3d A = r0t * T.leftCols<3>();
+    const Eigen::Vector3d tr = r0t * T.col(3);
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c) S.b(row + 3 * a + c) = A(a, c);
+    S.b.segment<3>(row + 9) = tr;
+    row += 12;
+  };
+  const Eigen::Matrix<double, 3, 4> identity = Eigen::Matrix<double, 3, 4>::Identity();
+  for (size_t i = 0; i < S.fixed_patches.size(); ++i) put_patch(identity);
+  for (const auto& T : targets.patch_transforms) put_patch(T);
+
+  for (Index i = 0; i < S.d; ++i) {
+    Eigen::Map<Eigen::Matrix3d>(S.s_local.data() + 9 * i) = r0t * Eigen::Map<const Eigen::Matrix3d>(S.S.data() + 9 * i);
+  }
+  detail::Timer t;
+  AlternatingOptions opts = S.alternating;
+  const AlternatingSummary as = alternate<double>(S.phase1, S.projection, S.b, opts, S.x, S.s_local);
+  summary.iterations = as.iterations;
+  summary.last_change = as.last_change;
+  for (Index i = 0; i < S.d; ++i) {
+    Eigen::Map<Eigen::Matrix3d>(S.S.data() + 9 * i) = S.r0 * Eigen::Map<const Eigen::Matrix3d>(S.s_local.data() + 9 * i);
+  }
+  summary.solve_seconds = t.seconds();
+
+  // Reconstruction V′ = r₀·(P·[N UD]·[X; S_local]), parallel over vertices.
+  t.reset();
+  S.wf.head(S.nx) = S.x.cast<float>();
+  S.wf.tail(9 * S.d) = S.s_local.cast<float>();
+  if (out->rows() != S.n) out->resize(S.n, 3);
+  const Eigen::Matrix3f r0f = S.r0.cast<float>();
+  const Index n = S.n;
+#pragma omp parallel for schedule(static)
+  for (Index v = 0; v < n; ++v) {
+    const Eigen::Vector3f p = S.basis.middleRows<3>(3 * v) * S.wf;
+    out->row(v) = (r0f * p).cast<double>().transpose();
+  }
+  summary.reconstruct_seconds = t.seconds();
+  summary.total_seconds = total.seconds();
+  return summary;
+}
+
+SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableModel* model) {
+  const Index n = model->V.rows();
+  detail::check_size("apply_sel_def: .sel entries", n, static_cast<Index>(sel.size()));
+  detail::check_finite("apply_sel_def: .def matrix", def);
+  model->patch_types = {PatchType::Fixed, PatchType::Affine};
+  model->patch_of_vertex.assign(static_cast<size_t>(n), -1);
+  Index fixed = 0, handle = 0;
+  for (Index v = 0; v < n; ++v) {
+    switch (sel[v]) {
+      case 0: model->patch_of_vertex[v] = 0; ++fixed; break;
+      case 1: break;
+      case 2: model->patch_of_vertex[v] = 1; ++handle; break;
+      default:
+        throw std::invalid_argument(fmt::format("apply_sel_def: vertex {} has role {} (expected 0, 1 or 2)", v, sel[v]));
+    }
+  }
+  if (handle == 0) throw std::invalid_argument("apply_sel_def: the selection has no handle vertex (role 2)");
+  if (fixed == 0) {
+    // No fixed region: keep only the handle patch.
+    model->patch_types = {PatchType::Affine};
+    for (int& p : model->patch_of_vertex)
+      if (p == 1) p = 0;
+  }
+  SelDefScenario sc;
+  sc.handles.patches = {static_cast<Index>(model->patch_types.size()) - 1};
+  sc.targets.points.resize(0, 3);
+  sc.targets.patch_transforms = {def.topRows<3>()};
+  return sc;
+}
+
+}  // namespace qpreduce::deform
