@@ -5,6 +5,7 @@
 #include "deform_run.h"
 #include "guard.h"
 
+#include <qpreduce/deform/mesh_io.h>
 #include <qpreduce/deform/shapes.h>
 
 #include <CLI/CLI.hpp>
@@ -28,6 +29,7 @@ struct DemoArgs {
 };
 
 int run_demo(const DemoArgs& a) {
+  using namespace qpreduce;
   using namespace qpreduce::deform;
   const double radius = 1.0, height = 12.0, pi = std::acos(-1.0);
   const TriangleMesh mesh = shapes::capped_cylinder(radius, height, 60, 80);

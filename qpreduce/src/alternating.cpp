@@ -74,6 +74,45 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
   return summary;
 }
 
+template <typename Scalar>
+void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
+                                   const Matrix<Scalar>& Gy) {
+  if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
+  detail::check_size("FusedAlternation::set: G_z columns (d)", phase1.d(), Gz.cols());
+  detail::check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), Gy.cols());
+  detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
+  Fb_.noalias() = Gz * phase1.Mb();
+  Fy_ = Gy;
+  Fy_.noalias() += Gz * phase1.MY();
+  gb_.resize(Gz.rows());
+  g_.resize(Gz.rows());
+  ready_ = true;
+}
+
+template <typename Scalar>
+AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Scalar>& phase1,
+                                                 InputProjection<Scalar>& projection,
+                                                 const Eigen::Ref<const Vector<Scalar>>& b,
+                                                 const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
+                                                 Eigen::Ref<Vector<Scalar>> y) {
+  assert(ready_ && options.is_valid(nullptr) && b.size() == Fb_.cols() && y.size() == Fy_.cols());
+  AlternatingSummary summary;
+  gb_.noalias() = Fb_ * b;
+  for (int it = 0; it < options.iterations; ++it) {
+    g_ = gb_;
+    g_.noalias() += Fy_ * y;
+    summary.last_change = projection.project(g_, y);
+    summary.iterations = it + 1;
+    if (options.tolerance > 0 &&
+        summary.last_change <= options.tolerance * std::max(1.0, static_cast<double>(y.norm())))
+      break;
+  }
+  phase1.solve(b, y, z);
+  return summary;
+}
+
+template class FusedAlternation<double>;
+template class FusedAlternation<float>;
 template class FixedCoordinateSolver<double>;
 template class FixedCoordinateSolver<float>;
 template AlternatingSummary alternate<double>(const FixedCoordinateSolver<double>&, Phase2Projection<double>&,

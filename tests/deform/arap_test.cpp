@@ -165,6 +165,12 @@ TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[a
     CHECK(F.determinant() == Approx(1.0).epsilon(1e-12));
     CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-12);
     if (seed % 2 == 0) CHECK((F - R).norm() < 1e-12);  // unreflected: recovers R
+    // The fit maximises tr(FᵀG) over SO(3): no nearby rotation does better.
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+      axis(k) = 1.0;
+      for (double eps : {1e-4, -1e-4}) CHECK((rotation(eps, axis) * F).cwiseProduct(G).sum() <= F.cwiseProduct(G).sum() + 1e-12);
+    }
   }
 }
 

@@ -100,6 +100,51 @@ TEST_CASE("alternate runs the requested rounds and ends with Phase 1", "[alterna
   CHECK(s2.last_change <= 1e-12 * std::max(1.0, y.norm()));
 }
 
+namespace {
+// A Phase 2 whose input is linear in (z, y): g = G_z z + G_y y, y ← g/‖g‖.
+struct LinearInput {
+  Matrix<double> Gz, Gy;
+};
+struct NormalizeZ : Phase2Projection<double> {
+  const LinearInput* in;
+  double project(const Eigen::Ref<const Vector<double>>& z, Eigen::Ref<Vector<double>> y) override {
+    const Vector<double> old = y;
+    y = (in->Gz * z + in->Gy * y).normalized();
+    return (y - old).norm();
+  }
+};
+struct NormalizeG : InputProjection<double> {
+  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y) override {
+    const Vector<double> old = y;
+    y = g.normalized();
+    return (y - old).norm();
+  }
+};
+}  // namespace
+
+TEST_CASE("fused alternation gives the iterates of the plain one", "[alternating]") {
+  Fixture f;
+  const SparseMatrix<double> A = gen::selection(f.n, gen::random_subset(f.n, f.m, 31));
+  FixedCoordinateSolver<double> phase1;
+  REQUIRE(phase1.set_constraints(f.solver, A).ok());
+  LinearInput in{0.3 * gen::gaussian_matrix(f.k, f.d, 32), gen::gaussian_matrix(f.k, f.k, 33)};
+  NormalizeZ plain;
+  plain.in = &in;
+  NormalizeG fused_proj;
+  FusedAlternation<double> fused;
+  fused.set(phase1, in.Gz, in.Gy);
+  const Vector<double> b = gen::gaussian_vector(f.m, 34);
+  Vector<double> z1(f.d), z2(f.d), y1 = gen::gaussian_vector(f.k, 35), y2 = y1;
+  AlternatingOptions opts;
+  opts.iterations = 6;
+  alternate<double>(phase1, plain, b, opts, z1, y1);
+  const AlternatingSummary s = fused.run(phase1, fused_proj, b, opts, z2, y2);
+  CHECK(s.iterations == 6);
+  CHECK((y1 - y2).norm() <= 1e-12 * (1 + y1.norm()));
+  CHECK((z1 - z2).norm() <= 1e-12 * (1 + z1.norm()));
+  CHECK_THROWS_WITH(fused.set(phase1, Matrix<double>(f.k, f.d + 1), in.Gy), Catch::Contains("G_z columns"));
+}
+
 TEST_CASE("alternating scheme rejects bad input", "[alternating][errors]") {
   Fixture f;
   FixedCoordinateSolver<double> phase1;

@@ -281,12 +281,36 @@ double modified_arap_energy(const Vertices& V, const RotationElements& el, const
   return energy;
 }
 
-Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
+namespace {
+
+Eigen::Matrix3d fit_rotation_svd(const Eigen::Matrix3d& G) {
   const Eigen::JacobiSVD<Eigen::Matrix3d> svd(G, Eigen::ComputeFullU | Eigen::ComputeFullV);
   Eigen::Matrix3d U = svd.matrixU();
   const Eigen::Matrix3d Vm = svd.matrixV();
   if ((U * Vm.transpose()).determinant() < 0) U.col(2) *= -1.0;  // flip the smallest singular direction
   return U * Vm.transpose();
+}
+
+}  // namespace
+
+Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
+  // det G > 0: the orthogonal polar factor of G is a rotation and maximises
+  // tr(RᵀG); the scaled Newton iteration X ← ½(γX + X⁻ᵀ/γ) (Higham) reaches it
+  // to round-off in a handful of 3×3 inversions, ~20× faster than a Jacobi
+  // SVD. Reflected or nearly singular G (det G ≤ 1e-6·‖G‖³): the SVD path.
+  const double norm = G.norm();
+  const double det = G.determinant();
+  if (!(det > 1e-6 * norm * norm * norm)) return fit_rotation_svd(G);
+  Eigen::Matrix3d X = G;
+  for (int it = 0; it < 30; ++it) {
+    const Eigen::Matrix3d Xinv = X.inverse();
+    const double gamma = std::sqrt(Xinv.norm() / X.norm());
+    const Eigen::Matrix3d next = 0.5 * (gamma * X + Xinv.transpose() / gamma);
+    const double step = (next - X).squaredNorm();
+    X = next;
+    if (step < 1e-30) return X;
+  }
+  return fit_rotation_svd(G);  // did not settle (never seen): exact fallback
 }
 
 double arap_energy(const Vertices& V, const RotationElements& el, const Vertices& Vp) {

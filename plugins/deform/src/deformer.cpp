@@ -16,16 +16,11 @@ namespace {
 using Triplets = std::vector<Eigen::Triplet<double>>;
 using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
-// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, G = M_N·X + M_U·S.
-class RotationProjection final : public Phase2Projection<double> {
+// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, with
+// G = M_N·X + M_U·S formed by the engine's FusedAlternation.
+class RotationProjection final : public InputProjection<double> {
  public:
-  Matrix<double> MN;  // 9d × nx
-  Matrix<double> MU;  // 9d × 9d
-  Eigen::VectorXd g;  // 9d workspace
-
-  double project(const Eigen::Ref<const Vector<double>>& x, Eigen::Ref<Vector<double>> s) override {
-    g.noalias() = MN * x;
-    g.noalias() += MU * s;
+  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) override {
     double change2 = 0.0;
     const Index d = s.size() / 9;
     for (Index i = 0; i < d; ++i) {
@@ -70,6 +65,8 @@ struct Deformer::State {
   // Subspace and reduced operators.
   SubspaceSolver<double> solver;
   RotationProjection projection;
+  Matrix<double> MN, MU;            // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
+  FusedAlternation<double> fused;
   RowMatrixF basis;                 // 3n × (nx + 9d): rows of P·[N UD], float
   Index nx = 0;                     // 3m + 12s
   // On-site.
@@ -316,11 +313,10 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     PB.leftCols(S.nx) = P * N;
     PB.rightCols(9 * S.d) = P * U;
     const SparseMatrix<double> DVt = elim.DV.transpose();
-    S.projection.MN = DVt * PB.leftCols(S.nx);
-    S.projection.MU = DVt * PB.rightCols(9 * S.d);
+    S.MN = DVt * PB.leftCols(S.nx);
+    S.MU = DVt * PB.rightCols(9 * S.d);
     S.basis = PB.cast<float>();
   }
-  S.projection.g.resize(9 * S.d);
   summary.reduction_seconds = t.seconds();
 
   S.S.resize(9 * S.d);
@@ -397,6 +393,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   SparseMatrix<double> A(S.nu, col);
   A.setFromTriplets(ta.begin(), ta.end());
   const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
+  S.fused.set(S.phase1, S.MN, S.MU);
   S.handles = handles;
   S.rows = col;
   S.b.resize(col);
@@ -447,7 +444,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   }
   detail::Timer t;
   AlternatingOptions opts = S.alternating;
-  const AlternatingSummary as = alternate<double>(S.phase1, S.projection, S.b, opts, S.x, S.s_local);
+  const AlternatingSummary as = S.fused.run(S.phase1, S.projection, S.b, opts, S.x, S.s_local);
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
   for (Index i = 0; i < S.d; ++i) {

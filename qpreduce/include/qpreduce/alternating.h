@@ -40,6 +40,8 @@ class FixedCoordinateSolver {
   void solve(const ConstRef& b, const ConstRef& Y, Ref z) const;
 
   bool ready() const { return ready_; }
+  const Matrix<Scalar>& Mb() const { return Mb_; }  // d × m
+  const Matrix<Scalar>& MY() const { return MY_; }  // d × k
   Index d() const { return Mb_.rows(); }
   Index k() const { return MY_.cols(); }
   Index m() const { return Mb_.cols(); }
@@ -83,5 +85,40 @@ template <typename Scalar>
 AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2Projection<Scalar>& phase2,
                              const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
                              Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
+
+// Phase 2 projections whose input is linear in (z, y): g = G_z·z + G_y·y
+// (g: q entries), then y ← Π(g). Substituting Phase 1, z = M_b·b + M_Y·y,
+//     g = (G_z·M_b)·b + (G_z·M_Y + G_y)·y = g_b + F_y·y,
+// so a round costs one q×k GEMV plus Π, g_b is formed once per call, and z
+// once after the last round. The iterates are those of `alternate` exactly.
+template <typename Scalar>
+class InputProjection {
+ public:
+  virtual ~InputProjection() = default;
+  // y ← Π(g); returns ‖y_new − y_old‖. Should not allocate.
+  virtual double project(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y) = 0;
+};
+
+template <typename Scalar>
+class FusedAlternation {
+ public:
+  // Forms F_b = G_z·M_b (q×m) and F_y = G_z·M_Y + G_y (q×k) for the current
+  // constraint set of `phase1` (call again after each set_constraints).
+  // Throws std::invalid_argument on mismatched sizes or an unready phase1.
+  void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy);
+
+  // `options.iterations` rounds from the given y (warm start), then
+  // z = M_b·b + M_Y·y. No heap allocation.
+  AlternatingSummary run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
+                         const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
+                         Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
+
+  bool ready() const { return ready_; }
+
+ private:
+  Matrix<Scalar> Fb_, Fy_;
+  Vector<Scalar> gb_, g_;
+  bool ready_ = false;
+};
 
 }  // namespace qpreduce
