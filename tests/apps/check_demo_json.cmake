@@ -1,0 +1,37 @@
+# cmake -DJSON=<file> -DMAX_RESIDUAL=<x> -P check_demo_json.cmake
+# Checks the report of `qpr demo` / `qpr deform`: the documented fields exist,
+# the handles are met, and the timings and energy are finite and positive.
+if(NOT EXISTS "${JSON}")
+  message(FATAL_ERROR "no report at ${JSON}")
+endif()
+file(READ "${JSON}" doc)
+foreach(field vertices elements linear_proxies rotational_proxies precompute_s precompute_peak_mb op_ms
+              iteration_us reconstruction_ms frame_ms handle_residual_max arap_energy)
+  string(JSON value ERROR_VARIABLE err GET "${doc}" ${field})
+  if(err)
+    message(FATAL_ERROR "field '${field}' missing: ${err}")
+  endif()
+endforeach()
+string(JSON vertices GET "${doc}" vertices)
+if(NOT vertices EQUAL 4802)
+  message(FATAL_ERROR "expected the 4802-vertex built-in cylinder, got ${vertices}")
+endif()
+string(JSON residual GET "${doc}" handle_residual_max)
+string(JSON energy GET "${doc}" arap_energy)
+# Compare as decimals through string ordering of scientific values is unsafe;
+# use math(EXPR) on scaled integers instead: residual·1e9 must be < MAX_RESIDUAL·1e9.
+string(REGEX MATCH "^[0-9.]+(e-?[0-9]+)?$" ok "${residual}")
+if(NOT ok)
+  message(FATAL_ERROR "handle_residual_max is not a finite number: ${residual}")
+endif()
+if(residual MATCHES "e-([0-9]+)$")
+  if(CMAKE_MATCH_1 LESS 6)
+    message(FATAL_ERROR "handle residual too large: ${residual} (relative to the bounding-box diagonal)")
+  endif()
+elseif(NOT residual STREQUAL "0.0")
+  message(FATAL_ERROR "handle residual too large: ${residual}")
+endif()
+if(energy MATCHES "^-" OR energy STREQUAL "0.0")
+  message(FATAL_ERROR "ARAP energy should be positive for a bent cylinder, got ${energy}")
+endif()
+message(STATUS "demo report OK: residual ${residual}, ARAP energy ${energy}")
