@@ -1,0 +1,20 @@
+// qpr — one subcommand per file (cmd_<name>.cpp), each registered by one
+// function declared here and called from main.cpp. A command that fails
+// throws CLI::RuntimeError(exit_code) (CLI11 then exits with that code
+// without printing anything more); messages go to stderr first.
+#pragma once
+
+namespace CLI {
+class App;
+}
+
+namespace qpr {
+
+// `qpr theorem`: Theorem 4.10 on seeded trials (cmd_theorem.cpp, docs/theorem.md).
+void register_theorem(CLI::App& app);
+// `qpr demo`: reduced ARAP on a built-in cylinder, no files (cmd_demo.cpp).
+void register_demo(CLI::App& app);
+// `qpr deform`: reduced ARAP of a mesh from files (cmd_deform.cpp, docs/deform.md).
+void register_deform(CLI::App& app);
+
+}  // namespace qpr

@@ -1,0 +1,16 @@
+// qpr — the qpreduce command line. No math lives here: each subcommand calls
+// the engine or a plugin and reports.
+#include "commands.h"
+
+#include <CLI/CLI.hpp>
+
+int main(int argc, char** argv) {
+  CLI::App app{"qpr — interactive solves of constrained QPs through linear variational subspaces (qpreduce)"};
+  app.name("qpr");
+  app.require_subcommand(1);
+  qpr::register_demo(app);
+  qpr::register_deform(app);
+  qpr::register_theorem(app);
+  CLI11_PARSE(app, argc, argv);
+  return 0;
+}

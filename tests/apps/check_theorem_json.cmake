@@ -1,0 +1,58 @@
+# cmake -DJSON=<file> -P check_theorem_json.cmake
+# Checks the summary written by `qpr theorem --json`: the documented fields
+# exist, overall and per family, and nothing violated the bound or failed.
+if(NOT EXISTS "${JSON}")
+  message(FATAL_ERROR "no JSON file at ${JSON}")
+endif()
+file(READ "${JSON}" doc)
+
+foreach(field trials violations theorem_violations galerkin_violations failed eta_median eta_max exact_max_rel_error
+              seed families)
+  string(JSON value ERROR_VARIABLE err GET "${doc}" ${field})
+  if(err)
+    message(FATAL_ERROR "field '${field}' missing: ${err}")
+  endif()
+endforeach()
+
+string(JSON trials GET "${doc}" trials)
+string(JSON violations GET "${doc}" violations)
+string(JSON theorem_violations GET "${doc}" theorem_violations)
+string(JSON failed GET "${doc}" failed)
+string(JSON galerkin GET "${doc}" galerkin_violations)
+string(JSON exact GET "${doc}" exact_max_rel_error)
+if(NOT trials EQUAL 40)
+  message(FATAL_ERROR "expected 40 trials, got ${trials}")
+endif()
+if(NOT violations EQUAL 0 OR NOT theorem_violations EQUAL 0)
+  message(FATAL_ERROR "bound violated: violations = ${violations}, theorem_violations = ${theorem_violations}")
+endif()
+if(NOT galerkin EQUAL 0)
+  message(FATAL_ERROR "d_H(X*, X_min) exceeded the error of Eq. 35 on ${galerkin} covered trial(s)")
+endif()
+if(NOT failed EQUAL 0)
+  message(FATAL_ERROR "${failed} trial(s) failed")
+endif()
+# CMake compares numbers with a decimal point as floats only through math(); an
+# exponent like 1.2e-13 is not understood there, so check it as text: the
+# exponent must be ≤ −10.
+if(NOT exact MATCHES "e-([1-9][0-9]+)$")
+  if(NOT exact STREQUAL "0" AND NOT exact STREQUAL "0.0")
+    message(FATAL_ERROR "exact_max_rel_error = ${exact} is not below 1e-10")
+  endif()
+endif()
+
+string(JSON nfam LENGTH "${doc}" families)
+if(nfam LESS 1)
+  message(FATAL_ERROR "no per-family breakdown")
+endif()
+math(EXPR last "${nfam} - 1")
+foreach(i RANGE ${last})
+  string(JSON name MEMBER "${doc}" families ${i})
+  foreach(field trials violations eta_median eta_max exact_max_rel_error)
+    string(JSON value ERROR_VARIABLE err GET "${doc}" families ${name} ${field})
+    if(err)
+      message(FATAL_ERROR "families.${name}.${field} missing: ${err}")
+    endif()
+  endforeach()
+endforeach()
+message(STATUS "qpr theorem JSON: ${trials} trials, ${nfam} families, no violations, exact rel error ${exact}")
