@@ -1,13 +1,20 @@
 #include "qpreduce/subspace.h"
 
+#include "blas.h"
+#include "subspace_internal.h"
+
 #include "qpreduce/detail/dense.h"
 #include "qpreduce/detail/timer.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
+#include <omp.h>
+
 #include <algorithm>
+#include <cassert>
 #include <cmath>
+#include <optional>
 
 namespace qpreduce {
 
@@ -23,6 +30,9 @@ bool SubspaceOptions::is_valid(std::string* why) const {
   if (!(psd_shift > 0.0)) return fail("psd_shift must be positive");
   if (!(rank_tolerance > 0.0 && rank_tolerance < 1.0)) return fail("rank_tolerance must lie in (0, 1)");
   if (!(max_probe_error > 0.0)) return fail("max_probe_error must be positive");
+  if (!(reduced_lift_tolerance >= 0.0 && reduced_lift_tolerance < 1.0)) {
+    return fail("reduced_lift_tolerance must lie in [0, 1)");
+  }
   return true;
 }
 
@@ -53,21 +63,69 @@ SpD kkt_matrix(const SpD& H, const SpD& C) {
   return K;
 }
 
-// Relative residual of Eq. 4 for B = [N UD]; see SubspaceSummary::kkt_residual.
-double kkt_residual(const SpD& H, const SpD& C, const SpD& D, const MatD& B) {
-  const Index d = C.cols(), k = D.cols();
-  MatD R1 = H * B;
-  if (k > 0) R1.rightCols(k) -= MatD(D);
-  const MatD CtC = MatD(C.transpose() * C);
-  const MatD coef = CtC.ldlt().solve(MatD(C.transpose() * R1));
-  R1.noalias() -= C * coef;
-  MatD R2 = C.transpose() * B;
-  R2.leftCols(d) -= MatD::Identity(d, d);
-  const double scale1 = H.norm() * B.norm() + D.norm();
-  const double scale2 = C.norm() * B.norm();
-  const double r1 = scale1 > 0 ? R1.norm() / scale1 : R1.norm();
-  const double r2 = scale2 > 0 ? R2.norm() / scale2 : R2.norm();
-  return std::max(r1, r2);
+// Rows per block for the row-blocked dense passes (N = G·S⁻¹, Dᵀ·X): a
+// 512 × 300 double block is 1.2 MB, a few L2-sized panels for the GEMM kernel.
+constexpr Index kRowBlock = 512;
+// Columns per block of the blocked residual / BᵀHB pass.
+constexpr Index kResidualColumns = 32;
+
+// One pass over column blocks B_j of B = [N UD] (OpenMP over blocks, so no
+// n × p temporary), each with one sparse product H·B_j, computing
+//   * `residual` (when not null): the relative residual of Eq. 4, see
+//     SubspaceSummary::kkt_residual — H·B_j, projected off Span(C);
+//   * `gram` (when not null): H_r = BᵀHB (p × p), the blocks on and above the
+//     diagonal as B(:, :j_end)ᵀ·(H·B_j), mirrored below.
+void blocked_pass(const SpD& H, const SpD& C, const SpD& D, const MatD& N, const MatD& UD, double* residual,
+                  MatD* gram) {
+  const Index d = N.cols(), k = UD.cols(), p = d + k;
+  const Eigen::LDLT<MatD> CtC(MatD(C.transpose() * C));
+  const Index nb_d = (d + kResidualColumns - 1) / kResidualColumns;
+  const Index nb_k = (k + kResidualColumns - 1) / kResidualColumns;
+  if (gram) gram->setZero(p, p);
+  const detail::ScopedBlasThreads one_blas_thread(1);  // the OpenMP loop below calls the BLAS from each thread
+  double r1sq = 0.0, r2sq = 0.0;
+  // Later blocks have taller Gram panels: hand them out first.
+#pragma omp parallel reduction(+ : r1sq, r2sq)
+  {
+    MatD HBbuf(H.rows(), kResidualColumns);  // reused: fresh n-sized buffers cost page faults
+#pragma omp for schedule(dynamic, 1)
+    for (Index bb = 0; bb < nb_d + nb_k; ++bb) {
+      const Index b = nb_d + nb_k - 1 - bb;
+      const bool in_n = b < nb_d;
+      const Index j = (in_n ? b : b - nb_d) * kResidualColumns;
+      const Index w = std::min(kResidualColumns, (in_n ? d : k) - j);
+      const Index col = in_n ? j : d + j;  // first column of the block in B
+      const auto Bj = in_n ? N.middleCols(j, w) : UD.middleCols(j, w);
+      auto HB = HBbuf.leftCols(w);
+      HB.noalias() = H * Bj;
+      if (gram) {
+        const Index end = col + w, rows_n = std::min(d, end), rows_u = std::max<Index>(0, end - d);
+        detail::blas_gemm(true, false, 1.0, N.leftCols(rows_n), HB, 0.0, gram->block(0, col, rows_n, w));
+        if (rows_u > 0) detail::blas_gemm(true, false, 1.0, UD.leftCols(rows_u), HB, 0.0, gram->block(d, col, rows_u, w));
+      }
+      if (residual) {
+        if (!in_n) HB -= D.middleCols(j, w);
+        const MatD coef = CtC.solve(MatD(C.transpose() * HB));
+        HB.noalias() -= C * coef;
+        r1sq += HB.squaredNorm();
+        MatD R2 = C.transpose() * Bj;
+        if (in_n) R2.middleRows(j, w) -= MatD::Identity(w, w);
+        r2sq += R2.squaredNorm();
+      }
+    }
+  }
+  if (gram) {
+    const MatD upper = *gram;
+    gram->triangularView<Eigen::StrictlyLower>() = upper.transpose();
+  }
+  if (residual) {
+    const double bnorm = std::sqrt(N.squaredNorm() + UD.squaredNorm());
+    const double scale1 = H.norm() * bnorm + D.norm();
+    const double scale2 = C.norm() * bnorm;
+    const double r1 = scale1 > 0 ? std::sqrt(r1sq) / scale1 : std::sqrt(r1sq);
+    const double r2 = scale2 > 0 ? std::sqrt(r2sq) / scale2 : std::sqrt(r2sq);
+    *residual = std::max(r1, r2);
+  }
 }
 
 // Solves K·x = K·v for a random v and returns ‖x − v‖/‖v‖: a direct measure of
@@ -83,12 +141,88 @@ double probe_error(const SparseFactorization& factor, const SpD& K) {
   return std::isfinite(err) ? err : INFINITY;
 }
 
+// Gershgorin bound on λ_max of a symmetric sparse matrix: max column sum of |a_ij|.
+double gershgorin_bound(const SpD& A) {
+  double top = 0.0;
+  for (Index j = 0; j < A.outerSize(); ++j) {
+    double sum = 0.0;
+    for (SpD::InnerIterator it(A, j); it; ++it) sum += std::abs(it.value());
+    top = std::max(top, sum);
+  }
+  return top;
+}
+
+// The working matrices of a build are the outputs themselves when Scalar is
+// double, and double scratch that is cast at the end otherwise.
+template <typename Scalar>
+struct Workspace {
+  MatD G, F;
+  MatD& N(VariationalSubspace<Scalar>*) { return G; }
+  MatD& UD(VariationalSubspace<Scalar>*) { return F; }
+  void finish(VariationalSubspace<Scalar>* out) {
+    out->N = G.template cast<Scalar>();
+    G.resize(0, 0);
+    out->UD = F.template cast<Scalar>();
+    F.resize(0, 0);
+  }
+};
+template <>
+struct Workspace<double> {
+  MatD& N(VariationalSubspace<double>* out) { return out->N; }
+  MatD& UD(VariationalSubspace<double>* out) { return out->UD; }
+  void finish(VariationalSubspace<double>*) {}
+};
+
+const SpD& as_double(const SparseMatrix<double>& m, SpD&) { return m; }
+const SpD& as_double(const SparseMatrix<float>& m, SpD& storage) {
+  storage = m.cast<double>();
+  return storage;
+}
+
 }  // namespace
 
+namespace detail {
+
+ScopedOmpThreads::ScopedOmpThreads(int threads) : previous_(omp_get_max_threads()) {
+  if (threads > 0) omp_set_num_threads(threads);
+}
+ScopedOmpThreads::~ScopedOmpThreads() { omp_set_num_threads(previous_); }
+
+MatD sparse_transpose_times(const SpD& S, const MatD& X) {
+  const Index n = S.rows(), a = S.cols(), b = X.cols();
+  assert(X.rows() == n);
+  const double density = n > 0 && a > 0 ? static_cast<double>(S.nonZeros()) / (static_cast<double>(n) * a) : 0.0;
+  // Below this density Eigen's sparse product (nnz·b) beats densifying.
+  constexpr double kDenseFrom = 0.05;
+  if (density < kDenseFrom || !S.isCompressed()) return MatD(S.transpose() * X);
+  const Index blocks = (n + kRowBlock - 1) / kRowBlock;
+  MatD result = MatD::Zero(a, b);
+  const ScopedBlasThreads one_blas_thread(1);
+#pragma omp parallel
+  {
+    MatD partial = MatD::Zero(a, b), dense(kRowBlock, a);
+#pragma omp for schedule(static)
+    for (Index blk = 0; blk < blocks; ++blk) {
+      const Index r0 = blk * kRowBlock, len = std::min(kRowBlock, n - r0);
+      dense.setZero();
+      for (Index j = 0; j < a; ++j) {
+        const int* rows = S.innerIndexPtr();
+        const Index begin = S.outerIndexPtr()[j], end = S.outerIndexPtr()[j + 1];
+        const int* first = std::lower_bound(rows + begin, rows + end, static_cast<int>(r0));
+        for (Index t = first - rows; t < end && rows[t] < r0 + len; ++t) dense(rows[t] - r0, j) = S.valuePtr()[t];
+      }
+      blas_gemm(true, false, 1.0, dense.topRows(len), X.middleRows(r0, len), 1.0, partial);
+    }
+#pragma omp critical
+    result += partial;
+  }
+  return result;
+}
+
 template <typename Scalar>
-SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMatrix<Scalar>& C_in,
-                               const SparseMatrix<Scalar>& D_in, const SubspaceOptions& options,
-                               VariationalSubspace<Scalar>* out) {
+SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, const SparseMatrix<Scalar>& C_in,
+                                           const SparseMatrix<Scalar>& D_in, const SubspaceOptions& options,
+                                           VariationalSubspace<Scalar>* out, SubspaceExtras* extras) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("SubspaceOptions: " + why);
   if (out == nullptr) throw std::invalid_argument("build_subspace: output pointer is null");
@@ -115,6 +249,7 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
 
   out->N.resize(0, 0);
   out->UD.resize(0, 0);
+  if (extras) *extras = SubspaceExtras{};
   const detail::Timer total;
   SubspaceSummary summary;
   const Index d = C_in.cols(), k = D_in.cols();
@@ -122,14 +257,22 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
   summary.d = d;
   summary.k = k;
 
-  const SpD H = H_in.template cast<double>();
-  const SpD C = C_in.template cast<double>();
-  const SpD D = D_in.template cast<double>();
+  SpD H_store, C_store, D_store;
+  const SpD& H = as_double(H_in, H_store);
+  const SpD& C = as_double(C_in, C_store);
+  const SpD& D = as_double(D_in, D_store);
 
+  Workspace<Scalar> work;
+  MatD& Nw = work.N(out);  // n × d: G, then N
+  MatD& Uw = work.UD(out);  // n × k: F, then UD
   auto fail = [&](Status status, std::string message) {
     summary.status = status;
     summary.message = std::move(message);
     summary.total_seconds = total.seconds();
+    Nw.resize(0, 0);
+    Uw.resize(0, 0);
+    out->N.resize(0, 0);
+    out->UD.resize(0, 0);
     return summary;
   };
 
@@ -145,22 +288,33 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
 
   const Backend spd_backend = options.backend == Backend::SimplicialLDLT ? Backend::SimplicialLDLT
                                                                          : Backend::Cholmod;
-  if (options.check_psd) {
+  // The PSD check by factorization: LDLᵀ/LLᵀ of H + τI. Returns false (and
+  // sets `psd_message`) when H is not PSD. Runs at most once.
+  const double tau = options.psd_shift * std::max(H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
+  std::optional<bool> psd_by_factor;
+  std::string psd_message;
+  auto factor_psd_check = [&]() {
+    if (psd_by_factor) return *psd_by_factor;
     const detail::Timer t;
-    const double tau = options.psd_shift * std::max(H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
     SpD shifted = H;
     SpD I(n, n);
     I.setIdentity();
     shifted += tau * I;
     auto check = make_factorization(spd_backend);
     check->compute(shifted);
-    summary.check_psd_seconds = t.seconds();
-    if (check->info() != Eigen::Success) {
-      return fail(Status::IndefiniteH,
-                  fmt::format("H is not positive semi-definite: H + {:.2e}·I failed to factor ({})", tau,
-                              check->message()));
+    summary.check_psd_seconds += t.seconds();
+    psd_by_factor = check->info() == Eigen::Success;
+    if (!*psd_by_factor) {
+      psd_message = fmt::format("H is not positive semi-definite: H + {:.2e}·I failed to factor ({})", tau,
+                                check->message());
     }
-  }
+    return *psd_by_factor;
+  };
+  // Before reporting a numerical failure of H_ρ, say IndefiniteH when that is the cause.
+  auto fail_kkt = [&](std::string message) {
+    if (options.check_psd && !factor_psd_check()) return fail(Status::IndefiniteH, psd_message);
+    return fail(Status::SingularKKT, std::move(message));
+  };
 
   // Choose the route: augmented Cholesky, or SparseLU of the KKT matrix.
   std::vector<Index> aug = options.augment_columns;
@@ -177,8 +331,10 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
   const bool kkt_route =
       options.backend == Backend::SparseLU ||
       (options.backend == Backend::Auto && fill > options.max_augmentation_fill * H.nonZeros());
+  // The factorization check runs first where no certificate will be available.
+  const bool psd_first = options.check_psd && (kkt_route || options.psd_check_by_factorization);
+  if (psd_first && !factor_psd_check()) return fail(Status::IndefiniteH, psd_message);
 
-  MatD B;  // [N UD], n × (d + k)
   if (!kkt_route) {
     const double mean_diag = H.diagonal().cwiseAbs().mean();
     summary.rho = options.rho_scale * (mean_diag > 0 ? mean_diag : 1.0) /
@@ -199,44 +355,75 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
     summary.backend_used = factor->backend();
     summary.factor_nonzeros = factor->factorNonZeros();
     if (factor->info() != Eigen::Success) {
-      return fail(Status::SingularKKT,
-                  "H + ρCCᵀ is not positive definite, so the KKT matrix [[H, C], [Cᵀ, 0]] is singular: "
-                  "H is not positive definite on ker(Cᵀ) (" + factor->message() + ")");
+      return fail_kkt("H + ρCCᵀ is not positive definite, so the KKT matrix [[H, C], [Cᵀ, 0]] is singular: "
+                      "H is not positive definite on ker(Cᵀ) (" + factor->message() + ")");
     }
     summary.probe_error = probe_error(*factor, Hrho);
     if (summary.probe_error > options.max_probe_error) {
-      return fail(Status::SingularKKT,
-                  fmt::format("H + ρCCᵀ is singular to working precision (a solve with a known answer came back "
-                              "with relative error {:.2e}): H is not positive definite on ker(Cᵀ)",
-                              summary.probe_error));
+      return fail_kkt(fmt::format("H + ρCCᵀ is singular to working precision (a solve with a known answer came "
+                                  "back with relative error {:.2e}): H is not positive definite on ker(Cᵀ)",
+                                  summary.probe_error));
     }
 
+    // G = H_ρ⁻¹C and F = H_ρ⁻¹D, solved in place in the output storage.
     t.reset();
-    MatD GF(n, d + k);
-    GF.leftCols(d) = MatD(C);
-    if (k > 0) GF.rightCols(k) = MatD(D);
-    factor->solveInPlace(GF, options.block_size);
+    Nw = MatD(C);
+    factor->solveInPlace(Nw, options.block_size);
+    if (k > 0) {
+      Uw = MatD(D);
+      factor->solveInPlace(Uw, options.block_size);
+    } else {
+      Uw.resize(n, 0);
+    }
     summary.solve_seconds = t.seconds();
+    factor.reset();
 
     // S = CᵀG is SPD when C has full rank and H_ρ is SPD.
-    MatD S = C.transpose() * GF.leftCols(d);
+    MatD S = C.transpose() * Nw;
     S = 0.5 * (S + S.transpose()).eval();
-    const auto eig = detail::symmetric_eigenvalues(S);
+    const Eigen::SelfAdjointEigenSolver<MatD> Seig(S, Eigen::EigenvaluesOnly);
+    const auto& eig = Seig.eigenvalues();
     summary.s_condition = eig.maxCoeff() / std::max(eig.minCoeff(), 1e-300);
     if (detail::numerical_rank(eig, options.rank_tolerance) < d) {
-      return fail(Status::SingularKKT,
-                  fmt::format("S = Cᵀ(H + ρCCᵀ)⁻¹C is singular (condition {:.2e}): the KKT matrix is "
-                              "singular to working precision",
-                              summary.s_condition));
+      return fail_kkt(fmt::format("S = Cᵀ(H + ρCCᵀ)⁻¹C is singular (condition {:.2e}): the KKT matrix is "
+                                  "singular to working precision",
+                                  summary.s_condition));
     }
-    const Eigen::LLT<MatD> Sllt(S);
-    B.resize(n, d + k);
-    // N = G S⁻¹ = (S⁻¹ Gᵀ)ᵀ since S is symmetric.
-    B.leftCols(d) = Sllt.solve(GF.leftCols(d).transpose()).transpose();
-    if (k > 0) {
-      const MatD W = Sllt.solve(MatD(C.transpose() * GF.rightCols(k)));  // S⁻¹CᵀF, d×k
-      B.rightCols(k) = GF.rightCols(k);
-      B.rightCols(k).noalias() -= GF.leftCols(d) * W;
+
+    // PSD certificate. With T = ρ·CpᵀH_ρ⁻¹Cp (the augmenting block of ρS),
+    // the pencil H − μH_ρ has μ_min = 1 − λ_max(T), so λ_max(T) ≤ 1 + η gives
+    // H ⪰ −η·H_ρ ⪰ −η·λ_max(H_ρ)·I. With η ≤ τ/λ̄ (λ̄ a Gershgorin bound on
+    // λ_max(H_ρ)) that certifies H + τI ⪰ 0, which is what the factorization
+    // check asks. Only when the certificate fails is the factorization run.
+    if (options.check_psd && !options.psd_check_by_factorization) {
+      const detail::Timer tc;
+      MatD T(aug.size(), aug.size());
+      for (size_t a = 0; a < aug.size(); ++a)
+        for (size_t b = 0; b < aug.size(); ++b) T(a, b) = summary.rho * S(aug[a], aug[b]);
+      const double lambda_max = detail::symmetric_eigenvalues(T).maxCoeff();
+      const double eta_max = tau / std::max(gershgorin_bound(Hrho), 1e-300);
+      summary.check_psd_seconds += tc.seconds();
+      if (!(lambda_max - 1.0 <= eta_max) && !factor_psd_check()) return fail(Status::IndefiniteH, psd_message);
+    }
+
+    MatD Sinv = Eigen::LLT<MatD>(S).solve(MatD::Identity(d, d));
+    Sinv = 0.5 * (Sinv + Sinv.transpose()).eval();
+    const MatD CtF = k > 0 ? MatD(C.transpose() * Uw) : MatD(d, 0);  // d × k
+    // In place, by row blocks: N = G·S⁻¹, then UD = F − G·S⁻¹·CᵀF = F − N·CᵀF.
+    {
+      const Index blocks = (n + kRowBlock - 1) / kRowBlock;
+      const ScopedBlasThreads one_blas_thread(1);
+#pragma omp parallel
+      {
+        MatD tmp(kRowBlock, d);
+#pragma omp for schedule(static)
+        for (Index b = 0; b < blocks; ++b) {
+          const Index r = b * kRowBlock, len = std::min(kRowBlock, n - r);
+          blas_gemm(false, false, 1.0, Nw.middleRows(r, len), Sinv, 0.0, tmp.topRows(len));
+          Nw.middleRows(r, len) = tmp.topRows(len);
+          if (k > 0) blas_gemm(false, false, -1.0, tmp.topRows(len), CtF, 1.0, Uw.middleRows(r, len));
+        }
+      }
     }
   } else {
     detail::Timer t;
@@ -268,15 +455,16 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
     if (!rhs.allFinite()) {
       return fail(Status::SingularKKT, "the KKT matrix is singular: SparseLU produced non-finite values");
     }
-    B = rhs.topRows(n);
+    Nw = rhs.topLeftCorner(n, d);
+    Uw = rhs.topRightCorner(n, k);
     summary.s_condition = 0.0;
   }
 
   // U·D must have full column rank: (UD)ᵀH(UD) = Dᵀ·UD is SPD iff no
   // combination of D's columns lies in Span(C).
+  MatD DtUD = k > 0 ? sparse_transpose_times(D, Uw) : MatD(0, 0);  // k × k
   if (k > 0 && options.check_dependent_cd) {
-    MatD G = D.transpose() * B.rightCols(k);
-    G = 0.5 * (G + G.transpose()).eval();
+    MatD G = 0.5 * (DtUD + DtUD.transpose());
     const auto eig = detail::symmetric_eigenvalues(G);
     const double hn = H.norm();
     const double scale = std::max(eig.cwiseAbs().maxCoeff(), hn > 0 ? D.squaredNorm() / hn : 0.0);
@@ -290,15 +478,40 @@ SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H_in, const SparseMat
     }
   }
 
-  if (!B.allFinite()) return fail(Status::NumericalFailure, "the subspace contains non-finite values");
-  if (options.compute_residual) summary.kkt_residual = kkt_residual(H, C, D, B);
+  if (!Nw.allFinite() || !Uw.allFinite()) return fail(Status::NumericalFailure, "the subspace contains non-finite values");
+  if (options.compute_residual || extras) {
+    blocked_pass(H, C, D, Nw, Uw, options.compute_residual ? &summary.kkt_residual : nullptr,
+                 extras ? &extras->Hr : nullptr);
+  }
 
-  out->N = B.leftCols(d).template cast<Scalar>();
-  out->UD = B.rightCols(k).template cast<Scalar>();
+  if (extras) {
+    extras->BtD.resize(d + k, k);
+    if (k > 0) {
+      extras->BtD.topRows(d) = sparse_transpose_times(D, Nw).transpose();
+      extras->BtD.bottomRows(k) = DtUD.transpose();
+    }
+  }
+  work.finish(out);
   summary.status = Status::Success;
   summary.message = "subspace built";
   summary.total_seconds = total.seconds();
   return summary;
+}
+
+template SubspaceSummary build_subspace_with_extras<double>(const SparseMatrix<double>&, const SparseMatrix<double>&,
+                                                            const SparseMatrix<double>&, const SubspaceOptions&,
+                                                            VariationalSubspace<double>*, SubspaceExtras*);
+template SubspaceSummary build_subspace_with_extras<float>(const SparseMatrix<float>&, const SparseMatrix<float>&,
+                                                           const SparseMatrix<float>&, const SubspaceOptions&,
+                                                           VariationalSubspace<float>*, SubspaceExtras*);
+
+}  // namespace detail
+
+template <typename Scalar>
+SubspaceSummary build_subspace(const SparseMatrix<Scalar>& H, const SparseMatrix<Scalar>& C,
+                               const SparseMatrix<Scalar>& D, const SubspaceOptions& options,
+                               VariationalSubspace<Scalar>* out) {
+  return detail::build_subspace_with_extras(H, C, D, options, out, nullptr);
 }
 
 template SubspaceSummary build_subspace<double>(const SparseMatrix<double>&, const SparseMatrix<double>&,

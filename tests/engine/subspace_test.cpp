@@ -321,3 +321,122 @@ TEST_CASE("soft constraints approach the hard ones as delta grows", "[solver]") 
   }
   CHECK(previous < 1e-3 * w_hard.norm());
 }
+
+// ---- performance paths: each must agree with the reference it replaces ----
+
+TEST_CASE("set_constraints fast path agrees with the null-space method", "[solver][fast]") {
+  const Index nx = 20, ny = 20, n = nx * ny;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);  // PSD, constants in ker H
+  const std::vector<Index> rows = gen::random_subset(n, 30, 31);
+  const SparseMatrix<double> C = gen::selection(n, rows);
+  const SparseMatrix<double> D = gen::grid_trend_basis(nx, ny, 6);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(H, C, D).ok());
+  // The reduced Hessian is BᵀHB of the stored subspace.
+  Matrix<double> B(n, solver.p());
+  B << solver.subspace().N, solver.subspace().UD;
+  const Matrix<double> BtHB = B.transpose() * (H * B);
+  CHECK((solver.reduced_hessian() - BtHB).norm() <= 1e-12 * BtHB.norm());
+
+  struct Demand {
+    const char* name;
+    SparseMatrix<double> A;
+    bool soft;
+    Status expected;
+    bool fast;  // whether the fast path is expected to take it
+  };
+  std::vector<Index> handles(rows.begin(), rows.begin() + 10);
+  std::vector<Eigen::Triplet<double>> diff;  // e_i − e_j over C vertices: blind to constants
+  for (Index c = 0; c < 5; ++c) {
+    diff.emplace_back(rows[2 * c], c, 1.0);
+    diff.emplace_back(rows[2 * c + 1], c, -1.0);
+  }
+  SparseMatrix<double> Adiff(n, 5);
+  Adiff.setFromTriplets(diff.begin(), diff.end());
+  std::vector<Index> repeated = handles;
+  repeated.push_back(handles[0]);
+  const std::vector<Demand> demands = {
+      {"point handles", gen::selection(n, handles), false, Status::Success, true},
+      {"dense combinations", (C * gen::gaussian_matrix(30, 7, 32)).sparseView(), false, Status::Success, true},
+      {"soft point handles", gen::selection(n, handles), true, Status::Success, true},
+      {"differences only (constant mode free)", Adiff, false, Status::Unbounded, false},
+      {"repeated handle", gen::selection(n, repeated), false, Status::ConstraintsLeastSquares, false},
+  };
+  for (const Demand& demand : demands) {
+    CAPTURE(demand.name);
+    const Index m = demand.A.cols();
+    const Vector<double> b = gen::gaussian_vector(m, 33), Y = gen::gaussian_vector(6, 34);
+    const Vector<double> q = gen::gaussian_vector(n, 35);
+    Vector<double> q_r(solver.p());
+    solver.reduce_linear_term(q, q_r);
+    Vector<double> w[2], wY[2];
+    for (int fast = 0; fast < 2; ++fast) {
+      ConstraintOptions o;
+      o.soft = demand.soft;
+      o.delta = 1e2;
+      o.fast_path = fast == 1;
+      const ConstraintSummary cs = solver.set_constraints(demand.A, o);
+      INFO(cs.message);
+      CHECK(cs.status == demand.expected);
+      CHECK(cs.fast_path == (fast == 1 && demand.fast));
+      w[fast].resize(solver.p());
+      wY[fast].resize(solver.p());
+      solver.solve(b, q_r, w[fast]);
+      solver.solve_in_D(b, Y, wY[fast]);
+      REQUIRE(w[fast].allFinite());
+    }
+    if (demand.expected != Status::Unbounded) {  // otherwise the answer is not unique
+      CHECK((w[1] - w[0]).norm() <= 1e-9 * w[0].norm());
+      CHECK((wY[1] - wY[0]).norm() <= 1e-9 * wY[0].norm());
+    }
+  }
+}
+
+TEST_CASE("the PSD certificate decides like the factorization check", "[subspace][psd]") {
+  const Index nx = 10, ny = 10, n = nx * ny;
+  const SparseMatrix<double> L = gen::grid_laplacian_2d(nx, ny);
+  const SparseMatrix<double> C = gen::selection(n, gen::random_subset(n, 20, 41));
+  const SparseMatrix<double> D = gen::grid_trend_basis(nx, ny, 3);
+  SparseMatrix<double> I(n, n);
+  I.setIdentity();
+  const Backend backend = GENERATE(Backend::Cholmod, Backend::SimplicialLDLT);
+  const bool by_factorization = GENERATE(false, true);
+  CAPTURE(to_string(backend), by_factorization);
+  SubspaceOptions opts;
+  opts.backend = backend;
+  opts.psd_check_by_factorization = by_factorization;
+  VariationalSubspace<double> s;
+  // PSD with a null space: accepted.
+  const SubspaceSummary ok = build_subspace(L, C, D, opts, &s);
+  INFO(ok.report());
+  CHECK(ok.ok());
+  // Slightly indefinite (λ_min = −10⁻³) while H + ρCCᵀ still factors: only a
+  // PSD check can tell.
+  const SparseMatrix<double> Hneg = L - 1e-3 * I;
+  const SubspaceSummary bad = build_subspace(Hneg, C, D, opts, &s);
+  INFO(bad.report());
+  CHECK(bad.status == Status::IndefiniteH);
+  CHECK(s.N.size() == 0);
+  // Without the check the same H builds (H_ρ is positive definite).
+  opts.check_psd = false;
+  CHECK(build_subspace(Hneg, C, D, opts, &s).ok());
+}
+
+TEST_CASE("blocked concurrent solves do not change the subspace", "[subspace][blocks]") {
+  const Problem p = in_span_problem(23, 19, 0.0, 51);
+  const Backend backend = GENERATE(Backend::Cholmod, Backend::SimplicialLDLT, Backend::SparseLU);
+  CAPTURE(to_string(backend));
+  SubspaceOptions opts;
+  opts.backend = backend;
+  opts.block_size = 1000;
+  VariationalSubspace<double> ref;
+  REQUIRE(build_subspace(p.H, p.C, p.D, opts, &ref).ok());
+  for (Index block : {1, 3, 5}) {
+    CAPTURE(block);
+    opts.block_size = block;
+    VariationalSubspace<double> s;
+    REQUIRE(build_subspace(p.H, p.C, p.D, opts, &s).ok());
+    CHECK((s.N - ref.N).norm() <= 1e-12 * ref.N.norm());
+    CHECK((s.UD - ref.UD).norm() <= 1e-12 * ref.UD.norm());
+  }
+}

@@ -30,7 +30,8 @@
 //   * (UD)ᵀH(UD) = Dᵀ·UD is SPD iff no combination of D's columns lies in
 //     Span(C)                                        → Status::DependentCD;
 //   * H_ρ not positive definite                      → Status::SingularKKT;
-//   * optional PSD check of H (LDLᵀ inertia of H + τI) → Status::IndefiniteH;
+//   * optional PSD check of H (a certificate from S, or LDLᵀ inertia of H + τI)
+//                                                    → Status::IndefiniteH;
 //   * the relative KKT residual of the result.
 #pragma once
 
@@ -57,15 +58,24 @@ struct SubspaceOptions {
   // Auto backend: when Σ_j nnz(c_j)² over the augmenting columns exceeds this
   // multiple of nnz(H), factor the KKT matrix with SparseLU instead.
   double max_augmentation_fill = 4.0;
-  // Right-hand sides solved per block (CHOLMOD BLAS-3 block, or OpenMP task).
+  // Right-hand sides solved per block. Blocks are solved concurrently, one per
+  // OpenMP thread (omp_get_max_threads(); set OMP_NUM_THREADS to change it),
+  // each a BLAS-3 supernodal solve for CHOLMOD.
   Index block_size = 64;
   // H is rejected as asymmetric when ‖H − Hᵀ‖_F > symmetry_tolerance·‖H‖_F.
   double symmetry_tolerance = 1e-10;
-  // Check that H is PSD: LDLᵀ of H + τI with τ = psd_shift·max|H_ii| must have
-  // no negative pivot (Sylvester's law of inertia). Costs one extra
-  // factorization of H; off for callers that know H is PSD by construction.
+  // Check that H is PSD, i.e. that H + τI with τ = psd_shift·max|H_ii| is
+  // positive definite. On the augmented route this comes almost free: with
+  // T = ρ·CᵀH_ρ⁻¹C over the augmenting columns (a block of ρS), H ⪰ 0 iff
+  // λ_max(T) ≤ 1, and λ_max(T) ≤ 1 + τ/λ̄ (λ̄ a Gershgorin bound on λ_max(H_ρ))
+  // certifies H + τI ⪰ 0. Only when that certificate fails, on the KKT route,
+  // or when a factorization of H_ρ fails, is H + τI factored (LDLᵀ inertia or
+  // CHOLMOD LLᵀ), which costs about one more factorization of H.
   bool check_psd = true;
   double psd_shift = 1e-8;
+  // Always run the factorization check instead of the certificate (the
+  // behaviour before the certificate; kept for comparison and benchmarks).
+  bool psd_check_by_factorization = false;
   // S and Dᵀ·UD count as singular when λ_min < rank_tolerance·λ_max.
   double rank_tolerance = 1e-12;
   // After factoring, one solve with a known answer checks the factor: a
@@ -74,6 +84,13 @@ struct SubspaceOptions {
   double max_probe_error = 1e-6;
   // Set to false to skip the KKT residual (saves one product with H).
   bool compute_residual = true;
+  // SubspaceSolver::precompute: eigen-directions of the scaled reduced Hessian
+  // H̄ with λ ≤ reduced_lift_tolerance·λ_max are lifted to λ_max for the
+  // set_constraints fast path (subspace_solver.h). Exact for any value; it
+  // bounds cond(H̃) by 1/reduced_lift_tolerance, which is what the fast path's
+  // rounding error grows with, while each lifted direction adds one row to the
+  // per-demand Schur complement.
+  double reduced_lift_tolerance = 1e-8;
   // Report Status::DependentCD when a combination of D's columns lies in
   // Span(C). Off for callers that use D as a plain right-hand side (the
   // full-space solve, where q ∈ Span(A) is legitimate).

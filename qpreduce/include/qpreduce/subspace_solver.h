@@ -22,7 +22,26 @@
 // q = D·Y also w = M_b·b + M_Y·Y (M_Y = M_q·BᵀD, p×k). `set_constraints` (the
 // paper's on-site preconditioning, "OP") forms these small dense matrices at a
 // cost independent of n beyond AᵀB (nnz(A)·p for sparse A); `solve` is two
-// matrix–vector products into caller-owned storage, with no heap allocation.
+// matrix–vector products into caller-owned storage, with no heap allocation
+// (M_q is symmetric and only its lower triangle is read).
+//
+// Scale invariance. N's and UD's columns can differ in scale by orders of
+// magnitude (UD's grow with the mesh), so every rank and conditioning test is
+// made in energy-normalised coordinates w = D_s·w̄, D_s = diag(H_r)^(−1/2),
+// where each column of B has unit energy: H̄ = D_sH_rD_s, Ā = A_rD_s.
+//
+// Fast path (the default for full-rank hard and for soft constraints).
+// `precompute` factors H̄ = VΛVᵀ once and lifts its near-null directions V_L
+// (λ_i ≤ lift_tolerance·λ_max) to σ = λ_max: H̃ = H̄ + V_L(σ − Λ_L)V_Lᵀ is SPD
+// and H̃⁻¹ is stored (p×p). A demand then only needs the small Schur
+// complement of the bordered system with Ã = [Ā; V_Lᵀ] ((m+ν)×p):
+//     Σ = ÃH̃⁻¹Ãᵀ + diag(c·I_m, −(σ − Λ_L)⁻¹),   c = 0 (hard) or 1/(2δ) (soft),
+//     M̄_q = H̃⁻¹ − YΣ⁻¹Yᵀ,  M̄_b = YΣ⁻¹[I_m; 0],  Y = H̃⁻¹Ãᵀ,
+// about 4·p²·(m+ν) flops instead of the O(p³) null-space method. The answer
+// is accepted only when λ_max(H̄)·‖M̄_q‖_F < 1/rank_tolerance, a bound on the
+// condition number the null-space method tests; anything else (and rank-
+// deficient hard constraints) goes to the null-space method, which decides the
+// status. Both give the same unique minimiser when it exists.
 #pragma once
 
 #include "qpreduce/common.h"
@@ -38,9 +57,16 @@ struct ConstraintOptions {
   // Soft-constraint weight δ (Eq. 18). Relative to H_r's scale: the system
   // solved is H_r + 2·δ·A_rᵀA_r, so δ ≫ ‖H_r‖/‖A_r‖² approaches hard constraints.
   double delta = 1e3;
-  // Singular values of A_r (and eigenvalues of the reduced Hessian on the
+  // Singular values of Ā (and eigenvalues of the reduced Hessian on the
   // constraint set) below rank_tolerance × the largest count as zero.
   double rank_tolerance = 1e-10;
+  // Use the precomputed range-space fast path when it applies (see above);
+  // false forces the O(p³) null-space method (for comparison and tests).
+  bool fast_path = true;
+  // OpenMP threads for the dense algebra of this step. At p ≈ 300 a step is
+  // about a millisecond of GEMMs, where waking a second thread on a shared
+  // machine costs more than it saves; 0 means omp_get_max_threads().
+  int threads = 1;
 
   bool is_valid(std::string* why) const;
 };
@@ -49,8 +75,9 @@ struct ConstraintSummary {
   Status status = Status::NotRun;
   std::string message;
   Index m = 0;            // number of constraints
-  Index rank = 0;         // numerical rank of A_r = AᵀB
-  double condition = 0.0; // σ_max/σ_min(A_r) over its rank
+  Index rank = 0;         // numerical rank of Ā = AᵀB·D_s (= rank of A_r)
+  double condition = 0.0; // σ_max/σ_min(Ā) over its rank
+  bool fast_path = false; // the answer came from the precomputed fast path
   double seconds = 0.0;
 
   bool ok() const { return usable(status); }
@@ -101,16 +128,32 @@ class SubspaceSolver {
   const MatrixS& reduced_linear_map() const { return BtD_; }   // BᵀD, p×k (q_r = BᵀD·Y)
 
  private:
+  using MatD = Matrix<double>;
   void require_ready(const char* what) const;
   void require_constrained(const char* what) const;
+  void prepare_fast_path(double lift_tolerance);
+  bool fast_operators(const MatD& Ar, bool soft, double delta, double rank_tolerance, MatD* Mb, MatD* Mq,
+                      MatD* MY) const;
+  void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,
+                           MatD* Mq, MatD* MY) const;
 
   VariationalSubspace<Scalar> subspace_;
   MatrixS Hr_;   // p × p
   MatrixS BtD_;  // p × k
   MatrixS Ar_;   // m × p
   MatrixS Mb_;   // p × m
-  MatrixS Mq_;   // p × p
+  MatrixS Mq_;   // p × p, symmetric: only its lower triangle is kept current (solve reads that)
   MatrixS MY_;   // p × k
+  // Precomputed, in double (see "Fast path" above), in unscaled coordinates.
+  MatD Hr_d_;                   // H_r
+  MatD BtD_d_;                  // BᵀD
+  Eigen::VectorXd scale_;       // diagonal of D_s
+  Eigen::VectorXd inv_scale_;   // its inverse
+  double hbar_max_ = 0.0;       // λ_max(H̄) = σ
+  MatD Minv0_;                  // D_s·H̃⁻¹·D_s (p × p)
+  MatD P0_;                     // D_s·H̃⁻¹·D_s·BᵀD (p × k)
+  MatD lift_cols_;              // D_s·V_L/σ (p × ν)
+  Eigen::VectorXd lift_block_;  // −λ_i/(σ(σ − λ_i)), the V_L block of Σ (ν)
   Index n_ = 0, m_ = 0;
   bool ready_ = false, constrained_ = false;
 };

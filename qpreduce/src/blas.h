@@ -1,0 +1,74 @@
+// Private to the engine: the few large dense products of a build go through
+// the system BLAS (the one CHOLMOD links; OpenBLAS on Debian, which picks its
+// kernels for the CPU at run time). The engine itself is compiled for
+// baseline x86-64, where Eigen's own GEMM kernels use SSE2 only — about a
+// third of the speed of OpenBLAS's AVX2/FMA kernels on the n × p products.
+#pragma once
+
+#include "qpreduce/common.h"
+
+#include <cassert>
+
+extern "C" void dgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
+                       const double* alpha, const double* a, const int* lda, const double* b, const int* ldb,
+                       const double* beta, double* c, const int* ldc);
+extern "C" void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha,
+                       const double* a, const int* lda, const double* beta, double* c, const int* ldc);
+
+namespace qpreduce::detail {
+
+// C = alpha·op(A)·op(B) + beta·C for column-major double blocks with unit
+// inner stride (whole matrices, middleRows/middleCols/block of them).
+template <typename MA, typename MB, typename MC>
+void blas_gemm(bool transpose_a, bool transpose_b, double alpha, const MA& A, const MB& B, double beta, MC&& C) {
+  const int m = static_cast<int>(C.rows()), n = static_cast<int>(C.cols());
+  const int k = static_cast<int>(transpose_a ? A.rows() : A.cols());
+  assert((transpose_a ? A.cols() : A.rows()) == m && (transpose_b ? B.rows() : B.cols()) == n &&
+         (transpose_b ? B.cols() : B.rows()) == k);
+  assert(A.innerStride() == 1 && B.innerStride() == 1 && C.innerStride() == 1);
+  if (m == 0 || n == 0) return;
+  if (k == 0) {
+    if (beta == 0.0) C.setZero();
+    else C *= beta;
+    return;
+  }
+  const char ta = transpose_a ? 'T' : 'N', tb = transpose_b ? 'T' : 'N';
+  const int lda = static_cast<int>(A.outerStride()), ldb = static_cast<int>(B.outerStride());
+  const int ldc = static_cast<int>(C.outerStride());
+  dgemm_(&ta, &tb, &m, &n, &k, &alpha, A.data(), &lda, B.data(), &ldb, &beta, C.data(), &ldc);
+}
+
+// Lower triangle of C = alpha·A·Aᵀ + beta·C (A: n × k, C: n × n); the strict
+// upper triangle of C is not touched.
+template <typename MA, typename MC>
+void blas_syrk_lower(double alpha, const MA& A, double beta, MC&& C) {
+  const int n = static_cast<int>(C.rows()), k = static_cast<int>(A.cols());
+  assert(C.cols() == n && A.rows() == n && A.innerStride() == 1 && C.innerStride() == 1);
+  if (n == 0) return;
+  const char uplo = 'L', trans = 'N';
+  const int lda = static_cast<int>(A.outerStride()), ldc = static_cast<int>(C.outerStride());
+  if (k == 0) {
+    C.template triangularView<Eigen::Lower>() *= beta;
+    return;
+  }
+  dsyrk_(&uplo, &trans, &n, &k, &alpha, A.data(), &lda, &beta, C.data(), &ldc);
+}
+
+// Sets the BLAS's own thread count for the scope when it is OpenBLAS (looked
+// up at run time; with another BLAS this does nothing) and restores it after.
+// Used around OpenMP loops that call the BLAS from every thread, so that the
+// two levels do not oversubscribe the cores. OpenBLAS's setting is process-
+// wide: another thread calling the BLAS meanwhile runs single-threaded too.
+class ScopedBlasThreads {
+ public:
+  explicit ScopedBlasThreads(int threads);
+  ~ScopedBlasThreads();
+  ScopedBlasThreads(const ScopedBlasThreads&) = delete;
+  ScopedBlasThreads& operator=(const ScopedBlasThreads&) = delete;
+
+ private:
+  void (*set_)(int) = nullptr;
+  int previous_ = 0;
+};
+
+}  // namespace qpreduce::detail
