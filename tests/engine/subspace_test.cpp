@@ -440,3 +440,43 @@ TEST_CASE("blocked concurrent solves do not change the subspace", "[subspace][bl
     CHECK((s.UD - ref.UD).norm() <= 1e-12 * ref.UD.norm());
   }
 }
+
+TEMPLATE_TEST_CASE("solve matches a dense solve of the reduced KKT system for any p", "[solver][kernels]", double,
+                   float) {
+  using S = TestType;
+  // p = d + k not a multiple of the SIMD width, so the kernels' tails run.
+  const Index d = GENERATE(3, 9, 17, 30), k = GENERATE(0, 2, 7);
+  CAPTURE(d, k);
+  const Index nx = 15, ny = 13, n = nx * ny, m = std::min<Index>(d, 4);
+  const std::vector<Index> rows = gen::random_subset(n, d, 61);
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny, 0.05);
+  const SparseMatrix<double> C = gen::selection(n, rows);
+  const SparseMatrix<double> D = k > 0 ? gen::grid_trend_basis(nx, ny, k) : SparseMatrix<double>(n, 0);
+  SubspaceSolver<S> solver;
+  REQUIRE(solver.precompute(H.cast<S>(), C.cast<S>(), D.cast<S>()).ok());
+  const SparseMatrix<double> A = gen::selection(n, std::vector<Index>(rows.begin(), rows.begin() + m));
+  REQUIRE(solver.set_constraints(A.cast<S>()).status == Status::Success);
+  const Index p = solver.p();
+  const Vector<double> b = gen::gaussian_vector(m, 62), q_r = gen::gaussian_vector(p, 63);
+  Vector<S> w(p);
+  solver.solve(b.cast<S>(), q_r.cast<S>(), w);
+  // [[H_r, A_rᵀ], [A_r, 0]]·[w; λ] = [q_r; b].
+  const Matrix<double> Hr = solver.reduced_hessian().template cast<double>();
+  const Matrix<double> Ar = solver.reduced_constraints().template cast<double>();
+  Matrix<double> K = Matrix<double>::Zero(p + m, p + m);
+  K.topLeftCorner(p, p) = Hr;
+  K.topRightCorner(p, m) = Ar.transpose();
+  K.bottomLeftCorner(m, p) = Ar;
+  Vector<double> rhs(p + m);
+  rhs << q_r, b;
+  const Vector<double> ref = K.fullPivLu().solve(rhs).head(p);
+  CHECK((w.template cast<double>() - ref).norm() <= tolerance<S>() * 10 * (1 + ref.norm()));
+  if (k > 0) {
+    const Vector<double> Y = gen::gaussian_vector(k, 64);
+    Vector<S> wY(p), qY(p), w2(p);
+    solver.solve_in_D(b.cast<S>(), Y.cast<S>(), wY);
+    solver.reduce_linear_term_in_D(Y.cast<S>(), qY);
+    solver.solve(b.cast<S>(), qY, w2);
+    CHECK((wY - w2).norm() <= tolerance<S>() * 10 * (1 + w2.norm()));
+  }
+}
