@@ -3,6 +3,7 @@
 #include "blas.h"
 #include "subspace_internal.h"
 
+#include "qpreduce/detail/qp_operators.h"
 #include "qpreduce/detail/timer.h"
 
 #include <Eigen/Eigenvalues>
@@ -32,30 +33,6 @@ bool ConstraintOptions::is_valid(std::string* why) const {
 namespace {
 
 using MatD = Matrix<double>;
-
-// Inverse of a symmetric PSD matrix on its numerical range (pseudo-inverse),
-// and whether it was singular.
-MatD symmetric_pinv(const MatD& K, double tolerance, bool* singular, double* condition) {
-  *singular = false;
-  if (K.rows() == 0) {
-    *condition = 1.0;
-    return MatD(0, 0);
-  }
-  Eigen::SelfAdjointEigenSolver<MatD> es(0.5 * (K + K.transpose()));
-  const Eigen::VectorXd& lambda = es.eigenvalues();
-  const double top = lambda.cwiseAbs().maxCoeff();
-  Eigen::VectorXd inv(lambda.size());
-  for (Index i = 0; i < lambda.size(); ++i) {
-    if (lambda(i) > tolerance * top && top > 0) {
-      inv(i) = 1.0 / lambda(i);
-    } else {
-      inv(i) = 0.0;
-      *singular = true;
-    }
-  }
-  *condition = lambda.minCoeff() > 0 ? top / lambda.minCoeff() : INFINITY;
-  return es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
-}
 
 // ---- the per-frame products of `solve` -----------------------------------
 // The engine is compiled for baseline x86-64, where Eigen's matrix–vector
@@ -388,69 +365,13 @@ template <typename Scalar>
 void SubspaceSolver<Scalar>::reference_operators(const MatD& Abar, const ConstraintOptions& options,
                                                  ConstraintSummary* summary, MatD* Mb_out, MatD* Mq_out,
                                                  MatD* MY_out) const {
-  const Index p = Abar.cols(), m = Abar.rows();
+  // The small QP in the scaled coordinates w̄ (w = D_s·w̄): Hessian D_s·H_r·D_s,
+  // constraints Ā (m×p). Shared with the Phase 1 solver (detail/qp_operators.h).
   const auto& Ds = scale_.asDiagonal();
   const MatD Hbar = Ds * Hr_d_ * Ds;
-  MatD Mb, Mq;
-  if (!options.soft) {
-    // Rank-revealing QR of Āᵀ (p×m): range(Āᵀ) = row space, the rest of Q
-    // spans ker(Ā).
-    Eigen::ColPivHouseholderQR<MatD> qr(Abar.transpose());
-    const double top = m > 0 ? qr.matrixQR().diagonal().cwiseAbs().maxCoeff() : 0.0;
-    qr.setThreshold(options.rank_tolerance);
-    const Index r = m > 0 && top > 0 ? qr.rank() : 0;
-    summary->rank = r;
-    const MatD Q = qr.householderQ();  // p×p
-    const MatD Z = Q.rightCols(p - r);
-    // Least-squares minimum-norm solution of Ā w̄ = b: w̄0 = P·b.
-    MatD P = MatD::Zero(p, m);
-    if (r > 0) {
-      Eigen::CompleteOrthogonalDecomposition<MatD> cod(Abar);
-      cod.setThreshold(options.rank_tolerance);
-      P = cod.pseudoInverse();
-      const Eigen::JacobiSVD<MatD> svd(Abar);
-      const auto& sv = svd.singularValues();
-      summary->condition = sv(0) / sv(r - 1);
-    }
-    bool singular = false;
-    double cond = 0;
-    const MatD Kinv = symmetric_pinv(Z.transpose() * Hbar * Z, options.rank_tolerance, &singular, &cond);
-    Mq = Z * Kinv * Z.transpose();
-    Mb = P - Mq * (Hbar * P);
-    if (singular) {
-      summary->status = Status::Unbounded;
-      summary->message = fmt::format(
-          "the reduced energy is not strictly convex on the constraint set (ZᵀH_rZ is singular, condition {:.2e}): "
-          "the minimiser is not unique or does not exist; the minimum-norm stationary point is returned",
-          cond);
-    } else if (r < m) {
-      summary->status = Status::ConstraintsLeastSquares;
-      summary->message = fmt::format(
-          "{} hard constraints have rank {} in the subspace (over-determined or dependent): they hold in the "
-          "least-squares sense",
-          m, r);
-    } else {
-      summary->status = Status::Success;
-      summary->message = fmt::format("{} hard constraints, rank {}", m, r);
-    }
-  } else {
-    const double two_delta = 2.0 * options.delta;
-    const MatD K = Hbar + two_delta * (Abar.transpose() * Abar);
-    bool singular = false;
-    double cond = 0;
-    Mq = symmetric_pinv(K, options.rank_tolerance, &singular, &cond);
-    Mb = two_delta * (Mq * Abar.transpose());
-    if (singular) {
-      summary->status = Status::Unbounded;
-      summary->message = fmt::format(
-          "H_r + 2δA_rᵀA_r is singular (condition {:.2e}): the soft-constrained minimiser is not unique; the "
-          "minimum-norm stationary point is returned",
-          cond);
-    } else {
-      summary->status = Status::Success;
-      summary->message = fmt::format("{} soft constraints, δ = {:.3g}", m, options.delta);
-    }
-  }
+  const detail::QpOperators ops = detail::qp_operators(Hbar, Abar, options, summary);
+  const MatD& Mq = ops.Mg;
+  const MatD& Mb = ops.Mc;
   *Mq_out = Ds * Mq * Ds;
   *Mq_out = 0.5 * (*Mq_out + Mq_out->transpose()).eval();
   *Mb_out = Ds * Mb;
