@@ -18,8 +18,8 @@
 // bound (docs/theorem.md), per query.
 //
 // Usage: gmrf_inpainting [nx] [queries] [seed]   (defaults 400 20 1)
+#include <qpreduce/families.h>
 #include <qpreduce/full_solve.h>
-#include <qpreduce/generators.h>
 #include <qpreduce/quotient.h>
 #include <qpreduce/subspace_solver.h>
 
@@ -33,7 +33,7 @@
 #include <vector>
 
 using namespace qpreduce;
-namespace gen = qpreduce::generators;
+namespace fam = qpreduce::families;
 
 namespace {
 
@@ -46,43 +46,11 @@ double median(std::vector<double> v) {
   return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
-// A smooth "true image" sampled at pixel i.
-double image(Index i, Index nx, Index ny) {
-  const double x = static_cast<double>(i % nx) / nx, y = static_cast<double>(i / nx) / ny;
-  return std::sin(6.0 * x) * std::cos(4.0 * y) + 0.5 * x * y;
-}
-
-struct Query {
-  SparseMatrix<double> A;
-  Vector<double> b, Y;
-};
-
-// `observed` pixels from the candidates, plus `outside` pixels that are not
-// candidates (0 for queries inside the design).
-Query make_query(Index n, Index nx, Index ny, const std::vector<Index>& candidates, Index observed, Index outside,
-                 Index k, std::uint64_t seed) {
-  std::vector<Index> rows;
-  for (Index j : gen::random_subset(static_cast<Index>(candidates.size()), observed, seed)) rows.push_back(candidates[j]);
-  if (outside > 0) {
-    std::vector<char> is_candidate(static_cast<size_t>(n), 0);
-    for (Index c : candidates) is_candidate[c] = 1;
-    for (Index i : gen::random_subset(n, 4 * outside, seed + 1))
-      if (!is_candidate[i] && static_cast<Index>(rows.size()) < observed + outside) rows.push_back(i);
-  }
-  Query q;
-  q.A = gen::selection(n, rows);
-  q.b.resize(static_cast<Index>(rows.size()));
-  for (size_t j = 0; j < rows.size(); ++j) q.b(static_cast<Index>(j)) = image(rows[j], nx, ny);
-  q.Y = 1e-3 * gen::gaussian_vector(k, seed + 2);
-  return q;
-}
-
 int part1(Index nx, int queries, std::uint64_t seed) {
   const Index ny = nx, n = nx * ny, d = 300, k = 6, observed = 60;
-  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
-  const std::vector<Index> candidates = gen::random_subset(n, d, seed);
-  const SparseMatrix<double> C = gen::selection(n, candidates);
-  const SparseMatrix<double> D = gen::grid_trend_basis(nx, ny, k);
+  // The shared generator (families.h): grid Laplacian H, C = candidate sites, D = trend.
+  const fam::QpFamily family = fam::make_gmrf({nx, ny, d, k, observed, 0.0, seed});
+  const SparseMatrix<double>&H = family.H, &C = family.C, &D = family.D;
 
   fmt::print("Part 1: {}×{} grid (n = {}), {} candidate sites (d), {} trend columns (k), {} observed per query\n", nx,
              ny, n, d, k, observed);
@@ -94,7 +62,7 @@ int part1(Index nx, int queries, std::uint64_t seed) {
   std::vector<double> t_op, t_solve, t_recon, t_full, err;
   Vector<double> w(solver.p()), X(n), X_full;
   for (int qi = 0; qi < queries; ++qi) {
-    const Query q = make_query(n, nx, ny, candidates, observed, 0, k, seed + 100 + static_cast<std::uint64_t>(qi));
+    const fam::QpDemand q = fam::make_demand(family, static_cast<std::uint64_t>(qi));
     auto t0 = std::chrono::steady_clock::now();
     const ConstraintSummary cs = solver.set_constraints(q.A);
     t_op.push_back(seconds_since(t0));
@@ -110,7 +78,7 @@ int part1(Index nx, int queries, std::uint64_t seed) {
     t_recon.push_back(seconds_since(t0));
 
     t0 = std::chrono::steady_clock::now();
-    const FullSolveSummary fs = solve_full(H, q.A, q.b, Vector<double>(D * q.Y), &X_full);
+    const FullSolveSummary fs = solve_full(H, q.A, q.b, q.q, &X_full);
     t_full.push_back(seconds_since(t0));
     if (!fs.ok()) {
       fmt::print("  query {}: full solve failed: {}\n", qi, fs.message);
@@ -132,11 +100,9 @@ int part1(Index nx, int queries, std::uint64_t seed) {
 }
 
 int part2(int queries, std::uint64_t seed) {
-  const Index nx = 30, ny = 30, n = nx * ny, d = 80, k = 6, observed = 20;
-  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
-  const std::vector<Index> candidates = gen::random_subset(n, d, seed + 7);
-  const SparseMatrix<double> C = gen::selection(n, candidates);
-  const SparseMatrix<double> D = gen::grid_trend_basis(nx, ny, k);
+  const Index nx = 30, ny = 30, d = 80, k = 6, observed = 20;
+  const fam::QpFamily family = fam::make_gmrf({nx, ny, d, k, observed, 0.0, seed + 7});
+  const SparseMatrix<double>&H = family.H, &C = family.C, &D = family.D;
   fmt::print("\nPart 2: {}×{} grid, {} candidates, {} observed per query, some outside the candidates (A ∉ Span(C))\n",
              nx, ny, d, observed);
   TheoremChecker checker;
@@ -149,8 +115,8 @@ int part2(int queries, std::uint64_t seed) {
   int violations = 0;
   for (int qi = 0; qi < queries; ++qi) {
     const Index outside = qi % 4;  // 0, 1, 2, 3 observations off the candidate set
-    const Query q = make_query(n, nx, ny, candidates, observed, outside, k, seed + 500 + static_cast<std::uint64_t>(qi));
-    const TheoremCheck c = checker.check(q.A, q.b, Vector<double>(D * q.Y));
+    const fam::QpDemand q = fam::make_demand(family, 500 + static_cast<std::uint64_t>(qi), {outside, 0.0});
+    const TheoremCheck c = checker.check(q.A, q.b, q.q);
     if (c.practical_violation()) ++violations;
     fmt::print("  {:>8} {:>12.3e} {:>12.3e} {:>10.3g} {:>8.3f}\n", outside, c.practical_error, c.bound.bound,
                c.eta(), c.bound.rho);

@@ -1,0 +1,73 @@
+// qpreduce — a strict Matrix Market reader and writer for QP data (H, C, D,
+// demands). Format: https://math.nist.gov/MatrixMarket/formats.html
+//
+//   %%MatrixMarket matrix coordinate real general      (or: integer, pattern;
+//   % comments                                           symmetric; array)
+//   rows cols nnz                                        (array: rows cols)
+//   i j value                                            1-based, one per line
+//
+// Unlike Eigen's unsupported loadMarket, every problem is reported with the
+// file and line it was found on (MatrixMarketError): a malformed header or
+// size line, a wrong field count, an index out of range, a non-numeric, NaN
+// or infinite value, a duplicate entry, an upper-triangle entry in symmetric
+// storage, too few or too many entries, wrong dimensions (the size line), and
+// — when asked — an entry of a general-storage matrix whose mirror differs
+// (H must be symmetric, Eq. 1). Complex, Hermitian and skew-symmetric files
+// are rejected by name. Blank lines are skipped; comment lines ('%') may
+// appear anywhere after the header.
+#pragma once
+
+#include "qpreduce/common.h"
+
+#include <stdexcept>
+#include <string>
+
+namespace qpreduce {
+
+class MatrixMarketError : public std::runtime_error {
+ public:
+  // line = 0 when the problem is not tied to one line (cannot open the file).
+  // what() is "<file>:<line>: <problem>" (or "<file>: <problem>").
+  MatrixMarketError(std::string file, long line, std::string problem);
+
+  const std::string& file() const { return file_; }
+  long line() const { return line_; }
+  const std::string& problem() const { return problem_; }
+
+ private:
+  std::string file_;
+  long line_;
+  std::string problem_;
+};
+
+struct MarketReadOptions {
+  // Expected dimensions, checked against the size line; −1 accepts any.
+  Index rows = -1, cols = -1;
+  // Require a square matrix equal to its transpose. Symmetric storage is
+  // symmetric by construction; general storage is checked entry by entry:
+  // |a_ij − a_ji| ≤ symmetry_tolerance·max|a| (a missing mirror counts as 0).
+  bool require_symmetric = false;
+  // Relative entry-wise tolerance of the symmetry check. Values written with
+  // 17 significant digits (write_market) round-trip exactly; 1e-12 leaves
+  // room for a writer that printed 15.
+  double symmetry_tolerance = 1e-12;
+
+  bool is_valid(std::string* why) const;
+};
+
+// Reads a real matrix (coordinate or array storage) into a sparse matrix;
+// symmetric storage is expanded to both triangles. Throws MatrixMarketError
+// (file and line) on any problem listed above, std::invalid_argument on
+// invalid options.
+SparseMatrix<double> read_market_sparse(const std::string& path, const MarketReadOptions& options = {});
+// The same into a dense matrix (vectors: rows × 1, usually array storage).
+Matrix<double> read_market_dense(const std::string& path, const MarketReadOptions& options = {});
+
+// Writers: coordinate real general (sparse; symmetric=true stores the lower
+// triangle of a matrix the caller guarantees symmetric) and array real
+// general (dense), 17 significant digits so that values round-trip exactly.
+// Throw MatrixMarketError (line 0) when the file cannot be written.
+void write_market(const std::string& path, const SparseMatrix<double>& M, bool symmetric = false);
+void write_market(const std::string& path, const Matrix<double>& M);
+
+}  // namespace qpreduce
