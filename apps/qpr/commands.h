@@ -16,5 +16,7 @@ void register_theorem(CLI::App& app);
 void register_demo(CLI::App& app);
 // `qpr deform`: reduced ARAP of a mesh from files (cmd_deform.cpp, docs/deform.md).
 void register_deform(CLI::App& app);
+// `qpr compare`: reduced ARAP against full-space references (cmd_compare.cpp, docs/quality.md).
+void register_compare(CLI::App& app);
 
 }  // namespace qpr

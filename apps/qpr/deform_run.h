@@ -1,16 +1,62 @@
-// qpr — running a deformation scenario and reporting it (shared by `qpr demo`
-// and `qpr deform`). No math here: the plugin does the work, this file times
-// it, prints the table and writes the meshes and the JSON report.
+// qpr — loading and running a deformation scenario and reporting it (shared
+// by `qpr demo`, `qpr deform` and `qpr compare`). No math here: the plugin
+// does the work, this file parses the inputs, times the run, prints the table
+// and writes the meshes and the JSON report.
 #pragma once
 
 #include <qpreduce/deform/scenario.h>
 
 #include <nlohmann/json.hpp>
 
+#include <optional>
 #include <string>
 #include <vector>
 
+namespace CLI {
+class App;
+}
+
 namespace qpr {
+
+// The inputs of a deformation: mesh, one handle source, proxies, energy
+// (the options of `qpr deform` and `qpr compare`).
+struct ScenarioArgs {
+  std::string mesh, sel, def, anim, scene;
+  long linear_proxies = 0, rotational_proxies = 0;
+  std::string linear_groups, rotational_clusters, affine_patches;
+  int iterations = 8, frames = 1;
+  std::optional<double> alpha, beta, soft;
+};
+
+// Registers the ScenarioArgs options (and the MESH positional) on `cmd`.
+void add_scenario_options(CLI::App* cmd, ScenarioArgs* args);
+
+// The scenario, its mesh and the deformer options the arguments ask for.
+struct LoadedScenario {
+  qpreduce::deform::Scenario scenario;
+  qpreduce::deform::TriangleMesh surface;  // when !tet
+  qpreduce::deform::TetMesh solid;         // when tet
+  bool tet = false;
+  qpreduce::deform::DeformerOptions options;
+  std::string name;
+};
+// Reads the files and builds the scenario. Throws on bad input.
+LoadedScenario load_scenario(const ScenarioArgs& args);
+
+// Writes a pose of the loaded mesh: surfaces as OBJ/OFF/PLY; tets as .mesh,
+// .node/.ele, or their boundary surface for a surface extension.
+void write_pose(const std::string& path, const qpreduce::deform::Vertices& V,
+                const qpreduce::deform::TriangleMesh* surface, const qpreduce::deform::TetMesh* solid);
+
+// What a run leaves behind besides the report: the last frame's pose and the
+// deformer's clusters and rotations (for comparisons).
+struct RunOutputs {
+  qpreduce::deform::Vertices last;
+  std::vector<int> clusters;               // per rotation element
+  Eigen::VectorXd rotations;               // S, 9d
+  Eigen::Matrix3d global_rotation = Eigen::Matrix3d::Identity();  // r₀ of the last frame
+  qpreduce::deform::DeformerOptions options;  // as used (scene overrides applied)
+};
 
 struct RunSettings {
   qpreduce::deform::DeformerOptions options;
@@ -25,8 +71,10 @@ struct RunSettings {
 // Precomputes, sets the handles, runs every frame of the scenario, prints a
 // timing table to stdout and returns the report (also written to
 // settings.report_path when set). Throws on bad input or a failed precompute.
+// `outputs`, when given, receives the last pose and the deformer state.
 nlohmann::json run_scenario(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::TriangleMesh* surface,
-                            const qpreduce::deform::TetMesh* solid, const RunSettings& settings);
+                            const qpreduce::deform::TetMesh* solid, const RunSettings& settings,
+                            RunOutputs* outputs = nullptr);
 
 // Peak resident set size of this process so far, in MB (getrusage).
 double peak_rss_mb();

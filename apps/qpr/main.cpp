@@ -10,6 +10,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   qpr::register_demo(app);
   qpr::register_deform(app);
+  qpr::register_compare(app);
   qpr::register_theorem(app);
   CLI11_PARSE(app, argc, argv);
   return 0;

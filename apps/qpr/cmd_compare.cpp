@@ -1,0 +1,174 @@
+// `qpr compare MESH …`: the reduced deformation against full-space references
+// (Ceres and/or local-global ARAP, reference.h) on the last frame of a
+// scenario. No math here: the plugin solves, this file measures and reports.
+#include "commands.h"
+#include "deform_run.h"
+#include "guard.h"
+
+#include <qpreduce/deform/geometry.h>
+#include <qpreduce/deform/reference.h>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+
+namespace qpr {
+
+namespace {
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+struct CompareArgs : ScenarioArgs {
+  std::string reference = "both";  // ceres | local-global | both
+  std::string energy = "classic";  // classic | modified
+  int reference_iterations = 20000;
+  std::string out_dir = "qpr-compare", report;
+};
+
+nlohmann::json deviation(const Vertices& a, const Vertices& b, double diag) {
+  const Eigen::VectorXd d = (a - b).rowwise().norm();
+  return {{"rms_deviation", std::sqrt(d.squaredNorm() / static_cast<double>(d.size())) / diag},
+          {"max_deviation", d.maxCoeff() / diag}};
+}
+
+int run_compare(const CompareArgs& a) {
+  if (a.reference != "ceres" && a.reference != "local-global" && a.reference != "both")
+    throw std::invalid_argument("--reference must be ceres, local-global or both, got " + a.reference);
+  if (a.energy != "classic" && a.energy != "modified")
+    throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
+  LoadedScenario ls = load_scenario(a);
+  const TriangleMesh* surface = ls.tet ? nullptr : &ls.surface;
+  const TetMesh* solid = ls.tet ? &ls.solid : nullptr;
+  const std::string ext = ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off";
+  std::filesystem::create_directories(a.out_dir);
+  auto path = [&](const std::string& what) { return (std::filesystem::path(a.out_dir) / (what + "." + ext)).string(); };
+
+  // The reduced run (every frame, as `qpr deform`), keeping the last pose.
+  RunSettings settings;
+  settings.name = ls.name;
+  settings.options = ls.options;
+  settings.out_path = path("reduced");
+  RunOutputs reduced;
+  const nlohmann::json rep = run_scenario(ls.scenario, surface, solid, settings, &reduced);
+  const Scenario& sc = ls.scenario;
+  const HandleTargets& targets = sc.frames.back();
+  const double diag = bounding_box_diagonal(sc.model.V);
+
+  // The references, on the last frame's targets, from the rest pose.
+  ReferenceOptions ro;
+  ro.max_iterations = a.reference_iterations;
+  DeformableModel model = sc.model;
+  if (a.energy == "modified") {
+    // E′ with the reduced run's clusters, α, β and last global rotation r₀.
+    ro.energy = ReferenceEnergy::ModifiedArap;
+    ro.parameters = reduced.options.energy;
+    ro.frame = reduced.global_rotation;
+    model.clusters = reduced.clusters;
+  }
+  const RotationElements elements =
+      ls.tet ? tet_elements(sc.model.V, sc.model.T) : spokes_and_rims_elements(sc.model.V, sc.model.F);
+  nlohmann::json report;
+  report["name"] = ls.name;
+  report["vertices"] = sc.model.V.rows();
+  report["bounding_box_diagonal"] = diag;
+  report["energy"] = a.energy;
+  nlohmann::json red;
+  red["arap_energy"] = arap_energy(sc.model.V, elements, reduced.last);
+  red["handle_residual"] = handle_residual(sc, targets, reduced.last) / diag;
+  red["frame_ms"] = rep["frame_ms"];
+  red["precompute_s"] = rep["precompute_s"];
+  red["linear_proxies"] = rep["linear_proxies"];
+  red["rotational_proxies"] = rep["rotational_proxies"];
+  red["iterations"] = rep["iterations"];
+  red["frames"] = rep["frames"];
+  red["alpha"] = rep["alpha"];
+  red["beta"] = rep["beta"];
+  report["reduced"] = red;
+
+  nlohmann::json refs = nlohmann::json::object();
+  std::string primary;
+  for (const std::string which : {"ceres", "local-global"}) {
+    if (a.reference != "both" && a.reference != which) continue;
+    ReferenceSolution sol;
+    const ReferenceSummary s = which == "ceres" ? solve_ceres_reference(model, sc.handles, targets, ro, &sol)
+                                                : solve_local_global(model, sc.handles, targets, ro, &sol);
+    nlohmann::json r;
+    r["status"] = to_string(s.status);
+    r["message"] = s.message;
+    r["converged"] = s.converged;
+    r["iterations"] = s.iterations;
+    r["energy_kind"] = to_string(s.energy_kind);
+    r["energy"] = s.energy;
+    r["arap_energy"] = arap_energy(sc.model.V, elements, sol.V);
+    r["handle_residual"] = s.handle_residual / diag;
+    r["setup_ms"] = 1e3 * s.setup_seconds;
+    r["solve_ms"] = 1e3 * s.solve_seconds;
+    if (!s.ok()) {
+      std::fprintf(stderr, "  %s reference failed: %s\n", which.c_str(), s.message.c_str());
+      refs[which] = r;
+      continue;
+    }
+    const std::string file = path("reference_" + which);
+    write_pose(file, sol.V, surface, solid);
+    r["mesh"] = file;
+    r.update(deviation(reduced.last, sol.V, diag));
+    refs[which] = r;
+    // The primary reference: Ceres when it converged, else local-global.
+    if (primary.empty() || (which == "local-global" && !refs[primary]["converged"].get<bool>())) primary = which;
+  }
+  report["references"] = refs;
+  if (primary.empty()) throw std::runtime_error("no reference succeeded");
+  const nlohmann::json& ref = refs[primary];
+  report["reference"] = ref;
+  report["reference"]["solver"] = primary;
+  report["energy_ratio"] = report["reduced"]["arap_energy"].get<double>() / ref["arap_energy"].get<double>();
+  report["rms_deviation"] = ref["rms_deviation"];
+  report["max_deviation"] = ref["max_deviation"];
+  report["speedup"] = ref["solve_ms"].get<double>() / report["reduced"]["frame_ms"].get<double>();
+
+  fmt::print("compare ({} energy), reference = {}:\n", a.energy, primary);
+  fmt::print("  {:<14}{:>14}{:>14}{:>12}{:>12}{:>14}{:>12}\n", "", "ARAP energy", "handle res.", "RMS dev.", "max dev.",
+             "time ms", "iterations");
+  fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>12}{:>12}{:>14.3f}{:>12}\n", "reduced", red["arap_energy"].get<double>(),
+             red["handle_residual"].get<double>(), "", "", red["frame_ms"].get<double>(),
+             rep["iterations"].get<int>());
+  for (const auto& [which, r] : refs.items()) {
+    if (!r.contains("rms_deviation")) continue;
+    fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>11.2f}%{:>11.2f}%{:>14.1f}{:>12}{}\n", which, r["arap_energy"].get<double>(),
+               r["handle_residual"].get<double>(), 100 * r["rms_deviation"].get<double>(),
+               100 * r["max_deviation"].get<double>(), r["solve_ms"].get<double>(), r["iterations"].get<int>(),
+               r["converged"].get<bool>() ? "" : "  (not converged)");
+  }
+  fmt::print("  energy ratio {:.3f}, speedup {:.0f}x (one reference solve / one reduced frame); meshes in {}\n",
+             report["energy_ratio"].get<double>(), report["speedup"].get<double>(), a.out_dir);
+  if (!a.report.empty()) {
+    std::ofstream f(a.report);
+    if (!f) throw std::runtime_error(a.report + ": cannot write the report");
+    f << report.dump(2) << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+
+void register_compare(CLI::App& app) {
+  auto a = std::make_shared<CompareArgs>();
+  CLI::App* cmd = app.add_subcommand("compare", "Reduced ARAP against full-space references (Ceres, local-global)");
+  add_scenario_options(cmd, a.get());
+  cmd->add_option("--reference", a->reference, "ceres, local-global or both (default both)");
+  cmd->add_option("--energy", a->energy,
+                  "classic: references minimise classic ARAP (default); modified: the reduced model's E' with its "
+                  "clusters, alpha, beta and global rotation");
+  cmd->add_option("--reference-iterations", a->reference_iterations, "Iteration limit of the references")
+      ->check(CLI::Range(1, 10000000));
+  cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
+  cmd->add_option("--report", a->report, "JSON report");
+  cmd->callback([a]() { run_guarded("compare", [&] { return run_compare(*a); }); });
+}
+
+}  // namespace qpr
