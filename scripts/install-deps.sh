@@ -5,7 +5,7 @@ set -euo pipefail
 packages=(
   build-essential cmake git pkg-config
   libeigen3-dev libopenblas-dev libsuitesparse-dev libceres-dev libspectra-dev libomp-dev
-  libfmt-dev catch2 libbenchmark-dev libcli11-dev nlohmann-json3-dev
+  libfmt-dev catch2 libbenchmark-dev libcli11-dev nlohmann-json3-dev zlib1g-dev
 )
 missing=()
 for p in "${packages[@]}"; do

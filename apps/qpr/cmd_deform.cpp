@@ -12,7 +12,7 @@ namespace qpr {
 namespace {
 
 struct DeformArgs : ScenarioArgs {
-  std::string out, report;
+  std::string out, report, cache;
 };
 
 int run_deform(const DeformArgs& a) {
@@ -22,6 +22,7 @@ int run_deform(const DeformArgs& a) {
   settings.options = ls.options;
   settings.out_path = a.out;
   settings.report_path = a.report;
+  settings.cache_path = a.cache;
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;
 }
@@ -34,6 +35,8 @@ void register_deform(CLI::App& app) {
   add_scenario_options(cmd, a.get());
   cmd->add_option("--out", a->out, "Deformed mesh of the last frame ({frame} in the name writes every frame)");
   cmd->add_option("--report", a->report, "JSON report");
+  cmd->add_option("--cache", a->cache,
+                  "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
   cmd->callback([a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 

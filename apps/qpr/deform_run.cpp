@@ -202,8 +202,21 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   Deformer deformer;
   const bool tty = isatty(fileno(stderr)) != 0;
   const ProgressFn progress = settings.progress && tty ? ProgressFn(progress_bar) : ProgressFn();
-  const PrecomputeSummary pre = deformer.precompute(scenario.model, options, progress);
-  if (!pre.ok()) throw std::runtime_error("precompute failed: " + pre.message);
+  PrecomputeSummary pre;
+  bool cache_loaded = false;
+  if (!settings.cache_path.empty() && std::ifstream(settings.cache_path).good()) {
+    try {
+      pre = deformer.load(settings.cache_path, scenario.model, options);
+      cache_loaded = true;
+    } catch (const IoError& e) {
+      std::fprintf(stderr, "  cache not used: %s\n", e.what());
+    }
+  }
+  if (!cache_loaded) {
+    pre = deformer.precompute(scenario.model, options, progress);
+    if (!pre.ok()) throw std::runtime_error("precompute failed: " + pre.message);
+    if (!settings.cache_path.empty()) deformer.save(settings.cache_path);
+  }
   const double peak_mb = peak_rss_mb();
 
   const detail::Timer op_timer;
@@ -252,6 +265,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
   report["precompute_s"] = pre.total_seconds;
+  report["precompute_from_cache"] = cache_loaded;
   report["precompute_breakdown_s"] = {{"clustering", pre.clustering_seconds},
                                       {"assembly", pre.assembly_seconds},
                                       {"subspace", pre.subspace_seconds},
@@ -271,8 +285,13 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   fmt::print("{}: {} vertices, {} {} elements, {} linear / {} rotational proxies, {} patches\n", settings.name,
              pre.vertices, pre.elements, scenario.model.is_tet() ? "tet" : "rotation", pre.linear_proxies,
              pre.rotational_proxies, pre.patches);
-  fmt::print("  {:<28}{:>12.3f} s   (peak RSS {:.0f} MB, backend {})\n", "precompute", pre.total_seconds, peak_mb,
-             to_string(pre.subspace.backend_used));
+  if (cache_loaded) {
+    fmt::print("  {:<28}{:>12.3f} s   (loaded from {}, peak RSS {:.0f} MB)\n", "precompute", pre.total_seconds,
+               settings.cache_path, peak_mb);
+  } else {
+    fmt::print("  {:<28}{:>12.3f} s   (peak RSS {:.0f} MB, backend {})\n", "precompute", pre.total_seconds, peak_mb,
+               to_string(pre.subspace.backend_used));
+  }
   fmt::print("  {:<28}{:>12.3f} ms\n", "OP (set handles)", op_ms);
   fmt::print("  {:<28}{:>12.2f} µs   (median over {} frames, {} iterations each)\n", "one iteration", median(iter_us),
              frames, options.iterations);

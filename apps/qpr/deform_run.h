@@ -64,6 +64,9 @@ struct RunSettings {
   std::vector<int> write_frames{-1};
   std::string out_path;     // the last frame's mesh (or a pattern with {frame})
   std::string report_path;  // JSON report, optional
+  // Precomputed model (Deformer::save/load): loaded when the file exists and
+  // was made from the same inputs, else precomputed and written there.
+  std::string cache_path;
   bool progress = true;     // progress bar on stderr during precompute
   std::string name;         // what is deformed, for the table
 };

@@ -252,6 +252,37 @@ SubspaceSummary SubspaceSolver<Scalar>::precompute(const SparseMatrix<Scalar>& H
 }
 
 template <typename Scalar>
+void SubspaceSolver<Scalar>::restore(VariationalSubspace<Scalar> subspace, Matrix<double> Hr, Matrix<double> BtD,
+                                     const SubspaceOptions& options) {
+  ready_ = constrained_ = false;
+  const Index n = subspace.N.rows(), d = subspace.N.cols(), k = subspace.UD.cols();
+  const Index p = d + k;
+  detail::check_size("SubspaceSolver::restore: UD rows", n, subspace.UD.rows());
+  detail::check_size("SubspaceSolver::restore: H_r rows", p, Hr.rows());
+  detail::check_size("SubspaceSolver::restore: H_r cols", p, Hr.cols());
+  detail::check_size("SubspaceSolver::restore: BᵀD rows", p, BtD.rows());
+  detail::check_size("SubspaceSolver::restore: BᵀD cols", k, BtD.cols());
+  if (d == 0) throw std::invalid_argument("SubspaceSolver::restore: N has no columns");
+  detail::check_finite("SubspaceSolver::restore: N", subspace.N);
+  detail::check_finite("SubspaceSolver::restore: UD", subspace.UD);
+  detail::check_finite("SubspaceSolver::restore: H_r", Hr);
+  detail::check_finite("SubspaceSolver::restore: BᵀD", BtD);
+  const double asym = (Hr - Hr.transpose()).norm();
+  if (asym > 1e-12 * std::max(1.0, Hr.norm())) {
+    throw std::invalid_argument(fmt::format("SubspaceSolver::restore: H_r is not symmetric (‖H_r − H_rᵀ‖ = {:.3e})",
+                                            asym));
+  }
+  subspace_ = std::move(subspace);
+  n_ = n;
+  Hr_d_ = std::move(Hr);
+  BtD_d_ = std::move(BtD);
+  Hr_ = Hr_d_.template cast<Scalar>();
+  BtD_ = BtD_d_.template cast<Scalar>();
+  prepare_fast_path(options.reduced_lift_tolerance);
+  ready_ = true;
+}
+
+template <typename Scalar>
 void SubspaceSolver<Scalar>::prepare_fast_path(double lift_tolerance) {
   const Index p = Hr_d_.rows();
   // D_s = diag(H_r)^(−1/2); a column without energy keeps the largest scale.

@@ -480,3 +480,36 @@ TEMPLATE_TEST_CASE("solve matches a dense solve of the reduced KKT system for an
     CHECK((wY - w2).norm() <= tolerance<S>() * 10 * (1 + w2.norm()));
   }
 }
+
+TEST_CASE("a solver restored from its parts solves like the original", "[solver][restore]") {
+  const Problem p = in_span_problem(14, 13, 0.0, 21);
+  SubspaceSolver<double> original;
+  REQUIRE(original.precompute(p.H, p.C, p.D).ok());
+  SubspaceSolver<double> restored;
+  restored.restore(original.subspace(), Matrix<double>(original.reduced_hessian()),
+                   Matrix<double>(original.reduced_linear_map()));
+  REQUIRE(restored.ready());
+  CHECK(restored.n() == original.n());
+  CHECK(restored.p() == original.p());
+  for (SubspaceSolver<double>* s : {&original, &restored}) REQUIRE(s->set_constraints(p.A).ok());
+  Vector<double> w0(original.p()), w1(restored.p());
+  original.solve_in_D(p.b, p.Y, w0);
+  restored.solve_in_D(p.b, p.Y, w1);
+  CHECK((w1 - w0).norm() <= 1e-14 * w0.norm());
+
+  SECTION("inconsistent parts are refused") {
+    SubspaceSolver<double> bad;
+    Matrix<double> Hr = original.reduced_hessian();
+    Matrix<double> BtD = original.reduced_linear_map();
+    CHECK_THROWS_WITH(bad.restore(original.subspace(), Hr.topLeftCorner(3, 3), BtD),
+                      Catch::Contains("H_r rows"));
+    CHECK_THROWS_WITH(bad.restore(original.subspace(), Hr, BtD.topRows(2)), Catch::Contains("BᵀD rows"));
+    Matrix<double> asym = Hr;
+    asym(0, 1) += 1.0;
+    CHECK_THROWS_WITH(bad.restore(original.subspace(), asym, BtD), Catch::Contains("not symmetric"));
+    VariationalSubspace<double> nan = original.subspace();
+    nan.UD(3, 0) = std::numeric_limits<double>::quiet_NaN();
+    CHECK_THROWS_AS(bad.restore(nan, Hr, BtD), std::invalid_argument);
+    CHECK_FALSE(bad.ready());
+  }
+}

@@ -1,5 +1,6 @@
 #include "qpreduce/deform/deformer.h"
 
+#include "deformer_state.h"
 #include "qpreduce/deform/geometry.h"
 
 #include <qpreduce/detail/timer.h>
@@ -11,30 +12,8 @@
 
 namespace qpreduce::deform {
 
-namespace {
+using detail_deformer::Triplets;
 
-using Triplets = std::vector<Eigen::Triplet<double>>;
-using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, with
-// G = M_N·X + M_U·S formed by the engine's FusedAlternation.
-class RotationProjection final : public InputProjection<double> {
- public:
-  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) override {
-    double change2 = 0.0;
-    const Index d = s.size() / 9;
-    for (Index i = 0; i < d; ++i) {
-      const Eigen::Map<const Eigen::Matrix3d> G(g.data() + 9 * i);
-      Eigen::Map<Eigen::Matrix3d> si(s.data() + 9 * i);
-      const Eigen::Matrix3d R = fit_rotation(G);
-      change2 += (R - si).squaredNorm();
-      si = R;
-    }
-    return std::sqrt(change2);
-  }
-};
-
-}  // namespace
 
 bool DeformerOptions::is_valid(std::string* why) const {
   auto fail = [why](std::string msg) {
@@ -51,54 +30,127 @@ bool DeformerOptions::is_valid(std::string* why) const {
   return true;
 }
 
-struct Deformer::State {
-  // Model.
-  Vertices rest;
-  RotationElements elements;
-  std::vector<int> clusters;
-  std::vector<int> patch_of_vertex;
-  std::vector<PatchType> patch_types;
-  Index n = 0, d = 0, m = 0, s = 0;
-  Index nu = 0;                     // control-layer size
-  std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
-  Eigen::VectorXd cluster_measure;  // Σ a_k per cluster (global rotation weights)
-  // Subspace and reduced operators.
-  SubspaceSolver<double> solver;
-  RotationProjection projection;
-  Matrix<double> MN, MU;            // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
-  FusedAlternation<double> fused;
-  RowMatrixF basis;                 // 3n × (nx + 9d): rows of P·[N UD], float
-  Index nx = 0;                     // 3m + 12s
-  // On-site.
-  FixedCoordinateSolver<double> phase1;
-  Handles handles;
-  std::vector<Index> fixed_patches;
-  Index rows = 0;
-  // Pose.
-  Eigen::VectorXd S;   // 9d, world frame
-  Eigen::VectorXd x;   // nx
-  Eigen::Matrix3d r0 = Eigen::Matrix3d::Identity();
-  // Frame workspaces (sized once).
-  Eigen::VectorXd b, s_local, w;
-  Eigen::VectorXf wf, vf;
-  AlternatingOptions alternating;
-  bool global_rotation = true;
-  bool ready = false;
+namespace detail_deformer {
 
-  // Row of V′ coordinate (vertex v, axis a) in the control layer, as a sparse
-  // combination: free vertices map to one control entry; patch vertices to
-  // t_s(a, ·)·v + d_s(a).
-  void control_row(Index v, int a, double scale, Index col, Triplets* t) const {
-    const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
-    if (p < 0) {
-      t->emplace_back(control_of_free[v] + a, col, scale);
-      return;
-    }
-    const Index base = nu - 12 * s + 12 * p;
-    for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
-    t->emplace_back(base + 9 + a, col, scale);
+double RotationProjection::project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) {
+  double change2 = 0.0;
+  const Index d = s.size() / 9;
+  for (Index i = 0; i < d; ++i) {
+    const Eigen::Map<const Eigen::Matrix3d> G(g.data() + 9 * i);
+    Eigen::Map<Eigen::Matrix3d> si(s.data() + 9 * i);
+    const Eigen::Matrix3d R = fit_rotation(G);
+    change2 += (R - si).squaredNorm();
+    si = R;
   }
-};
+  return std::sqrt(change2);
+}
+
+}  // namespace detail_deformer
+
+void Deformer::State::set_topology(const DeformableModel& model) {
+  const bool tet = model.is_tet();
+  if (tet == (model.F.rows() > 0)) {
+    throw std::invalid_argument("DeformableModel: give exactly one of F (surface) and T (tetrahedra)");
+  }
+  if (tet) {
+    check_mesh("DeformableModel", TetMesh{model.V, model.T, {}});
+  } else {
+    check_mesh("DeformableModel", TriangleMesh{model.V, model.F});
+  }
+  rest = model.V;
+  n = model.V.rows();
+  patch_of_vertex = model.patch_of_vertex;
+  patch_types = model.patch_types;
+  if (!patch_of_vertex.empty()) {
+    detail::check_size("DeformableModel::patch_of_vertex size", n, static_cast<Index>(patch_of_vertex.size()));
+    for (Index v = 0; v < n; ++v) {
+      const int p = patch_of_vertex[v];
+      if (p < -1 || p >= static_cast<int>(patch_types.size())) {
+        throw std::invalid_argument(fmt::format("DeformableModel::patch_of_vertex: vertex {} has patch {} outside "
+                                                "[-1, {})",
+                                                v, p, patch_types.size()));
+      }
+    }
+  }
+  s = static_cast<Index>(patch_types.size());
+  std::vector<Index> patch_size(static_cast<size_t>(s), 0);
+  for (int p : patch_of_vertex)
+    if (p >= 0) ++patch_size[static_cast<size_t>(p)];
+  fixed_patches.clear();
+  for (Index p = 0; p < s; ++p) {
+    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableModel: patch {} has no vertex", p));
+    if (patch_types[p] == PatchType::Fixed) fixed_patches.push_back(p);
+  }
+  control_of_free.assign(static_cast<size_t>(n), -1);
+  Index free_count = 0;
+  for (Index v = 0; v < n; ++v)
+    if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) control_of_free[v] = 3 * free_count++;
+  nu = 3 * free_count + 12 * s;
+  elements = tet ? tet_elements(model.V, model.T) : spokes_and_rims_elements(model.V, model.F);
+}
+
+void Deformer::State::set_clusters(std::vector<int> labels, Index count) {
+  const Index r = elements.size();
+  detail::check_size("rotational cluster labels", r, static_cast<Index>(labels.size()));
+  std::vector<Index> size(static_cast<size_t>(count), 0);
+  for (Index k = 0; k < r; ++k) {
+    if (labels[k] < 0 || labels[k] >= count) {
+      throw std::invalid_argument(fmt::format("rotational clusters: element {} has label {} outside [0, {})", k,
+                                              labels[k], count));
+    }
+    ++size[static_cast<size_t>(labels[k])];
+  }
+  for (Index c = 0; c < count; ++c)
+    if (size[c] == 0) throw std::invalid_argument(fmt::format("rotational clusters: cluster {} is empty", c));
+  clusters = std::move(labels);
+  d = count;
+  cluster_measure = Eigen::VectorXd::Zero(d);
+  for (Index k = 0; k < r; ++k) cluster_measure(clusters[k]) += elements.measure(k);
+}
+
+void Deformer::State::control_row(Index v, int a, double scale, Index col, Triplets* t) const {
+  const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
+  if (p < 0) {
+    t->emplace_back(control_of_free[v] + a, col, scale);
+    return;
+  }
+  const Index base = nu - 12 * s + 12 * p;
+  for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
+  t->emplace_back(base + 9 + a, col, scale);
+}
+
+SparseMatrix<double> Deformer::State::control_matrix() const {
+  Triplets tp, row;
+  tp.reserve(static_cast<size_t>(3 * n) * 4);
+  for (Index v = 0; v < n; ++v)
+    for (int a = 0; a < 3; ++a) {
+      row.clear();
+      control_row(v, a, 1.0, 0, &row);
+      for (const auto& e : row) tp.emplace_back(3 * v + a, e.row(), e.value());
+    }
+  SparseMatrix<double> P(3 * n, nu);
+  P.setFromTriplets(tp.begin(), tp.end());
+  return P;
+}
+
+Matrix<double> Deformer::State::vertex_rows(const SparseMatrix<double>& P) const {
+  Matrix<double> PB(3 * n, nx + 9 * d);
+  PB.leftCols(nx) = P * solver.subspace().N;
+  PB.rightCols(9 * d) = P * solver.subspace().UD;
+  return PB;
+}
+
+void Deformer::State::finish(const DeformerOptions& options) {
+  S.resize(9 * d);
+  x = Eigen::VectorXd::Zero(nx);
+  s_local.resize(9 * d);
+  w.resize(nx + 9 * d);
+  wf.resize(nx + 9 * d);
+  vf.resize(3 * n);
+  alternating.iterations = options.iterations;
+  global_rotation = options.global_rotation;
+  ready = true;
+}
 
 Deformer::Deformer() : state_(std::make_unique<State>()) {}
 Deformer::~Deformer() = default;
@@ -122,14 +174,6 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
   const bool tet = model.is_tet();
-  if (tet == (model.F.rows() > 0)) {
-    throw std::invalid_argument("DeformableModel: give exactly one of F (surface) and T (tetrahedra)");
-  }
-  if (tet) {
-    check_mesh("DeformableModel", TetMesh{model.V, model.T, {}});
-  } else {
-    check_mesh("DeformableModel", TriangleMesh{model.V, model.F});
-  }
   auto report = [&](const char* stage, double f) {
     if (progress) progress(stage, f);
   };
@@ -137,58 +181,24 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   auto st = std::make_unique<State>();
   State& S = *st;
   PrecomputeSummary summary;
-  S.rest = model.V;
-  S.n = model.V.rows();
+  S.set_topology(model);
+  S.inputs = {model.F, model.T, model.clusters, model.linear.groups, options};
   const Index n = S.n;
   const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
 
-  // Patches.
-  S.patch_of_vertex = model.patch_of_vertex;
-  S.patch_types = model.patch_types;
-  if (!S.patch_of_vertex.empty()) {
-    detail::check_size("DeformableModel::patch_of_vertex size", n, static_cast<Index>(S.patch_of_vertex.size()));
-    for (Index v = 0; v < n; ++v) {
-      const int p = S.patch_of_vertex[v];
-      if (p < -1 || p >= static_cast<int>(S.patch_types.size())) {
-        throw std::invalid_argument(fmt::format("DeformableModel::patch_of_vertex: vertex {} has patch {} outside "
-                                                "[-1, {})",
-                                                v, p, S.patch_types.size()));
-      }
-    }
-  }
-  S.s = static_cast<Index>(S.patch_types.size());
-  std::vector<Index> patch_size(static_cast<size_t>(S.s), 0);
-  for (int p : S.patch_of_vertex)
-    if (p >= 0) ++patch_size[static_cast<size_t>(p)];
-  for (Index p = 0; p < S.s; ++p) {
-    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableModel: patch {} has no vertex", p));
-    if (S.patch_types[p] == PatchType::Fixed) S.fixed_patches.push_back(p);
-  }
-  S.control_of_free.assign(static_cast<size_t>(n), -1);
-  Index free_count = 0;
-  for (Index v = 0; v < n; ++v)
-    if (S.patch_of_vertex.empty() || S.patch_of_vertex[v] < 0) S.control_of_free[v] = 3 * free_count++;
-  S.nu = 3 * free_count + 12 * S.s;
-
-  // Rotation elements and clusters.
+  // Rotation clusters.
   report("clusters", 0.0);
   detail::Timer t;
-  S.elements = tet ? tet_elements(model.V, model.T) : spokes_and_rims_elements(model.V, model.F);
   const Index r = S.elements.size();
   if (!model.clusters.empty()) {
     detail::check_size("DeformableModel::clusters size", r, static_cast<Index>(model.clusters.size()));
-    S.clusters = model.clusters;
-    S.d = 1 + *std::max_element(S.clusters.begin(), S.clusters.end());
-    std::vector<Index> count(static_cast<size_t>(S.d), 0);
     for (Index k = 0; k < r; ++k) {
-      if (S.clusters[k] < 0) {
+      if (model.clusters[k] < 0) {
         throw std::invalid_argument(fmt::format("DeformableModel::clusters: element {} has negative label {}", k,
-                                                S.clusters[k]));
+                                                model.clusters[k]));
       }
-      ++count[static_cast<size_t>(S.clusters[k])];
     }
-    for (Index c = 0; c < S.d; ++c)
-      if (count[c] == 0) throw std::invalid_argument(fmt::format("DeformableModel::clusters: cluster {} is empty", c));
+    S.set_clusters(model.clusters, 1 + *std::max_element(model.clusters.begin(), model.clusters.end()));
   } else {
     Clustering clustering;
     const ClusterSummary cs = rotation_clusters(model.V, E, tet ? ClusterElement::Element : ClusterElement::Vertex,
@@ -198,11 +208,8 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
       summary.message = "rotational clusters: " + cs.message;
       return summary;
     }
-    S.clusters = clustering.labels;
-    S.d = clustering.count;
+    S.set_clusters(std::move(clustering.labels), clustering.count);
   }
-  S.cluster_measure = Eigen::VectorXd::Zero(S.d);
-  for (Index k = 0; k < r; ++k) S.cluster_measure(S.clusters[k]) += S.elements.measure(k);
   summary.clustering_seconds = t.seconds();
 
   // Linear proxies, restricted to free vertices.
@@ -243,16 +250,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   t.reset();
   const ModifiedArapSystem full = assemble_modified_arap(model.V, S.elements, S.clusters, S.d, options.energy);
   const EliminatedArapSystem elim = eliminate_rotation_corrections(full);
-  Triplets tp;
-  tp.reserve(static_cast<size_t>(3 * n) * 4);
-  for (Index v = 0; v < n; ++v)
-    for (int a = 0; a < 3; ++a) {
-      Triplets row;
-      S.control_row(v, a, 1.0, 0, &row);
-      for (const auto& e : row) tp.emplace_back(3 * v + a, e.row(), e.value());
-    }
-  SparseMatrix<double> P(3 * n, S.nu);
-  P.setFromTriplets(tp.begin(), tp.end());
+  const SparseMatrix<double> P = S.control_matrix();
   const SparseMatrix<double> Pt = P.transpose();
   const SparseMatrix<double> Hu = SparseMatrix<double>(Pt * elim.H * P);
   const SparseMatrix<double> Du = Pt * elim.Ds;
@@ -306,12 +304,8 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   // Reconstruction basis P·[N UD] and the Phase 2 matrices D_Vᵀ·P·[N UD].
   report("reduction", 0.9);
   t.reset();
-  const Matrix<double>& N = S.solver.subspace().N;
-  const Matrix<double>& U = S.solver.subspace().UD;
   {
-    Matrix<double> PB(3 * n, S.nx + 9 * S.d);
-    PB.leftCols(S.nx) = P * N;
-    PB.rightCols(9 * S.d) = P * U;
+    const Matrix<double> PB = S.vertex_rows(P);
     const SparseMatrix<double> DVt = elim.DV.transpose();
     S.MN = DVt * PB.leftCols(S.nx);
     S.MU = DVt * PB.rightCols(9 * S.d);
@@ -319,15 +313,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   }
   summary.reduction_seconds = t.seconds();
 
-  S.S.resize(9 * S.d);
-  S.x = Eigen::VectorXd::Zero(S.nx);
-  S.s_local.resize(9 * S.d);
-  S.w.resize(S.nx + 9 * S.d);
-  S.wf.resize(S.nx + 9 * S.d);
-  S.vf.resize(3 * n);
-  S.alternating.iterations = options.iterations;
-  S.global_rotation = options.global_rotation;
-  S.ready = true;
+  S.finish(options);
   state_ = std::move(st);
   reset_pose();
   report("done", 1.0);

@@ -98,6 +98,15 @@ class SubspaceSolver {
   SubspaceSummary precompute(const SparseMatrix<Scalar>& H, const SparseMatrix<Scalar>& C,
                              const SparseMatrix<Scalar>& D, const SubspaceOptions& options = {});
 
+  // Restores a precomputed solver from its parts (e.g. read back from a cache
+  // file): the subspace B = [N UD] (n×p), H_r = BᵀHB (p×p, symmetric) and
+  // BᵀD (p×k), as `precompute` would have made them from the same options.
+  // Redoes only the p×p fast-path preparation (O(p³), no factorization).
+  // Throws std::invalid_argument on inconsistent sizes, NaN/Inf, or an
+  // asymmetric H_r.
+  void restore(VariationalSubspace<Scalar> subspace, Matrix<double> Hr, Matrix<double> BtD,
+               const SubspaceOptions& options = {});
+
   // The on-site step for a new constraint set A (n×m, sparse). m may be 0.
   // Throws std::invalid_argument on a wrong row count, NaN, or when called
   // before a successful precompute.

@@ -133,6 +133,21 @@ class Deformer {
   PrecomputeSummary precompute(const DeformableModel& model, const DeformerOptions& options = {},
                                const ProgressFn& progress = {});
 
+  // Writes the precomputed model to `path` (binary, versioned, CRC-32
+  // checked; layout in docs/formats.md), through a temporary file renamed at
+  // the end so an existing cache is never left half-written. Throws IoError
+  // when the file cannot be written, std::invalid_argument before precompute.
+  void save(const std::string& path) const;
+
+  // Reads a model written by save() instead of precomputing it. `model` and
+  // `options` must be what precompute was given: the file keeps them and
+  // load compares (rest positions, elements, patches, given proxies, energy
+  // and proxy options); the runtime options (iterations, global_rotation)
+  // are taken from `options`. Throws IoError naming the file and the problem
+  // for a missing, truncated or corrupted file, another format version, or a
+  // cache made from other inputs; the session is then left as it was.
+  PrecomputeSummary load(const std::string& path, const DeformableModel& model, const DeformerOptions& options = {});
+
   // The on-site step: forms the reduced constraint operators for this handle
   // set. Fixed patches are always included. Cost independent of n (a few rows
   // of the subspace per handle).

@@ -1,0 +1,101 @@
+// Internal: the state of a Deformer session, shared by deformer.cpp
+// (precompute, on-site step, frames) and deformer_cache.cpp (save/load).
+//
+// Shapes (n vertices, r rotation elements, d clusters, m linear proxies,
+// s patches, n_u = 3·n_free + 12·s control unknowns, nx = 3m + 12s):
+//   subspace B = [N UD]            n_u × (nx + 9d), inside `solver`
+//   P (control_row)                3n × n_u, sparse, V′ = P·u
+//   basis = P·B (float, row-major) 3n × (nx + 9d)
+//   MN, MU                         9d × nx, 9d × 9d (Phase 2 input G = MN·X + MU·S)
+#pragma once
+
+#include "qpreduce/deform/deformer.h"
+
+#include <qpreduce/alternating.h>
+#include <qpreduce/subspace_solver.h>
+
+#include <vector>
+
+namespace qpreduce::deform::detail_deformer {
+
+using Triplets = std::vector<Eigen::Triplet<double>>;
+using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, with
+// G = M_N·X + M_U·S formed by the engine's FusedAlternation.
+class RotationProjection final : public InputProjection<double> {
+ public:
+  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) override;
+};
+
+}  // namespace qpreduce::deform::detail_deformer
+
+namespace qpreduce::deform {
+
+struct Deformer::State {
+  using Triplets = detail_deformer::Triplets;
+  using RowMatrixF = detail_deformer::RowMatrixF;
+
+  // What precompute was given beyond rest and the patches (kept for save(),
+  // so that load() can refuse a cache made from other inputs).
+  struct Inputs {
+    Triangles F;
+    Tetrahedra T;
+    std::vector<int> clusters;
+    std::vector<std::vector<Index>> groups;
+    DeformerOptions options;
+  } inputs;
+  // Model.
+  Vertices rest;
+  RotationElements elements;
+  std::vector<int> clusters;
+  std::vector<int> patch_of_vertex;
+  std::vector<PatchType> patch_types;
+  Index n = 0, d = 0, m = 0, s = 0;
+  Index nu = 0;                        // control-layer size
+  std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
+  std::vector<Index> fixed_patches;
+  Eigen::VectorXd cluster_measure;     // Σ a_k per cluster (global rotation weights)
+  // Subspace and reduced operators.
+  SubspaceSolver<double> solver;
+  detail_deformer::RotationProjection projection;
+  Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
+  FusedAlternation<double> fused;
+  RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
+  Index nx = 0;           // 3m + 12s
+  // On-site.
+  FixedCoordinateSolver<double> phase1;
+  Handles handles;
+  Index rows = 0;
+  // Pose.
+  Eigen::VectorXd S;  // 9d, world frame
+  Eigen::VectorXd x;  // nx
+  Eigen::Matrix3d r0 = Eigen::Matrix3d::Identity();
+  // Frame workspaces (sized once).
+  Eigen::VectorXd b, s_local, w;
+  Eigen::VectorXf wf, vf;
+  AlternatingOptions alternating;
+  bool global_rotation = true;
+  bool ready = false;
+
+  // Validates the mesh and the patches of `model`, and sets rest, n, the
+  // patches, control_of_free, nu and the rotation elements. Throws
+  // std::invalid_argument naming the problem.
+  void set_topology(const DeformableModel& model);
+  // Sets the cluster labels (r entries in [0, d), none empty) and their
+  // measures. Throws std::invalid_argument.
+  void set_clusters(std::vector<int> labels, Index count);
+  // Row of V′ coordinate (vertex v, axis a) in the control layer, as a sparse
+  // combination: free vertices map to one control entry; patch vertices to
+  // t_s(a, ·)·v + d_s(a).
+  void control_row(Index v, int a, double scale, Index col, Triplets* t) const;
+  // P (3n × n_u): V′ = P·u.
+  SparseMatrix<double> control_matrix() const;
+  // P·[N UD] (3n × (nx + 9d), double), once the solver holds the subspace.
+  Matrix<double> vertex_rows(const SparseMatrix<double>& P) const;
+  // After the solver, basis, MN and MU are set: the frame workspaces and the
+  // runtime options; ready = true.
+  void finish(const DeformerOptions& options);
+};
+
+}  // namespace qpreduce::deform
