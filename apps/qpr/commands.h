@@ -16,6 +16,8 @@ void register_theorem(CLI::App& app);
 void register_demo(CLI::App& app);
 // `qpr deform`: reduced ARAP of a mesh from files (cmd_deform.cpp, docs/deform.md).
 void register_deform(CLI::App& app);
+// `qpr qp`: any QP from Matrix Market files, many demands (cmd_qp.cpp, docs/examples/qp_files.md).
+void register_qp(CLI::App& app);
 // `qpr compare`: reduced ARAP against full-space references (cmd_compare.cpp, docs/quality.md).
 void register_compare(CLI::App& app);
 

@@ -12,6 +12,7 @@ int main(int argc, char** argv) {
   qpr::register_deform(app);
   qpr::register_compare(app);
   qpr::register_theorem(app);
+  qpr::register_qp(app);
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

@@ -361,6 +361,12 @@ QpFamily make_family(Family family, Index size, std::uint64_t seed) {
   throw std::invalid_argument("make_family: unknown family");
 }
 
+SubspaceOptions recommended_options(const QpFamily& family) {
+  SubspaceOptions o;
+  o.augment = !family.positive_definite();
+  return o;
+}
+
 QpDemand make_demand(const QpFamily& family, std::uint64_t index, const DemandOptions& options) {
   require_valid("make_demand", options);
   switch (family.family) {

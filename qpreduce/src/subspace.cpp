@@ -318,7 +318,9 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
 
   // Choose the route: augmented Cholesky, or SparseLU of the KKT matrix.
   std::vector<Index> aug = options.augment_columns;
-  if (aug.empty()) {
+  if (!options.augment) {
+    aug.clear();  // factor H itself
+  } else if (aug.empty()) {
     aug.resize(d);
     for (Index j = 0; j < d; ++j) aug[j] = j;
   }
@@ -337,8 +339,9 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
 
   if (!kkt_route) {
     const double mean_diag = H.diagonal().cwiseAbs().mean();
-    summary.rho = options.rho_scale * (mean_diag > 0 ? mean_diag : 1.0) /
-                  (col_norm2 / static_cast<double>(aug.size()));
+    summary.rho = aug.empty() ? 0.0
+                              : options.rho_scale * (mean_diag > 0 ? mean_diag : 1.0) /
+                                    (col_norm2 / static_cast<double>(aug.size()));
     SpD Cp(n, static_cast<Index>(aug.size()));
     {
       std::vector<Eigen::Triplet<double>> t;
@@ -395,7 +398,8 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
     // H ⪰ −η·H_ρ ⪰ −η·λ_max(H_ρ)·I. With η ≤ τ/λ̄ (λ̄ a Gershgorin bound on
     // λ_max(H_ρ)) that certifies H + τI ⪰ 0, which is what the factorization
     // check asks. Only when the certificate fails is the factorization run.
-    if (options.check_psd && !options.psd_check_by_factorization) {
+    // Without augmentation H itself was factored as SPD: nothing to certify.
+    if (options.check_psd && !options.psd_check_by_factorization && !aug.empty()) {
       const detail::Timer tc;
       MatD T(aug.size(), aug.size());
       for (size_t a = 0; a < aug.size(); ++a)

@@ -62,7 +62,8 @@ TEST_CASE("QP families: in-design demands are reproduced exactly", "[qp][familie
   INFO(families::to_string(f) << " seed " << seed);
   const families::QpFamily fam = families::make_family(f, 3000, seed);
   SubspaceSolver<double> solver;
-  const SubspaceSummary s = solver.precompute(fam.H, fam.C, fam.D);
+  const SubspaceOptions options = families::recommended_options(fam);
+  const SubspaceSummary s = solver.precompute(fam.H, fam.C, fam.D, options);
   REQUIRE(s.ok());
   for (std::uint64_t i = 0; i < 4; ++i) {
     const families::QpDemand dem = families::make_demand(fam, i);
@@ -70,7 +71,7 @@ TEST_CASE("QP families: in-design demands are reproduced exactly", "[qp][familie
     REQUIRE(dem.A.rows() == fam.n());
     REQUIRE((fam.D * dem.Y - dem.q).norm() <= 1e-14 * (1.0 + dem.q.norm()));
     Vector<double> X_full;
-    const FullSolveSummary fs = solve_full(fam.H, dem.A, dem.b, dem.q, &X_full);
+    const FullSolveSummary fs = solve_full(fam.H, dem.A, dem.b, dem.q, &X_full, options);
     REQUIRE(fs.ok());
     for (bool in_D : {true, false}) {
       const Vector<double> X = reduced_answer(solver, dem, in_D);
@@ -167,4 +168,28 @@ TEST_CASE("Cached Cholesky + Schur baseline equals the full solve", "[qp][baseli
   CHECK_THROWS_AS(base.solve(SparseMatrix<double>(fam.n() + 1, 1), Vector<double>::Zero(1),
                              Vector<double>::Zero(fam.n()), &X),
                   std::invalid_argument);
+}
+
+TEST_CASE("Subspace without augmentation (H PD) equals the augmented build", "[qp][families]") {
+  const families::QpFamily traj = families::make_family(Family::Trajectory, 1200, 9);
+  REQUIRE(traj.positive_definite());
+  SubspaceOptions plain;
+  plain.augment = false;
+  VariationalSubspace<double> a, b;
+  const SubspaceSummary sa = build_subspace(traj.H, traj.C, traj.D, plain, &a);
+  const SubspaceSummary sb = build_subspace(traj.H, traj.C, traj.D, SubspaceOptions{}, &b);
+  REQUIRE(sa.ok());
+  REQUIRE(sb.ok());
+  CHECK(sa.rho == 0.0);
+  CHECK(sb.rho > 0.0);
+  CHECK((a.N - b.N).norm() <= 1e-9 * b.N.norm());
+  CHECK((a.UD - b.UD).norm() <= 1e-9 * b.UD.norm());
+  // A singular H cannot be factored without augmentation: a status, no output.
+  const families::QpFamily gmrf = families::make_family(Family::Gmrf, 400, 9);
+  REQUIRE_FALSE(gmrf.positive_definite());
+  CHECK(families::recommended_options(gmrf).augment);
+  VariationalSubspace<double> c;
+  const SubspaceSummary sc = build_subspace(gmrf.H, gmrf.C, gmrf.D, plain, &c);
+  CHECK_FALSE(sc.ok());
+  CHECK(c.N.size() == 0);
 }

@@ -35,6 +35,7 @@
 #pragma once
 
 #include "qpreduce/common.h"
+#include "qpreduce/subspace.h"
 
 #include <cstdint>
 #include <string>
@@ -98,7 +99,14 @@ struct QpFamily {
   Index n() const { return H.rows(); }
   Index d() const { return C.cols(); }
   Index k() const { return D.cols(); }
+  bool positive_definite() const { return kernel.cols() == 0; }
 };
+
+// Subspace options suited to the family: when H is PD, factor H itself
+// (augment = false) — the portfolio's C has long columns (factor loadings,
+// sector sums) whose augmentation ρCCᵀ would fill in (or push the build onto
+// the SparseLU route); otherwise the defaults (augmented Cholesky).
+SubspaceOptions recommended_options(const QpFamily& family);
 
 // Throw std::invalid_argument on invalid options. Deterministic in the options
 // (seed included).

@@ -55,6 +55,11 @@ struct SubspaceOptions {
   // of them. One column per connected component of H's null space suffices;
   // pick short columns to limit fill.
   std::vector<Index> augment_columns;
+  // false: no augmentation, factor H itself (ρ = 0; G = H⁻¹C, F = H⁻¹D).
+  // Requires H positive definite (else Status::SingularKKT); avoids the fill
+  // of long columns of C (group sums, factor loadings) without the SparseLU
+  // route. augment_columns and max_augmentation_fill are then ignored.
+  bool augment = true;
   // Auto backend: when Σ_j nnz(c_j)² over the augmenting columns exceeds this
   // multiple of nnz(H), factor the KKT matrix with SparseLU instead.
   double max_augmentation_fill = 4.0;
