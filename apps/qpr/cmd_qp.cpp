@@ -201,11 +201,12 @@ json bound_json(const qpreduce::TheoremCheck& c) {
           {"slack", c.slack}};
 }
 
-// Columns that make H + W·Wᵀ PD when H is only PSD: √ρ·C, ρ as the engine's default.
-qpreduce::Matrix<double> bordering_columns(const SpMat& H, const SpMat& C) {
+// Columns that make H + W·Wᵀ PD when H is only PSD: √ρ·C (sparse), ρ as the
+// engine's default (ker H ∩ ker Cᵀ = {0} is required of the design anyway).
+SpMat bordering_columns(const SpMat& H, const SpMat& C) {
   const double mean_diag = H.diagonal().cwiseAbs().mean();
   const double mean_col = C.squaredNorm() / static_cast<double>(std::max<Index>(1, C.cols()));
-  return std::sqrt(mean_diag / std::max(mean_col, 1e-300)) * qpreduce::Matrix<double>(C);
+  return std::sqrt(mean_diag / std::max(mean_col, 1e-300)) * C;
 }
 
 int run_qp(const Options& opt) {
@@ -261,7 +262,7 @@ int run_qp(const Options& opt) {
   std::string baseline_note;
   double baseline_precompute = 0.0;
   if (opt.baseline) {
-    qpreduce::SchurBaselineSummary bs = baseline.precompute(H, qpreduce::Matrix<double>(n, 0));
+    qpreduce::SchurBaselineSummary bs = baseline.precompute(H, SpMat(n, 0));
     baseline_note = "factor of H";
     if (!bs.ok()) {
       bs = baseline.precompute(H, bordering_columns(H, C));

@@ -367,6 +367,12 @@ SubspaceOptions recommended_options(const QpFamily& family) {
   return o;
 }
 
+SparseMatrix<double> baseline_bordering(const QpFamily& family) {
+  if (family.positive_definite()) return SparseMatrix<double>(family.n(), 0);
+  // Only the gmrf family has a kernel (the constants), pinned by one site.
+  return std::sqrt(family.H.diagonal().mean()) * gen::selection(family.n(), {family.candidates.front()});
+}
+
 QpDemand make_demand(const QpFamily& family, std::uint64_t index, const DemandOptions& options) {
   require_valid("make_demand", options);
   switch (family.family) {

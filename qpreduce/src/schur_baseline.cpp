@@ -24,7 +24,7 @@ bool SchurBaselineOptions::is_valid(std::string* why) const {
   return true;
 }
 
-SchurBaselineSummary CachedCholeskySchur::precompute(const SparseMatrix<double>& H, const Matrix<double>& W,
+SchurBaselineSummary CachedCholeskySchur::precompute(const SparseMatrix<double>& H, const SparseMatrix<double>& W,
                                                      const SchurBaselineOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("SchurBaselineOptions: " + why);
@@ -38,7 +38,7 @@ SchurBaselineSummary CachedCholeskySchur::precompute(const SparseMatrix<double>&
   n_ = H.rows();
   SchurBaselineSummary summary;
   SparseMatrix<double> K = H;
-  if (W.cols() > 0) K += (W * W.transpose()).sparseView();
+  if (W.cols() > 0) K += SparseMatrix<double>(W * W.transpose());
   auto factor = make_factorization(options.backend);
   factor->compute(K);
   if (factor->info() != Eigen::Success) {
@@ -47,7 +47,7 @@ SchurBaselineSummary CachedCholeskySchur::precompute(const SparseMatrix<double>&
     return summary;
   }
   W_ = W;
-  GW_ = W;
+  GW_ = Matrix<double>(W);
   factor->solveInPlace(GW_, options.block_size);
   WtGW_ = W.transpose() * GW_ - Matrix<double>::Identity(W.cols(), W.cols());
   factor_ = std::move(factor);

@@ -108,6 +108,12 @@ struct QpFamily {
 // the SparseLU route); otherwise the defaults (augmented Cholesky).
 SubspaceOptions recommended_options(const QpFamily& family);
 
+// Sparse n×ν columns W with H + W·Wᵀ positive definite, for the cached
+// Cholesky + Schur baseline (schur_baseline.h): empty when H is PD; for the
+// gmrf family (ker H = constants, a connected grid) √(mean diag H)·e_i at the
+// first candidate site.
+SparseMatrix<double> baseline_bordering(const QpFamily& family);
+
 // Throw std::invalid_argument on invalid options. Deterministic in the options
 // (seed included).
 QpFamily make_gmrf(const GmrfOptions& options);

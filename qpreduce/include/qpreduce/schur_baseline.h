@@ -3,8 +3,10 @@
 //
 // Eq. 1:  min_X ½XᵀHX − qᵀX  s.t.  AᵀX = b   (H n×n PSD, A n×m, b m, q n).
 // The factor is of K = H + W·Wᵀ (n×n), with W (n×r) chosen so that K is
-// positive definite: r = 0 when H is PD; for a PSD H, W = √ρ·(a basis of
-// ker H) or any columns that make K PD (e.g. √ρ·C). With s = WᵀX, HX = KX − Ws,
+// positive definite: r = 0 when H is PD; for a PSD H, any sparse columns with
+// ker H ∩ ker Wᵀ = {0}, e.g. √ρ·e_i (one pinned vertex) for a connected graph
+// Laplacian, or √ρ·C. W is sparse so that W·Wᵀ adds little fill (a dense
+// kernel vector would make K dense). With s = WᵀX, HX = KX − Ws,
 // so the KKT system of Eq. 1 becomes
 //     K X − W s + A Λ = q,   WᵀX − s = 0,   AᵀX = b,
 // and with G_W = K⁻¹W (n×r, at precompute), G_A = K⁻¹A (n×m, per demand:
@@ -42,10 +44,10 @@ struct SchurBaselineSummary {
 
 class CachedCholeskySchur {
  public:
-  // Factors K = H + W·Wᵀ and forms G_W = K⁻¹W. W: n×r (may have 0 columns).
+  // Factors K = H + W·Wᵀ and forms G_W = K⁻¹W. W: n×r sparse (may have 0 columns).
   // Throws std::invalid_argument on wrong sizes, NaN, invalid options; a K
   // that is not PD comes back as Status::SingularKKT.
-  SchurBaselineSummary precompute(const SparseMatrix<double>& H, const Matrix<double>& W,
+  SchurBaselineSummary precompute(const SparseMatrix<double>& H, const SparseMatrix<double>& W,
                                   const SchurBaselineOptions& options = {});
   // Solves one demand. X is resized to n on success, left empty otherwise.
   // Throws std::invalid_argument on wrong sizes or before precompute.
@@ -58,7 +60,8 @@ class CachedCholeskySchur {
  private:
   SchurBaselineOptions options_;
   std::unique_ptr<SparseFactorization> factor_;
-  Matrix<double> W_, GW_, WtGW_;  // n×r, n×r, r×r (WᵀG_W − I)
+  SparseMatrix<double> W_;     // n×r
+  Matrix<double> GW_, WtGW_;   // n×r K⁻¹W, r×r (WᵀG_W − I)
   Index n_ = 0;
 };
 
