@@ -6,6 +6,7 @@ packages=(
   build-essential cmake git pkg-config
   libeigen3-dev libopenblas-dev libsuitesparse-dev libceres-dev libspectra-dev libomp-dev
   libfmt-dev catch2 libbenchmark-dev libcli11-dev nlohmann-json3-dev zlib1g-dev
+  libimgui-dev libstb-dev libglfw3-dev libgl-dev libgl1-mesa-dri xvfb xauth mesa-utils
 )
 missing=()
 for p in "${packages[@]}"; do

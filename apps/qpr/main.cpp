@@ -13,6 +13,9 @@ int main(int argc, char** argv) {
   qpr::register_compare(app);
   qpr::register_theorem(app);
   qpr::register_qp(app);
+#ifdef QPREDUCE_HAVE_VIEWER
+  qpr::register_view(app);
+#endif
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

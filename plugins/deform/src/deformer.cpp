@@ -168,6 +168,10 @@ const std::vector<int>& Deformer::patch_of_vertex() const { return state_->patch
 const RotationElements& Deformer::elements() const { return state_->elements; }
 const Eigen::VectorXd& Deformer::rotations() const { return state_->S; }
 const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->r0; }
+const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis() const {
+  return state_->basis;
+}
+const Eigen::VectorXf& Deformer::reduced_coordinates() const { return state_->wf; }
 
 PrecomputeSummary Deformer::precompute(const DeformableModel& model, const DeformerOptions& options,
                                        const ProgressFn& progress) {
@@ -442,6 +446,10 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   t.reset();
   S.wf.head(S.nx) = S.x.cast<float>();
   S.wf.tail(9 * S.d) = S.s_local.cast<float>();
+  if (out == nullptr) {  // the caller reconstructs (reconstruction_basis, reduced_coordinates)
+    summary.total_seconds = total.seconds();
+    return summary;
+  }
   if (out->rows() != S.n) out->resize(S.n, 3);
   const Eigen::Matrix3f r0f = S.r0.cast<float>();
   const Index n = S.n;

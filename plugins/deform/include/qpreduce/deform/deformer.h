@@ -154,7 +154,10 @@ class Deformer {
   ConstraintSummary set_handles(const Handles& handles, const ConstraintOptions& options = {});
 
   // One frame: alternation warm-started from the previous frame, then
-  // reconstruction into *out (n × 3, resized once).
+  // reconstruction into *out (n × 3, resized once). With out == nullptr the
+  // reconstruction is left to the caller (e.g. a GPU, paper Fig. 5 step 5):
+  // V′ = r₀·(B·w) with B = reconstruction_basis(), w = reduced_coordinates(),
+  // r₀ = global_rotation().
   FrameSummary frame(const HandleTargets& targets, Vertices* out);
 
   // Back to the rest rotations (S = identity, r₀ = identity).
@@ -171,6 +174,14 @@ class Deformer {
   const RotationElements& elements() const;
   const Eigen::VectorXd& rotations() const;  // S, 9d (world frame)
   const Eigen::Matrix3d& global_rotation() const;
+  // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
+  // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
+  // Empty before precompute.
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
+  // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
+  // and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
+  // cluster, each 3 × 3 column-major). Valid after the first frame().
+  const Eigen::VectorXf& reduced_coordinates() const;
 
  private:
   struct State;

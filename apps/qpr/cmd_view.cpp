@@ -1,0 +1,77 @@
+// `qpr view MESH …`: the interactive deformation viewer (apps/viewer), or with
+// --screenshot a headless render of the scenario's last frame.
+#include "commands.h"
+#include "deform_run.h"
+#include "guard.h"
+
+#include <viewer.h>
+
+#include <CLI/CLI.hpp>
+
+#include <map>
+#include <memory>
+
+namespace qpr {
+
+namespace {
+
+struct ViewArgs : ScenarioArgs {
+  viewer::ViewerOptions view;
+  std::string size = "1280x800", color = "clusters", reconstruction = "gpu", up = "y";
+};
+
+int run_view(ViewArgs& a) {
+  LoadedScenario ls = load_scenario(a);
+  viewer::ViewerOptions& o = a.view;
+  if (std::sscanf(a.size.c_str(), "%dx%d", &o.width, &o.height) != 2)
+    throw std::invalid_argument("--size: expected WIDTHxHEIGHT, got '" + a.size + "'");
+  o.color = std::map<std::string, viewer::ColorMode>{{"clusters", viewer::ColorMode::Clusters},
+                                                     {"linear", viewer::ColorMode::LinearProxies},
+                                                     {"patches", viewer::ColorMode::Patches},
+                                                     {"deviation", viewer::ColorMode::Deviation}}.at(a.color);
+  o.reconstruction = a.reconstruction == "cpu" ? viewer::Reconstruction::Cpu : viewer::Reconstruction::Gpu;
+  o.up_axis = a.up == "x" ? 0 : a.up == "z" ? 2 : 1;
+
+  viewer::ViewerInput input;
+  input.name = ls.name;
+  input.options = ls.options;
+  if (ls.scenario.alpha) input.options.energy.alpha = *ls.scenario.alpha;
+  if (ls.scenario.beta) input.options.energy.beta = *ls.scenario.beta;
+  if (ls.scenario.iterations) input.options.iterations = *ls.scenario.iterations;
+  input.faces = !ls.tet ? ls.surface.F : ls.solid.F.rows() > 0 ? ls.solid.F : viewer::boundary_faces(ls.solid.T);
+  input.scenario = std::move(ls.scenario);
+  const auto save = [&ls](const std::string& path, const qpreduce::deform::Vertices& V) {
+    write_pose(path, V, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr);
+  };
+  return viewer::run_viewer(std::move(input), o, save);
+}
+
+}  // namespace
+
+void register_view(CLI::App& app) {
+  auto a = std::make_shared<ViewArgs>();
+  CLI::App* cmd = app.add_subcommand("view", "Interactive deformation viewer (GLFW + Dear ImGui); --screenshot renders headless");
+  add_scenario_options(cmd, a.get());
+  cmd->add_option("--screenshot", a->view.screenshot, "Headless: run the scenario's frames, write this PNG and exit");
+  cmd->add_option("--size", a->size, "Window / image size WIDTHxHEIGHT (default 1280x800)");
+  cmd->add_option("--samples", a->view.samples, "MSAA samples (default 4)")->check(CLI::Range(0, 16));
+  cmd->add_option("--reconstruction", a->reconstruction, "gpu (default; CPU fallback when it does not fit) or cpu")
+      ->check(CLI::IsMember({"gpu", "cpu"}));
+  cmd->add_option("--color", a->color, "clusters (default), linear, patches or deviation")
+      ->check(CLI::IsMember({"clusters", "linear", "patches", "deviation"}));
+  cmd->add_option("--deviation-scale", a->view.deviation_scale, "Deviation shown at the top of the ramp, / bbox diagonal (0.1)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--up", a->up, "World axis shown upwards: x, y (default) or z")->check(CLI::IsMember({"x", "y", "z"}));
+  cmd->add_option("--yaw", a->view.yaw_deg, "Camera yaw about the up axis, degrees (0)");
+  cmd->add_option("--pitch", a->view.pitch_deg, "Camera elevation, degrees (15)")->check(CLI::Range(-89.0, 89.0));
+  cmd->add_option("--zoom", a->view.zoom, "Zoom steps, > 0 closer (0)");
+  cmd->add_flag("!--no-handles", a->view.show_handles, "Do not draw the handle vertices");
+  cmd->add_option("--out", a->view.out_mesh, "Headless: also write the last pose (mesh)");
+  cmd->add_option("--stats", a->view.stats_json, "Headless: JSON with timings, the path used and GPU/CPU agreement");
+  cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")->check(CLI::NonNegativeNumber);
+  cmd->callback([a]() { run_guarded("view", [&] { return run_view(*a); }); });
+}
+
+}  // namespace qpr

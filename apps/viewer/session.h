@@ -1,0 +1,156 @@
+// qpr viewer — the deformation session behind the window: the Deformer, the
+// handles the user (or a scenario) moves, and one step per displayed frame.
+//
+// A handle is a set of point handles moved together by one rigid/affine map T
+// (4 × 4, column vectors): point j goes to T·rest_j, where rest_j = Σ_i w_i v_i
+// is its rest position; or a prescribed affine patch whose transform is T
+// itself. A handle made from a selection of k > 4 vertices is represented by at
+// most 4 weighted points (the means of the selection's quadrants along its two
+// main axes), so it costs ≤ 12 constraint rows however large the selection is,
+// and still fixes a rigid motion (3 non-collinear points).
+//
+// Each step: targets from the handles → Deformer::frame (k rounds of Phase 1
+// and Phase 2) → positions and normals in the renderer's buffers, either on the
+// GPU (upload only w = [X; S_local] and r₀) or on the CPU (Deformer's own
+// reconstruction, then upload).
+#pragma once
+
+#include "renderer.h"
+
+#include <qpreduce/deform/deformer.h>
+#include <qpreduce/deform/scenario.h>
+
+#include <atomic>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace qpr::viewer {
+
+struct ViewHandle {
+  std::string name;
+  std::vector<qpreduce::deform::PointHandle> points;
+  qpreduce::deform::Vertices rest;          // points.size() × 3
+  int patch = -1;                           // a prescribed patch instead of points
+  Eigen::Matrix4d transform = Eigen::Matrix4d::Identity();
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();  // rest centre, for rotations
+  std::vector<unsigned> vertices;           // drawn as markers
+  int scenario_point = -1;                  // from scenario point handle #i (playback)
+  int scenario_patch = -1;                  // from scenario patch handle #j (playback)
+};
+
+// The inputs of a session (built by `qpr view` from the command line).
+struct ViewerInput {
+  qpreduce::deform::Scenario scenario;
+  qpreduce::deform::Triangles faces;  // triangles drawn (tets: the boundary)
+  qpreduce::deform::DeformerOptions options;
+  std::string name;
+};
+
+enum class Reconstruction { Gpu, Cpu };
+const char* to_string(Reconstruction r);
+
+// Per-frame timings (milliseconds unless named otherwise).
+struct FrameStats {
+  double iteration_us = 0.0;      // one Phase 1 + Phase 2 round
+  double solve_ms = 0.0;          // all rounds of the frame
+  double reconstruction_ms = 0.0; // w → positions and normals in GPU buffers (either path)
+  double frame_ms = 0.0;          // solve + reconstruction
+  double handle_residual = 0.0;   // max over constrained points / bbox diagonal
+};
+
+class Session {
+ public:
+  explicit Session(ViewerInput input);
+  ~Session();
+
+  const ViewerInput& input() const { return input_; }
+  const qpreduce::deform::Vertices& rest() const { return input_.scenario.model.V; }
+  double diagonal() const { return diagonal_; }
+
+  // ---- precompute ----
+  // Synchronous (headless); `progress` may be empty. Throws on failure.
+  void precompute(const qpreduce::deform::DeformerOptions& options, const qpreduce::deform::ProgressFn& progress = {});
+  // On a worker thread; the current deformer keeps serving frames until
+  // poll() installs the new one (returns true then). Errors end up in
+  // precompute_error().
+  void precompute_async(const qpreduce::deform::DeformerOptions& options);
+  bool poll();
+  bool precomputing() const { return worker_.joinable(); }
+  double progress() const { return progress_.load(); }
+  std::string progress_stage() const;
+  const std::string& precompute_error() const { return error_; }
+  const qpreduce::deform::PrecomputeSummary& summary() const { return summary_; }
+  const qpreduce::deform::Deformer& deformer() const { return *deformer_; }
+  const qpreduce::deform::DeformerOptions& options() const { return options_; }
+  // Linear proxies used (computed by farthest-point sampling when the model has none).
+  const qpreduce::deform::LinearProxies& linear_proxies() const { return input_.scenario.model.linear; }
+
+  // ---- handles ----
+  std::vector<ViewHandle>& handles() { return handles_; }
+  // Handles of the scenario (its point handles and prescribed patches), posed at frame 0.
+  void handles_from_scenario();
+  // A handle made of `vertices` (see the file comment). Throws std::invalid_argument on bad indices.
+  void add_handle(const std::vector<int>& vertices, const std::string& name);
+  void remove_handle(size_t index);
+  // Poses the scenario handles as in scenario frame f (clamped).
+  void pose_scenario_frame(size_t f);
+  size_t scenario_frames() const { return input_.scenario.frames.size(); }
+  // Re-forms the constraints (the "OP" step) after handles were added or
+  // removed. Returns its time in ms; the status message, when not plain
+  // success, in *note.
+  double update_constraints(std::string* note);
+  qpreduce::ConstraintOptions& constraint_options() { return constraints_; }
+
+  // ---- frames ----
+  // Reconstruction actually used: GPU when requested and the basis fitted.
+  Reconstruction reconstruction() const { return path_; }
+  const std::string& gpu_unavailable_reason() const { return gpu_reason_; }
+  // Chooses the path; uploads the basis for the GPU (once per precompute).
+  void set_reconstruction(Reconstruction wanted, MeshRenderer* renderer);
+  // One frame at the current handle targets into the renderer's buffers.
+  FrameStats step(MeshRenderer* renderer);
+  // The last frame's positions (read back from the renderer for the GPU path).
+  void positions(const MeshRenderer& renderer, qpreduce::deform::Vertices* V) const;
+  // CPU reconstruction r₀·(B·w) of the last frame from the Deformer's
+  // accessors (double accumulation), to check the GPU path against.
+  qpreduce::deform::Vertices cpu_reconstruction() const;
+
+ private:
+  ViewerInput input_;
+  double diagonal_ = 1.0;
+  std::unique_ptr<qpreduce::deform::Deformer> deformer_, pending_;
+  qpreduce::deform::PrecomputeSummary summary_, pending_summary_;
+  qpreduce::deform::DeformerOptions options_, pending_options_;
+  std::thread worker_;
+  std::atomic<double> progress_{0.0};
+  std::atomic<bool> done_{false};
+  mutable std::mutex stage_mutex_;
+  std::string stage_, error_;
+  std::vector<ViewHandle> handles_;
+  qpreduce::deform::Handles flat_;
+  qpreduce::deform::HandleTargets targets_;
+  qpreduce::ConstraintOptions constraints_;
+  bool constraints_ready_ = false;
+  Reconstruction wanted_ = Reconstruction::Gpu, path_ = Reconstruction::Cpu;
+  bool basis_uploaded_ = false;
+  std::string gpu_reason_;
+  qpreduce::deform::Vertices cpu_out_;
+  qpreduce::deform::Scenario residual_scenario_;  // flat_ as a scenario, for handle_residual
+  qpreduce::deform::LinearProxies input_linear_pending_;  // the proxies of the pending deformer
+
+  void fill_targets();
+};
+
+}  // namespace qpr::viewer
+
+namespace qpr::viewer {
+
+// The triangles a tet mesh shows: faces used by exactly one tet, oriented
+// outwards for positively oriented tets (mesh.h). k × 3.
+qpreduce::deform::Triangles boundary_faces(const qpreduce::deform::Tetrahedra& T);
+
+}  // namespace qpr::viewer

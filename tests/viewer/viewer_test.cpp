@@ -1,0 +1,183 @@
+// The viewer's GL paths, run headless (ctest runs this under `xvfb-run -a`):
+// GPU reconstruction (basis in a texture buffer, transform feedback) against
+// the Deformer's own CPU reconstruction, a scripted drag that must change the
+// picture, recorded motion round trips, and bad input.
+#include <context.h>
+#include <image.h>
+#include <motion.h>
+#include <renderer.h>
+#include <session.h>
+
+#include <qpreduce/deform/geometry.h>
+#include <qpreduce/deform/shapes.h>
+
+#include <Eigen/Geometry>
+#include <catch2/catch.hpp>
+
+#include <cfloat>
+#include <cstdio>
+#include <memory>
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+using namespace qpr::viewer;
+
+namespace {
+
+constexpr int kSize = 160;
+constexpr Index kAround = 16, kRings = 12;
+
+ViewerInput cylinder_input() {
+  const TriangleMesh mesh = shapes::capped_cylinder(0.5, 4.0, kAround, kRings);
+  ViewerInput in;
+  in.scenario.model.V = mesh.V;
+  in.scenario.model.F = mesh.F;
+  in.faces = mesh.F;
+  in.options.linear_proxies = 10;
+  in.options.rotational_proxies = 8;
+  in.options.iterations = 4;
+  in.name = "cylinder";
+  return in;
+}
+
+std::vector<int> ring(Index j) {
+  std::vector<int> r;
+  for (Index v = 0; v < kAround; ++v) r.push_back(static_cast<int>(j * kAround + v));
+  return r;
+}
+
+// Bottom ring held, top ring dragged sideways and twisted, in `steps` frames.
+void scripted_drag(Session* s, MeshRenderer* renderer, int steps, std::vector<FrameStats>* stats) {
+  s->add_handle(ring(0), "base");
+  s->add_handle(ring(kRings - 1), "top");
+  for (int k = 1; k <= steps; ++k) {
+    const double t = static_cast<double>(k) / steps;
+    Eigen::Affine3d T = Eigen::Translation3d(1.5 * t, 0.0, -0.3 * t) * Eigen::Translation3d(0, 0, 4.0) *
+                        Eigen::AngleAxisd(0.8 * t, Eigen::Vector3d::UnitZ()) * Eigen::Translation3d(0, 0, -4.0);
+    s->handles()[1].transform = T.matrix();
+    stats->push_back(s->step(renderer));
+  }
+}
+
+Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices& rest) {
+  Camera camera;
+  camera.up_axis = 2;
+  camera.fit(rest.colwise().minCoeff().cast<float>().transpose() - Eigen::Vector3f(1.5f, 1.5f, 0.5f),
+             rest.colwise().maxCoeff().cast<float>().transpose() + Eigen::Vector3f(1.5f, 1.5f, 0.5f));
+  camera.pitch = 0.2f;
+  target->bind();
+  renderer.draw(camera, kSize, kSize, MeshRenderer::Style{});
+  target->resolve();
+  return target->read_rgb();
+}
+
+}  // namespace
+
+TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag changes the picture") {
+  GlContext context(kSize, kSize, "viewer_test", false);
+  INFO(context.description());
+  RenderTarget target;
+  target.resize(kSize, kSize, 4);
+
+  Session gpu_session(cylinder_input()), cpu_session(cylinder_input());
+  gpu_session.precompute(gpu_session.input().options);
+  cpu_session.precompute(cpu_session.input().options);
+  MeshRenderer gpu_renderer(gpu_session.rest(), gpu_session.input().faces);
+  MeshRenderer cpu_renderer(cpu_session.rest(), cpu_session.input().faces);
+
+  const Image rest_image = render(gpu_renderer, &target, gpu_session.rest());
+  CHECK(foreground_fraction(rest_image) > 0.02);
+
+  gpu_session.set_reconstruction(Reconstruction::Gpu, &gpu_renderer);
+  cpu_session.set_reconstruction(Reconstruction::Cpu, &cpu_renderer);
+  REQUIRE(gpu_session.reconstruction() == Reconstruction::Gpu);
+  REQUIRE(cpu_session.reconstruction() == Reconstruction::Cpu);
+  std::vector<FrameStats> gpu_stats, cpu_stats;
+  scripted_drag(&gpu_session, &gpu_renderer, 6, &gpu_stats);
+  scripted_drag(&cpu_session, &cpu_renderer, 6, &cpu_stats);
+
+  // Same solves (deterministic), so the two paths must agree up to float
+  // rounding of B·w: per coordinate |Δ| ≤ c·p·ε·Σ_j |B_ij w_j|.
+  Vertices gpu, cpu;
+  gpu_renderer.read_positions(&gpu);
+  cpu_session.positions(cpu_renderer, &cpu);
+  const auto& B = gpu_session.deformer().reconstruction_basis();
+  const Eigen::VectorXf& w = gpu_session.deformer().reduced_coordinates();
+  REQUIRE(B.rows() == 3 * gpu.rows());
+  REQUIRE(B.cols() == w.size());
+  const Eigen::VectorXd magnitude = B.cast<double>().cwiseAbs() * w.cast<double>().cwiseAbs();
+  const double c = 8.0 * static_cast<double>(B.cols()) * FLT_EPSILON;
+  for (Index v = 0; v < gpu.rows(); ++v) {
+    const double bound = c * magnitude.segment<3>(3 * v).maxCoeff() + 1e-7;
+    INFO("vertex " << v);
+    REQUIRE((gpu.row(v) - cpu.row(v)).cwiseAbs().maxCoeff() <= bound);
+  }
+  // And the handles were met (hard constraints).
+  CHECK(gpu_stats.back().handle_residual < 1e-3);
+  CHECK(cpu_stats.back().handle_residual < 1e-3);
+  // The top moved by about the drag (1.5 sideways).
+  const double top_x = gpu.row(ring(kRings - 1)[0]).x() - gpu_session.rest().row(ring(kRings - 1)[0]).x();
+  CHECK(top_x > 1.0);
+
+  const Image gpu_image = render(gpu_renderer, &target, gpu_session.rest());
+  const Image cpu_image = render(cpu_renderer, &target, cpu_session.rest());
+  CHECK(foreground_fraction(gpu_image) > 0.02);
+  CHECK(differing_fraction(gpu_image, rest_image) > 0.02);
+  // Both paths draw the same surface (normals from the same formula).
+  CHECK(differing_fraction(gpu_image, cpu_image, 24) < 0.002);
+
+  // PNG round trip of what was rendered.
+  const std::string png = "viewer_test_drag.png";
+  write_png(png, gpu_image);
+  const Image back = read_png(png);
+  CHECK(back.width == kSize);
+  CHECK(differing_fraction(back, gpu_image, 0) == 0.0);
+  std::remove(png.c_str());
+
+  SECTION("bad input is refused with a message") {
+    CHECK_THROWS_AS(gpu_renderer.upload_basis(RowMatrixF::Zero(5, 3), nullptr), std::invalid_argument);
+    CHECK_THROWS_AS(gpu_renderer.set_colors({}), std::invalid_argument);
+    CHECK_THROWS_AS(gpu_renderer.set_markers(0, {static_cast<unsigned>(gpu_session.rest().rows())}), std::invalid_argument);
+    CHECK_THROWS_AS(gpu_session.add_handle({-1}, "bad"), std::invalid_argument);
+    CHECK_THROWS_AS(gpu_session.add_handle({}, "empty"), std::invalid_argument);
+    CHECK_THROWS_AS(read_png("no-such-file.png"), std::runtime_error);
+  }
+}
+
+TEST_CASE("recorded handle motion round trips and bad files are refused") {
+  Session s(cylinder_input());
+  s.add_handle(ring(0), "base");
+  s.add_handle({5}, "tip");
+  HandleMotion m;
+  for (int f = 0; f < 3; ++f) {
+    s.handles()[1].transform(0, 3) = 0.5 * f;
+    record_frame(s.handles(), s.rest().rows(), &m);
+  }
+  const std::string path = "viewer_test_motion.json";
+  write_motion(path, m);
+  const HandleMotion back = read_motion(path);
+  REQUIRE(back.frames.size() == 3);
+  REQUIRE(back.handles.size() == 2);
+  CHECK(back.handles[0].vertices == ring(0));
+  CHECK(back.frames[2][1](0, 3) == 1.0);
+  {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    std::fputs(R"({"format": "qpr-handle-motion", "version": 1, "vertex_count": 10,
+                  "handles": [{"vertices": [12]}], "frames": []})", f);
+    std::fclose(f);
+  }
+  CHECK_THROWS_WITH(read_motion(path), Catch::Contains("/handles/0/vertices"));
+  std::remove(path.c_str());
+  CHECK_THROWS_AS(read_motion("no-such-motion.json"), std::runtime_error);
+}
+
+TEST_CASE("boundary faces of a tet box are its surface") {
+  const TetMesh box = shapes::box_tets(1, 1, 1, 2, 2, 2);
+  const Triangles F = boundary_faces(box.T);
+  CHECK(F.rows() == box.F.rows());  // 6 sides × 2·2 squares × 2 triangles
+  // Outward: positive signed volume.
+  double volume = 0.0;
+  for (Index f = 0; f < F.rows(); ++f)
+    volume += box.V.row(F(f, 0)).dot(box.V.row(F(f, 1)).cross(box.V.row(F(f, 2)))) / 6.0;
+  CHECK(volume == Approx(1.0));
+}
