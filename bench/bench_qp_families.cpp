@@ -4,8 +4,11 @@
 //   BM_QpPrecompute     SubspaceSolver::precompute (one factorization,
 //                       d + k solves) — once per (H, C, D);
 //   BM_QpDemand         a new demand end to end in reduced coordinates:
-//                       set_constraints (OP) + solve_in_D; variant 1 also
-//                       reconstructs all n values of X;
+//                       set_constraints (OP) + solve_in_D; reconstruct:1 also
+//                       reconstructs all n values of X; design:1 passes the
+//                       constraints as A_c (A = C·A_c) to
+//                       set_constraints_in_design, without the nnz(A)·p
+//                       product AᵀB;
 //   BM_QpSolve          solve_in_D alone (same constraint set, new b and Y);
 //   BM_QpCachedSchur    the strongest simple competitor: a Cholesky of
 //                       H (+ W·Wᵀ, one pinned site, when H is singular) cached at
@@ -121,12 +124,12 @@ void BM_QpPrecompute(benchmark::State& state) {
 
 void BM_QpDemand(benchmark::State& state) {
   Fixture& f = fixture(static_cast<int>(state.range(0)), state.range(1));
-  const bool reconstruct = state.range(2) != 0;
+  const bool reconstruct = state.range(2) != 0, in_design = state.range(3) != 0;
   Vector<double> w(f.solver.p()), X(f.solver.n());
   int i = 0;
   for (auto _ : state) {
     const families::QpDemand& d = f.demands[static_cast<size_t>(i++ % kDemands)];
-    const ConstraintSummary cs = f.solver.set_constraints(d.A);
+    const ConstraintSummary cs = in_design ? f.solver.set_constraints_in_design(d.A_c) : f.solver.set_constraints(d.A);
     if (!cs.ok()) state.SkipWithError(cs.message.c_str());
     f.solver.solve_in_D(d.b, d.Y, w);
     if (reconstruct) f.solver.reconstruct(w, X);
@@ -186,17 +189,18 @@ void families_and_sizes(benchmark::internal::Benchmark* b) {
     for (Index size : {10000, 100000}) b->Args({family, size});
 }
 
-void with_reconstruct(benchmark::internal::Benchmark* b) {
-  b->ArgNames({"family", "size", "reconstruct"});
+void demand_variants(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"family", "size", "reconstruct", "design"});
   for (int family = 0; family < 3; ++family)
     for (Index size : {10000, 100000})
-      for (int r : {0, 1}) b->Args({family, size, r});
+      for (int r : {0, 1})
+        for (int design : {0, 1}) b->Args({family, size, r, design});
 }
 
 }  // namespace
 
 BENCHMARK(BM_QpPrecompute)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
-BENCHMARK(BM_QpDemand)->Apply(with_reconstruct)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_QpDemand)->Apply(demand_variants)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_QpSolve)->Apply(families_and_sizes)->Unit(benchmark::kMicrosecond)->UseRealTime();
 BENCHMARK(BM_QpCachedSchur)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_QpFullKkt)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -71,6 +71,14 @@ double image(Index i, Index nx, Index ny) {
   return std::sin(6.0 * x) * std::cos(4.0 * y) + 0.5 * x * y;
 }
 
+// A_c for selection demands: column j of A is column design_cols[j] of C.
+void set_design_selection(const QpFamily& f, const std::vector<Index>& design_cols, const DemandOptions& o,
+                          QpDemand* dem) {
+  if (o.outside > 0) return;
+  dem->A_c = Matrix<double>::Zero(f.d(), static_cast<Index>(design_cols.size()));
+  for (size_t j = 0; j < design_cols.size(); ++j) dem->A_c(design_cols[j], static_cast<Index>(j)) = 1.0;
+}
+
 // The common tail of every demand: Y = y_scale·(Gaussian), q = D·Y, the
 // in-design flag, then the optional noise on q.
 void finish_demand(const QpFamily& f, double y_scale, const DemandOptions& o, std::mt19937_64& rng, QpDemand* dem) {
@@ -87,14 +95,17 @@ void finish_demand(const QpFamily& f, double y_scale, const DemandOptions& o, st
 QpDemand gmrf_demand(const QpFamily& f, std::uint64_t index, const DemandOptions& o) {
   const GmrfOptions& g = f.gmrf;
   std::mt19937_64 rng = stream(f.seed, index, 1);
-  std::vector<Index> rows;
-  for (Index j : gen::random_subset(static_cast<Index>(f.candidates.size()), g.observed, draw_seed(rng)))
+  std::vector<Index> rows, design_cols;  // design_cols: the C column of each in-design constraint
+  for (Index j : gen::random_subset(static_cast<Index>(f.candidates.size()), g.observed, draw_seed(rng))) {
     rows.push_back(f.candidates[static_cast<size_t>(j)]);
+    design_cols.push_back(j);
+  }
   std::vector<char> taken(static_cast<size_t>(f.n()), 0);
   for (Index c : f.candidates) taken[static_cast<size_t>(c)] = 1;
   for (Index i : draw_outside(f.n(), o.outside, taken, rng)) rows.push_back(i);
   QpDemand dem;
   dem.A = gen::selection(f.n(), rows);
+  set_design_selection(f, design_cols, o, &dem);
   dem.b.resize(static_cast<Index>(rows.size()));
   for (size_t j = 0; j < rows.size(); ++j) dem.b(static_cast<Index>(j)) = image(rows[j], g.nx, g.ny);
   // Trend weights small against the data term (the prior is a pure smoother).
@@ -106,11 +117,12 @@ QpDemand trajectory_demand(const QpFamily& f, std::uint64_t index, const DemandO
   const TrajectoryOptions& t = f.trajectory;
   const Index T = t.samples;
   std::mt19937_64 rng = stream(f.seed, index, 2);
-  std::vector<Index> rows;
+  std::vector<Index> rows, design_cols;
   std::vector<double> values;
   for (Index s : gen::random_subset(t.stations, t.waypoints, draw_seed(rng)))
     for (Index c = 0; c < t.dims; ++c) {
       rows.push_back(f.candidates[static_cast<size_t>(s)] + T * c);
+      design_cols.push_back(s + t.stations * c);  // C lists every station per coordinate
       values.push_back(f.stations(s, c));
     }
   std::vector<char> taken(static_cast<size_t>(T), 0);
@@ -123,6 +135,7 @@ QpDemand trajectory_demand(const QpFamily& f, std::uint64_t index, const DemandO
     }
   QpDemand dem;
   dem.A = gen::selection(f.n(), rows);
+  set_design_selection(f, design_cols, o, &dem);
   dem.b = Eigen::Map<const Vector<double>>(values.data(), static_cast<Index>(values.size()));
   // Reference path r = D·Y' and q = λ·r, so q = D·Y with Y = λ·Y'.
   finish_demand(f, t.lambda, o, rng, &dem);
@@ -156,6 +169,13 @@ QpDemand portfolio_demand(const QpFamily& f, std::uint64_t index, const DemandOp
     for (Index i : draw_outside(na, kBasket, none, rng)) t.emplace_back(i, nf + 1 + p.neutral + c, 1.0);
   dem.A.resize(n, m);
   dem.A.setFromTriplets(t.begin(), t.end());
+  if (o.outside == 0) {
+    // C = [[F; −I], sector indicators]: factor columns, budget = Σ sectors, chosen sectors.
+    dem.A_c = Matrix<double>::Zero(f.d(), m);
+    for (Index j = 0; j < nf; ++j) dem.A_c(j, j) = 1.0;
+    dem.A_c.block(nf, nf, p.sectors, 1).setOnes();
+    for (Index s = 0; s < p.neutral; ++s) dem.A_c(nf + chosen[static_cast<size_t>(s)], nf + 1 + s) = 1.0;
+  }
   // Factor views α (annualised premia of a few per cent).
   finish_demand(f, 0.05, o, rng, &dem);
   return dem;

@@ -420,14 +420,40 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Sca
   const detail::Timer timer;
   const detail::ScopedOmpThreads threads(options.threads);
   constrained_ = false;
-  ConstraintSummary summary;
   const Index d = this->d(), k = this->k(), p = d + k, m = A.cols();
-  summary.m = m;
-
   // A_r = AᵀB: nnz(A)·p work for sparse A.
   MatD Ar(m, p);
   Ar.leftCols(d) = (A.transpose() * subspace_.N).template cast<double>();
   Ar.rightCols(k) = (A.transpose() * subspace_.UD).template cast<double>();
+  ConstraintSummary summary = apply_constraints(std::move(Ar), options);
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+ConstraintSummary SubspaceSolver<Scalar>::set_constraints_in_design(const MatrixS& A_c,
+                                                                    const ConstraintOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  require_ready("SubspaceSolver::set_constraints_in_design");
+  detail::check_size("SubspaceSolver::set_constraints_in_design: A_c rows", d(), A_c.rows());
+  detail::check_finite("SubspaceSolver::set_constraints_in_design: A_c", A_c);
+  const detail::Timer timer;
+  const detail::ScopedOmpThreads threads(options.threads);
+  constrained_ = false;
+  // A_r = A_cᵀ·Cᵀ[N UD] = [A_cᵀ 0]: CᵀN = I and CᵀUD = 0 (Eq. 4, second row).
+  MatD Ar = MatD::Zero(A_c.cols(), p());
+  Ar.leftCols(d()) = A_c.transpose().template cast<double>();
+  ConstraintSummary summary = apply_constraints(std::move(Ar), options);
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const ConstraintOptions& options) {
+  ConstraintSummary summary;
+  const Index m = Ar.rows();
+  summary.m = m;
   const MatD Abar = Ar * scale_.asDiagonal();
   // The operators are formed in double: in place for Scalar = double (no
   // p × p copy), in scratch that is cast afterwards otherwise.
@@ -487,7 +513,6 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Sca
   }
   m_ = m;
   constrained_ = true;
-  summary.seconds = timer.seconds();
   return summary;
 }
 

@@ -78,6 +78,14 @@ TEST_CASE("QP families: in-design demands are reproduced exactly", "[qp][familie
       CHECK((X - X_full).norm() <= 1e-10 * X_full.norm());
       CHECK((dem.A.transpose() * X - dem.b).norm() <= 1e-10 * (1.0 + dem.b.norm()));
     }
+    // Constraints given in design coordinates: A = C·A_c exactly, same answer.
+    REQUIRE(dem.A_c.rows() == fam.d());
+    CHECK((Matrix<double>(fam.C * dem.A_c) - Matrix<double>(dem.A)).norm() == 0.0);
+    REQUIRE(solver.set_constraints_in_design(dem.A_c).status == Status::Success);
+    Vector<double> w(solver.p()), X(fam.n());
+    solver.solve_in_D(dem.b, dem.Y, w);
+    solver.reconstruct(w, X);
+    CHECK((X - X_full).norm() <= 1e-10 * X_full.norm());
   }
 }
 
@@ -91,6 +99,9 @@ TEST_CASE("QP families: generators are deterministic and validate their options"
   CHECK(da.b == db.b);
   CHECK(da.q == db.q);
   CHECK_FALSE(da.in_design);
+  CHECK(da.A_c.size() == 0);
+  CHECK_THROWS_AS(SubspaceSolver<double>().set_constraints_in_design(Matrix<double>::Identity(2, 1)),
+                  std::invalid_argument);
   const families::QpDemand other = families::make_demand(a, 6);
   CHECK(((other.A - families::make_demand(a, 5).A).norm() > 0.0 || other.b != da.b));
   // H symmetric, and the stated kernel is in ker H.

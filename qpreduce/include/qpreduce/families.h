@@ -132,6 +132,9 @@ struct DemandOptions {
 
 struct QpDemand {
   SparseMatrix<double> A;  // n × m, full column rank
+  // d × m with A = C·A_c exactly (SubspaceSolver::set_constraints_in_design);
+  // 0 × 0 when some constraint is off-design (outside > 0).
+  Matrix<double> A_c;
   Vector<double> b;        // m
   Vector<double> Y;        // k: the in-design part of q is D·Y
   Vector<double> q;        // n: D·Y (+ noise)

@@ -111,6 +111,14 @@ class SubspaceSolver {
   // Throws std::invalid_argument on a wrong row count, NaN, or when called
   // before a successful precompute.
   ConstraintSummary set_constraints(const SparseMatrix<Scalar>& A, const ConstraintOptions& options = {});
+  // The same for constraints given in the design space, A = C·A_c (A_c d×m,
+  // dense): A_r = A_cᵀ·Cᵀ[N UD] = [A_cᵀ 0], because CᵀN = I and CᵀUD = 0
+  // (Eq. 4, second row) — exact up to the precompute's kkt_residual. Costs
+  // O(m·p) to form A_r plus the dense algebra of set_constraints: no term in
+  // n, even when A itself is dense in n (group sums, factor loadings). Throws
+  // std::invalid_argument when A_c does not have d rows, holds NaN, or
+  // before a successful precompute.
+  ConstraintSummary set_constraints_in_design(const MatrixS& A_c, const ConstraintOptions& options = {});
 
   // q_r = Bᵀq for a general linear term q (n). Cost O(n·p).
   void reduce_linear_term(const ConstRef& q, Ref q_r) const;
@@ -141,6 +149,8 @@ class SubspaceSolver {
   void require_ready(const char* what) const;
   void require_constrained(const char* what) const;
   void prepare_fast_path(double lift_tolerance);
+  // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
+  ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
   bool fast_operators(const MatD& Ar, bool soft, double delta, double rank_tolerance, MatD* Mb, MatD* Mq,
                       MatD* MY) const;
   void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,
