@@ -71,6 +71,8 @@ void register_view(CLI::App& app) {
   cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
       ->check(CLI::ExistingFile);
   cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--window-screenshot", a->view.window_screenshot,
+                  "Interactive with --max-frames: save the whole window (panels too) at the last frame");
   cmd->callback([a]() { run_guarded("view", [&] { return run_view(*a); }); });
 }
 

@@ -255,20 +255,34 @@ void RenderTarget::resolve() const {
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
 }
 
-Image RenderTarget::read_rgb() const {
+namespace {
+// glReadPixels of the bound read framebuffer, flipped so that row 0 is the top.
+Image read_pixels(int width, int height) {
   Image image;
-  image.width = width_;
-  image.height = height_;
-  image.rgb.resize(3 * static_cast<size_t>(width_) * height_);
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+  image.width = width;
+  image.height = height;
+  image.rgb.resize(3 * static_cast<size_t>(width) * height);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   std::vector<std::uint8_t> flipped(image.rgb.size());
-  glReadPixels(0, 0, width_, height_, GL_RGB, GL_UNSIGNED_BYTE, flipped.data());
-  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
-  const size_t row = 3 * static_cast<size_t>(width_);
-  for (int y = 0; y < height_; ++y)
-    std::copy_n(flipped.data() + (height_ - 1 - y) * row, row, image.rgb.data() + y * row);
+  glReadPixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, flipped.data());
+  const size_t row = 3 * static_cast<size_t>(width);
+  for (int y = 0; y < height; ++y)
+    std::copy_n(flipped.data() + (height - 1 - y) * row, row, image.rgb.data() + y * row);
   return image;
+}
+}  // namespace
+
+Image RenderTarget::read_rgb() const {
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+  Image image = read_pixels(width_, height_);
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+  return image;
+}
+
+Image read_window(int width, int height) {
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+  glReadBuffer(GL_BACK);
+  return read_pixels(width, height);
 }
 
 float RenderTarget::read_depth(int x, int y) const {

@@ -65,6 +65,10 @@ class RenderTarget {
   int width_ = 0, height_ = 0;
 };
 
+// The default framebuffer's back buffer (width × height, row 0 at the top):
+// the window as it will be shown, panels included.
+Image read_window(int width, int height);
+
 enum class ColorMode { Clusters, LinearProxies, Patches, Deviation };
 const char* to_string(ColorMode mode);
 

@@ -277,8 +277,18 @@ class Interactive {
     ui_iterations_ = d.iterations;
     ui_soft_ = session.constraint_options().soft;
     ui_delta_ = static_cast<float>(session.constraint_options().delta);
+    // Scenes open posed: the scenario's last frame (the display loop converges
+    // to it, warm-started frame after frame).
     session.handles_from_scenario();
-    if (!o.replay.empty()) replay_ = read_motion(o.replay);
+    if (session.scenario_frames() > 0) {
+      scenario_frame_ = session.scenario_frames() - 1;
+      session.pose_scenario_frame(scenario_frame_);
+    }
+    if (!o.replay.empty()) {
+      replay_ = read_motion(o.replay);
+      handles_from_motion(replay_, &session);
+      replaying_ = true;
+    }
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
     ImGui::GetIO().IniFilename = nullptr;
@@ -339,8 +349,10 @@ class Interactive {
       ImGui::Render();
       glViewport(0, 0, fb_w_, fb_h_);
       ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+      const bool last = o_.max_frames > 0 && ++frame >= o_.max_frames;
+      if (last && !o_.window_screenshot.empty()) write_png(o_.window_screenshot, read_window(fb_w_, fb_h_));
       glfwSwapBuffers(context_.window());
-      if (o_.max_frames > 0 && ++frame >= o_.max_frames) break;
+      if (last) break;
     }
     return 0;
   }

@@ -26,6 +26,7 @@ struct ViewerOptions {
   std::string stats_json;          // headless: timings, path and GPU/CPU agreement
   std::string replay;              // a recorded handle motion (JSON) to play
   int max_frames = 0;              // interactive: close after this many frames (0: never; for smoke tests)
+  std::string window_screenshot;   // interactive with max_frames: the whole window (panels too) at the last frame
 };
 
 // Writes a pose of the input mesh (surfaces OBJ/OFF/PLY, tets .mesh/.node or
