@@ -10,9 +10,11 @@
 // its terms (TheoremChecker). --baseline also times a cached Cholesky of H
 // plus a Schur complement per demand (schur_baseline.h).
 //
-// Demands. A directory holds A_<name>.mtx (n×m), b_<name>.mtx (m×1) and
-// optionally q_<name>.mtx (n×1; missing: q = 0) or Y_<name>.mtx (k×1:
-// q = D·Y). A JSON manifest lists them instead:
+// Demands. A directory holds A_<name>.mtx (n×m) or Ac_<name>.mtx (d×m, the
+// constraints in design coordinates: A = C·A_c, solved with
+// set_constraints_in_design), b_<name>.mtx (m×1) and optionally q_<name>.mtx
+// (n×1; missing: q = 0) or Y_<name>.mtx (k×1: q = D·Y). A JSON manifest lists
+// them instead ("A_c" may replace "A"):
 //   {"demands": [{"name": "d0", "A": "A0.mtx", "b": "b0.mtx", "q": "q0.mtx"}, ...]}
 // with paths relative to the manifest ("Y" may replace "q").
 //
@@ -62,12 +64,13 @@ struct Options {
 };
 
 struct DemandFiles {
-  std::string name, A, b, q, Y;  // q and Y optional, not both
+  std::string name, A, Ac, b, q, Y;  // A or Ac (A = C·A_c); q and Y optional, not both
 };
 
 struct Demand {
   std::string name;
-  SpMat A;
+  SpMat A;               // n × m (= C·A_c when given in design coordinates)
+  qpreduce::Matrix<double> A_c;  // d × m, or empty
   Vec b, q, Y;
   bool in_D = false;  // q = D·Y
 };
@@ -80,11 +83,18 @@ std::vector<DemandFiles> list_directory(const fs::path& dir) {
   std::map<std::string, DemandFiles> by_name;
   for (const auto& entry : fs::directory_iterator(dir)) {
     const std::string file = entry.path().filename().string();
-    if (file.size() < 7 || file[1] != '_' || entry.path().extension() != ".mtx") continue;
+    if (entry.path().extension() != ".mtx") continue;
+    const std::string path = entry.path().string();
+    if (file.size() > 7 && file.compare(0, 3, "Ac_") == 0) {
+      const std::string name = file.substr(3, file.size() - 7);
+      by_name[name].name = name;
+      by_name[name].Ac = path;
+      continue;
+    }
+    if (file.size() < 7 || file[1] != '_') continue;
     const std::string name = file.substr(2, file.size() - 6);
     DemandFiles& f = by_name[name];
     f.name = name;
-    const std::string path = entry.path().string();
     switch (file[0]) {
       case 'A': f.A = path; break;
       case 'b': f.b = path; break;
@@ -95,8 +105,11 @@ std::vector<DemandFiles> list_directory(const fs::path& dir) {
   }
   std::vector<DemandFiles> out;
   for (auto& [name, f] : by_name) {
-    if (f.A.empty() && f.b.empty() && f.q.empty() && f.Y.empty()) continue;
-    if (f.A.empty()) throw std::invalid_argument(fmt::format("{}: demand '{}' has no A_{}.mtx", dir.string(), name, name));
+    if (f.A.empty() && f.Ac.empty() && f.b.empty() && f.q.empty() && f.Y.empty()) continue;
+    if (f.A.empty() == f.Ac.empty()) {
+      throw std::invalid_argument(fmt::format("{}: demand '{}' needs exactly one of A_{}.mtx and Ac_{}.mtx", dir.string(),
+                                              name, name, name));
+    }
     if (f.b.empty()) throw std::invalid_argument(fmt::format("{}: demand '{}' has no b_{}.mtx", dir.string(), name, name));
     if (!f.q.empty() && !f.Y.empty()) {
       throw std::invalid_argument(fmt::format("{}: demand '{}' has both q_ and Y_ files", dir.string(), name));
@@ -138,7 +151,11 @@ std::vector<DemandFiles> read_manifest(const fs::path& file) {
     DemandFiles f;
     f.name = d.is_object() && d.contains("name") && d["name"].is_string() ? d["name"].get<std::string>()
                                                                            : fmt::format("{}", i);
-    f.A = field("A", true);
+    f.A = field("A", false);
+    f.Ac = field("A_c", false);
+    if (f.A.empty() == f.Ac.empty()) {
+      throw std::invalid_argument(fmt::format("{}: demands[{}]: give exactly one of \"A\" and \"A_c\"", file.string(), i));
+    }
     f.b = field("b", true);
     f.q = field("q", false);
     f.Y = field("Y", false);
@@ -159,12 +176,20 @@ Vec read_vector(const std::string& path, Index rows) {
   return qpreduce::read_market_dense(path, o).col(0);
 }
 
-Demand load_demand(const DemandFiles& f, Index n, Index k) {
+Demand load_demand(const DemandFiles& f, const SpMat& C, Index k) {
+  const Index n = C.rows();
   Demand d;
   d.name = f.name;
-  qpreduce::MarketReadOptions oa;
-  oa.rows = n;
-  d.A = qpreduce::read_market_sparse(f.A, oa);
+  if (!f.Ac.empty()) {
+    qpreduce::MarketReadOptions oc;
+    oc.rows = C.cols();
+    d.A_c = qpreduce::read_market_dense(f.Ac, oc);
+    d.A = (C * d.A_c).sparseView();
+  } else {
+    qpreduce::MarketReadOptions oa;
+    oa.rows = n;
+    d.A = qpreduce::read_market_sparse(f.A, oa);
+  }
   d.b = read_vector(f.b, d.A.cols());
   if (!f.Y.empty()) {
     d.Y = read_vector(f.Y, k);
@@ -223,7 +248,7 @@ int run_qp(const Options& opt) {
   if (!fs::exists(dpath)) throw std::invalid_argument(fmt::format("{}: no such file or directory", opt.demands));
   const std::vector<DemandFiles> files = fs::is_directory(dpath) ? list_directory(dpath) : read_manifest(dpath);
   std::vector<Demand> demands;
-  for (const DemandFiles& f : files) demands.push_back(load_demand(f, n, D.cols()));
+  for (const DemandFiles& f : files) demands.push_back(load_demand(f, C, D.cols()));
   if (D.cols() == 0) {
     for (const Demand& d : demands)
       if (d.in_D) throw std::invalid_argument(fmt::format("demand '{}': Y given but no --D", d.name));
@@ -282,9 +307,11 @@ int run_qp(const Options& opt) {
   fmt::print("{:<12} {:>5} {:>12} {:>12} {:>12} {:>12} {:>12}\n", "demand", "m", "reduced ms", "full ms",
              "baseline ms", "d_H error", "bound");
   for (const Demand& d : demands) {
-    json r = {{"name", d.name}, {"m", d.A.cols()}};
+    json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
     const auto t0 = std::chrono::steady_clock::now();
-    const qpreduce::ConstraintSummary cs = solver.set_constraints(d.A, copt);
+    // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
+    const qpreduce::ConstraintSummary cs =
+        d.A_c.size() > 0 ? solver.set_constraints_in_design(d.A_c, copt) : solver.set_constraints(d.A, copt);
     const double t_op = seconds_since(t0);
     r["status"] = qpreduce::to_string(cs.status);
     r["message"] = cs.message;

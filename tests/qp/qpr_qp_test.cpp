@@ -154,6 +154,34 @@ TEST_CASE("qpr qp: a JSON manifest and soft constraints", "[qp][cli]") {
   CHECK(doc["demands"][0]["dH_rel_error"].get<double>() < 1e-2);
 }
 
+TEST_CASE("qpr qp: constraints in design coordinates (Ac_ files)", "[qp][cli]") {
+  const Written w = write_family("design", families::Family::Portfolio, false);
+  // Replace every A_ by its design-coordinate form Ac_ (A = C·A_c).
+  for (size_t i = 0; i < w.demands.size(); ++i) {
+    const std::string tag = "d" + std::to_string(i);
+    fs::remove(w.dir / "demands" / ("A_" + tag + ".mtx"));
+    write_market((w.dir / "demands" / ("Ac_" + tag + ".mtx")).string(), w.demands[i].A_c);
+  }
+  const fs::path report = w.dir / "report.json", out = w.dir / "out";
+  const Run r = run_qpr(w.dir, files(w, (w.dir / "demands").string()) + " --no-augment --check-full --report " +
+                                   report.string() + " --out " + out.string());
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const nlohmann::json doc = nlohmann::json::parse(slurp(report));
+  REQUIRE(doc["demands"].size() == 3);
+  for (size_t i = 0; i < 3; ++i) {
+    const nlohmann::json& d = doc["demands"][i];
+    CHECK(d["design_coordinates"] == true);
+    CHECK(d["dH_rel_error"].get<double>() <= 1e-10);
+    CHECK(d["constraint_residual"].get<double>() <= 1e-10);
+  }
+  // Both A_ and Ac_ for one demand is ambiguous.
+  write_market((w.dir / "demands" / "A_d0.mtx").string(), w.demands[0].A);
+  const Run both = run_qpr(w.dir, files(w, (w.dir / "demands").string()));
+  CHECK(both.code == 2);
+  CHECK_THAT(both.err, Catch::Contains("exactly one of A_d0.mtx and Ac_d0.mtx"));
+}
+
 TEST_CASE("qpr qp: malformed inputs are rejected with the file and line", "[qp][cli]") {
   const Written w = write_family("malformed", families::Family::Gmrf, false);
   const fs::path demands = w.dir / "demands";
@@ -195,6 +223,9 @@ TEST_CASE("qpr qp: malformed inputs are rejected with the file and line", "[qp][
   SECTION("a demand without b, a broken manifest, a missing path") {
     fs::remove(demands / "b_d0.mtx");
     expect_error(files(w, demands.string()), "has no b_d0.mtx");
+    write_market((demands / "b_d0.mtx").string(), Matrix<double>(w.demands[0].b));
+    fs::remove(demands / "A_d1.mtx");
+    expect_error(files(w, demands.string()), "needs exactly one of A_d1.mtx and Ac_d1.mtx");
     const fs::path manifest = w.dir / "bad.json";
     std::ofstream(manifest) << "{\"demands\": [\n  {\"A\": \"x\",}\n]}\n";
     expect_error(files(w, manifest.string()), "line 2");
