@@ -377,8 +377,10 @@ int run_qp(const Options& opt) {
       if (bsum.ok()) r["baseline_dH_error"] = qpreduce::h_distance(H, X, X_base);
     }
     if (!opt.out.empty()) qpreduce::write_market((fs::path(opt.out) / ("X_" + d.name + ".mtx")).string(), X);
-    fmt::print("{:<12} {:>5} {:>12.3f} {:>12.3f} {:>12.3f} {:>12.3e} {:>12.3e}\n", d.name, d.A.cols(), 1e3 * reduced,
-               1e3 * full_s, 1e3 * base_s, err, bound);
+    // Columns that were not computed (no --check-full, --baseline, or theorem skipped) print "-".
+    auto cell = [](double v, const char* spec) { return std::isnan(v) ? std::string("-") : fmt::format(spec, v); };
+    fmt::print("{:<12} {:>5} {:>12.3f} {:>12} {:>12} {:>12} {:>12}\n", d.name, d.A.cols(), 1e3 * reduced,
+               cell(1e3 * full_s, "{:.3f}"), cell(1e3 * base_s, "{:.3f}"), cell(err, "{:.3e}"), cell(bound, "{:.3e}"));
     records.push_back(r);
   }
 
