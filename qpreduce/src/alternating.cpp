@@ -1,9 +1,13 @@
 #include "qpreduce/alternating.h"
 
+#include "blas.h"
 #include "qpreduce/detail/qp_operators.h"
 #include "qpreduce/detail/timer.h"
 
 #include <fmt/format.h>
+
+#include <optional>
+#include <type_traits>
 
 namespace qpreduce {
 
@@ -39,10 +43,19 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
   const MatD Ay = (A.transpose() * solver.subspace().UD).template cast<double>();
   const MatD G = solver.reduced_linear_map().topRows(d).template cast<double>() - Hr.topRightCorner(d, k);
 
+  std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
+  if (options.threads > 0) blas.emplace(options.threads);
   ConstraintSummary summary;
   const detail::QpOperators ops = detail::qp_operators(Hr.topLeftCorner(d, d), Az, options, &summary);
   Mb_ = ops.Mc.template cast<Scalar>();
-  MY_ = (ops.Mg * G - ops.Mc * Ay).template cast<Scalar>();
+  MatD MY(d, k);  // M_g·G − M_c·A_y, through the BLAS (blas.h)
+  detail::blas_gemm(false, false, 1.0, ops.Mg, G, 0.0, MY);
+  detail::blas_gemm(false, false, -1.0, ops.Mc, Ay, 1.0, MY);
+  if constexpr (std::is_same_v<Scalar, double>) {
+    MY_ = std::move(MY);
+  } else {
+    MY_ = MY.template cast<Scalar>();
+  }
   ready_ = true;
   summary.seconds = timer.seconds();
   return summary;
@@ -76,16 +89,27 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
 
 template <typename Scalar>
 void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
-                                   const Matrix<Scalar>& Gy) {
+                                   const Matrix<Scalar>& Gy, int threads) {
+  std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
+  if (threads > 0) blas.emplace(threads);
   if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
   detail::check_size("FusedAlternation::set: G_z columns (d)", phase1.d(), Gz.cols());
   detail::check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), Gy.cols());
   detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
-  Fb_.noalias() = Gz * phase1.Mb();
   Fy_ = Gy;
-  Fy_.noalias() += Gz * phase1.MY();
+  if constexpr (std::is_same_v<Scalar, double>) {
+    Fb_.resize(Gz.rows(), phase1.m());
+    detail::blas_gemm(false, false, 1.0, Gz, phase1.Mb(), 0.0, Fb_);
+    detail::blas_gemm(false, false, 1.0, Gz, phase1.MY(), 1.0, Fy_);
+  } else {
+    Fb_.noalias() = Gz * phase1.Mb();
+    Fy_.noalias() += Gz * phase1.MY();
+  }
+  Fy_f_ = Fy_.template cast<float>();
   gb_.resize(Gz.rows());
   g_.resize(Gz.rows());
+  gf_.resize(Gz.rows());
+  yf_.resize(Fy_.cols());
   ready_ = true;
 }
 
@@ -100,7 +124,15 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   gb_.noalias() = Fb_ * b;
   for (int it = 0; it < options.iterations; ++it) {
     g_ = gb_;
-    g_.noalias() += Fy_ * y;
+    if (options.float_products) {
+      // Mixed precision: the k×k product in float (twice the SIMD width of
+      // double in Eigen's baseline kernels), accumulated onto g in double.
+      yf_ = y.template cast<float>();
+      gf_.noalias() = Fy_f_ * yf_;
+      g_ += gf_.template cast<Scalar>();
+    } else {
+      g_.noalias() += Fy_ * y;
+    }
     summary.last_change = projection.project(g_, y);
     summary.iterations = it + 1;
     if (options.tolerance > 0 &&

@@ -1,5 +1,7 @@
 #include "qpreduce/detail/qp_operators.h"
 
+#include "blas.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <fmt/format.h>
@@ -73,9 +75,20 @@ QpOperators qp_operators(const MatD& H, const MatD& A, const ConstraintOptions& 
       summary->condition = r > 0 ? diag(0) / diag(r - 1) : 0.0;
     }
     summary->rank = r;
-    const MatD Kinv = symmetric_pinv(Z.transpose() * H * Z, options.rank_tolerance, &singular, &cond);
-    ops.Mg = Z * Kinv * Z.transpose();
-    ops.Mc = P - ops.Mg * (H * P);
+    // The p×p products go through the BLAS (blas.h): M_g = Z·K⁺·Zᵀ with
+    // K = ZᵀHZ, and M_c = P − M_g·H·P.
+    const Index q = Z.cols();
+    MatD HZ(p, q), K(q, q);
+    blas_gemm(false, false, 1.0, H, Z, 0.0, HZ);
+    blas_gemm(true, false, 1.0, Z, HZ, 0.0, K);
+    const MatD Kinv = symmetric_pinv(K, options.rank_tolerance, &singular, &cond);
+    MatD ZK(p, q), HP(p, m);
+    blas_gemm(false, false, 1.0, Z, Kinv, 0.0, ZK);
+    ops.Mg.resize(p, p);
+    blas_gemm(false, true, 1.0, ZK, Z, 0.0, ops.Mg);
+    blas_gemm(false, false, 1.0, H, P, 0.0, HP);
+    ops.Mc = P;
+    blas_gemm(false, false, -1.0, ops.Mg, HP, 1.0, ops.Mc);
     if (singular) {
       summary->status = Status::Unbounded;
       summary->message = fmt::format(

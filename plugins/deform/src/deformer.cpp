@@ -148,6 +148,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   wf.resize(nx + 9 * d);
   vf.resize(3 * n);
   alternating.iterations = options.iterations;
+  alternating.float_products = options.float_rounds;
   global_rotation = options.global_rotation;
   ready = true;
 }
@@ -383,7 +384,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   SparseMatrix<double> A(S.nu, col);
   A.setFromTriplets(ta.begin(), ta.end());
   const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
-  S.fused.set(S.phase1, S.MN, S.MU);
+  S.fused.set(S.phase1, S.MN, S.MU, options.threads);
   S.handles = handles;
   S.rows = col;
   S.b.resize(col);

@@ -69,6 +69,13 @@ struct AlternatingOptions {
   int iterations = 8;
   // Stop early when ‖Δy‖ ≤ tolerance·max(1, ‖y‖). 0: always run `iterations`.
   double tolerance = 0.0;
+  // FusedAlternation<double>: form the round's product F_y·y in float
+  // (g = F_b·b + F_y·y keeps F_b·b and the sum in double). About 2.5× faster
+  // at k ≈ 250 on baseline x86-64; the Phase 2 input then carries a relative
+  // error of ~1e-7·‖F_y‖‖y‖/‖g‖, which a projection onto rotations absorbs.
+  // Phase 1's final z = M_b·b + M_Y·y stays in double, so hard constraints
+  // hold to double precision either way.
+  bool float_products = false;
 
   bool is_valid(std::string* why) const;
 };
@@ -105,7 +112,10 @@ class FusedAlternation {
   // Forms F_b = G_z·M_b (q×m) and F_y = G_z·M_Y + G_y (q×k) for the current
   // constraint set of `phase1` (call again after each set_constraints).
   // Throws std::invalid_argument on mismatched sizes or an unready phase1.
-  void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy);
+  // `threads`: BLAS threads for these products (as ConstraintOptions::threads;
+  // 0 leaves the BLAS's own setting).
+  void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
+           int threads = 1);
 
   // `options.iterations` rounds from the given y (warm start), then
   // z = M_b·b + M_Y·y. No heap allocation.
@@ -117,7 +127,9 @@ class FusedAlternation {
 
  private:
   Matrix<Scalar> Fb_, Fy_;
+  Matrix<float> Fy_f_;  // F_y in float (AlternatingOptions::float_products)
   Vector<Scalar> gb_, g_;
+  Vector<float> gf_, yf_;
   bool ready_ = false;
 };
 

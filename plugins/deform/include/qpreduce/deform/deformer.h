@@ -72,6 +72,10 @@ struct DeformerOptions {
   int iterations = 8;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
+  // Phase 2 inputs from a float product in each round
+  // (AlternatingOptions::float_products); the handles still hold to double
+  // precision. false: every round in double.
+  bool float_rounds = true;
   SubspaceOptions subspace;
 
   bool is_valid(std::string* why) const;

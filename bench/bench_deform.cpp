@@ -1,0 +1,253 @@
+// Benchmark: the paper's Table 1 on this machine — reduced ARAP deformation
+// (Section 3.2) of the paper's models found in ../shared/data, with the
+// paper's proxy counts (linear = farthest-point samples, rotational =
+// spectral k-means clusters, both seeded).
+//
+// Per model <M>, benchmarks run in this order (one Deformer per model, made
+// by the first of them that runs):
+//   Precompute/<M>      clusters, proxies, energy, subspace, reduced matrices
+//                       (one iteration; counters peak_MiB, extra_MiB)
+//   OP/<M>              set_handles for 8 point handles (farthest-point
+//                       vertices): the on-site preconditioner
+//   Iteration/<M>       one Phase 1 + Phase 2 round (a frame's alternation
+//                       divided by its rounds; manual time)
+//   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices (manual time)
+//   StreamRead/<M>      a plain parallel streaming read (sum) of a float
+//                       buffer of the same size as the reconstruction basis,
+//                       the memory-bandwidth floor of reconstruction
+//   Frame/<M>           a whole frame (8 rounds + reconstruction)
+// With QPREDUCE_BENCH_CACHE_DIR set, the untimed sessions (all but
+// Precompute) load the precomputed model from <dir>/<M>.qpr when it exists,
+// and write it there otherwise.
+// Frames move the first handle back and forth along a circle of radius 10%
+// of the bounding-box diagonal; the others stay at rest (warm start).
+//
+// Models are looked up under $QPREDUCE_SHARED_DATA, else the source tree's
+// ../shared/data; missing models are skipped with a message.
+// bench/table1.py turns the JSON output into docs/performance.md's table.
+#include "bench_util.h"
+
+#include <qpreduce/deform/deformer.h>
+#include <qpreduce/deform/geometry.h>
+#include <qpreduce/deform/mesh_io.h>
+#include <qpreduce/deform/proxies.h>
+#include <qpreduce/deform/tet_io.h>
+
+#include <benchmark/benchmark.h>
+#include <fmt/format.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+struct ModelSpec {
+  const char* name;
+  const char* path;  // under the shared data folder
+  Index linear, rotational;
+};
+
+// Table 1 of the paper: the models we have, with its proxy counts.
+const ModelSpec kModels[] = {
+    {"Cylinder", "meshes/botsch-sorkine/cylinder.off", 33, 12},
+    {"Cactus", "meshes/botsch-sorkine/cactus.off", 33, 27},
+    {"Bar", "meshes/botsch-sorkine/bar.off", 33, 52},
+    {"BumpyPlane", "meshes/botsch-sorkine/bumpy_plane.off", 33, 27},
+    {"SolidCylinder", "tets/solid_cylinder.node", 33, 52},
+    {"Tree", "paper-examples/tree/tree.off", 60, 60},
+    {"Fertility", "tets/solid_fertility.node", 29, 26},
+    {"Dinosaur", "paper-examples/dinosaur/dinosaur.off", 46, 34},
+    {"Dragon", "paper-examples/dragon/dragon.off", 20, 20},
+};
+
+constexpr Index kHandles = 8;
+
+struct Session {
+  DeformableModel model;
+  DeformerOptions options;
+  Deformer deformer;
+  PrecomputeSummary pre;
+  double peak_mib = 0.0, extra_mib = 0.0;
+  Handles handles;
+  Vertices rest_targets;
+  double diagonal = 0.0;
+  int frame = 0;
+  Vertices out;
+};
+
+std::map<std::string, std::unique_ptr<Session>>& sessions() {
+  static std::map<std::string, std::unique_ptr<Session>> s;
+  return s;
+}
+
+std::string data_dir() {
+  if (const char* env = std::getenv("QPREDUCE_SHARED_DATA")) return env;
+  return std::string(QPREDUCE_SHARED_DIR) + "/data";
+}
+
+// Loads the model and precomputes (timed by the caller when it wants).
+Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
+  auto& all = sessions();
+  auto it = all.find(spec.name);
+  if (it != all.end() && timed == nullptr) return *it->second;
+  all.clear();  // one model in memory at a time: its peak is its own
+  auto s = std::make_unique<Session>();
+  const std::string path = data_dir() + "/" + spec.path;
+  const bool tet = path.size() > 5 && (path.substr(path.size() - 5) == ".node" || path.substr(path.size() - 5) == ".mesh");
+  if (tet) {
+    const TetMesh m = read_tet_mesh(path);
+    s->model.V = m.V;
+    s->model.T = m.T;
+  } else {
+    const TriangleMesh m = read_triangle_mesh(path);
+    s->model.V = m.V;
+    s->model.F = m.F;
+  }
+  s->options.linear_proxies = spec.linear;
+  s->options.rotational_proxies = spec.rotational;
+  bench::PeakMemory mem;
+  mem.reset();
+  // Untimed sessions may come from a cache (QPREDUCE_BENCH_CACHE_DIR, for
+  // profiling the per-frame parts without paying for precompute each run).
+  const char* cache_dir = std::getenv("QPREDUCE_BENCH_CACHE_DIR");
+  const std::string cache = cache_dir ? std::string(cache_dir) + "/" + spec.name + ".qpr" : "";
+  if (timed) {
+    for (auto _ : *timed) s->pre = s->deformer.precompute(s->model, s->options);
+  } else if (!cache.empty() && std::filesystem::exists(cache)) {
+    s->pre = s->deformer.load(cache, s->model, s->options);
+  } else {
+    s->pre = s->deformer.precompute(s->model, s->options);
+    if (!cache.empty() && s->pre.ok()) s->deformer.save(cache);
+  }
+  s->peak_mib = mem.peak_mb();
+  s->extra_mib = s->peak_mib - mem.baseline_mb();
+  if (!s->pre.ok()) throw std::runtime_error(spec.name + std::string(": ") + s->pre.message);
+  // 8 well-spread point handles.
+  const LinearProxies fps = s->model.is_tet() ? linear_proxies_fps(s->model.V, ElementsRef(s->model.T), kHandles)
+                                              : linear_proxies_fps(s->model.V, ElementsRef(s->model.F), kHandles);
+  s->rest_targets.resize(fps.count(), 3);
+  for (Index h = 0; h < fps.count(); ++h) {
+    s->handles.points.push_back({{fps.groups[h].front()}, {}});
+    s->rest_targets.row(h) = s->model.V.row(fps.groups[h].front());
+  }
+  s->diagonal = bounding_box_diagonal(s->model.V);
+  const ConstraintSummary cs = s->deformer.set_handles(s->handles);
+  if (!cs.ok()) throw std::runtime_error(spec.name + std::string(": handles: ") + cs.message);
+  Session& ref = *s;
+  all[spec.name] = std::move(s);
+  return ref;
+}
+
+HandleTargets next_targets(Session& s) {
+  HandleTargets t;
+  t.points = s.rest_targets;
+  const double a = 0.3 * static_cast<double>(s.frame++ % 21);
+  t.points(0, 0) += 0.1 * s.diagonal * std::sin(a);
+  t.points(0, 1) += 0.1 * s.diagonal * (1.0 - std::cos(a));
+  return t;
+}
+
+void set_sizes(benchmark::State& state, const Session& s) {
+  state.counters["vertices"] = static_cast<double>(s.pre.vertices);
+  state.counters["linear"] = static_cast<double>(s.pre.linear_proxies);
+  state.counters["rotational"] = static_cast<double>(s.pre.rotational_proxies);
+  state.counters["reduced"] = static_cast<double>(s.pre.reduced_size);
+}
+
+void BM_Precompute(benchmark::State& state, const ModelSpec* spec) {
+  try {
+    Session& s = session(*spec, &state);
+    set_sizes(state, s);
+    state.counters["peak_MiB"] = s.peak_mib;
+    state.counters["extra_MiB"] = s.extra_mib;
+    state.counters["subspace_s"] = s.pre.subspace_seconds;
+    state.counters["clustering_s"] = s.pre.clustering_seconds;
+  } catch (const std::exception& e) {
+    state.SkipWithError(e.what());
+  }
+}
+
+void BM_OP(benchmark::State& state, const ModelSpec* spec) {
+  Session& s = session(*spec);
+  for (auto _ : state) {
+    const ConstraintSummary cs = s.deformer.set_handles(s.handles);
+    benchmark::DoNotOptimize(cs.rank);
+  }
+  set_sizes(state, s);
+}
+
+// Runs frames; reports the chosen part of each as the iteration's time.
+enum class Part { Iteration, Reconstruction, Frame };
+
+void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part) {
+  Session& s = session(*spec);
+  for (auto _ : state) {
+    const HandleTargets t = next_targets(s);
+    const FrameSummary f = s.deformer.frame(t, &s.out);
+    const double seconds = part == Part::Iteration        ? f.solve_seconds / std::max(f.iterations, 1)
+                           : part == Part::Reconstruction ? f.reconstruct_seconds
+                                                          : f.total_seconds;
+    state.SetIterationTime(seconds);
+  }
+  set_sizes(state, s);
+}
+
+void BM_StreamRead(benchmark::State& state, const ModelSpec* spec) {
+  Session& s = session(*spec);
+  const Index count = 3 * s.pre.vertices * s.pre.reduced_size;
+  std::vector<float> buffer(static_cast<size_t>(count), 1.0f);
+  for (auto _ : state) {
+    float sum = 0.0f;
+#pragma omp parallel for reduction(+ : sum) schedule(static)
+    for (Index i = 0; i < count; ++i) sum += buffer[static_cast<size_t>(i)];
+    benchmark::DoNotOptimize(sum);
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * count * static_cast<int64_t>(sizeof(float)));
+  state.counters["MiB"] = static_cast<double>(count) * sizeof(float) / (1024.0 * 1024.0);
+  set_sizes(state, s);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  const std::string dir = data_dir();
+  int found = 0;
+  for (const ModelSpec& spec : kModels) {
+    if (!std::filesystem::exists(dir + "/" + spec.path)) {
+      fmt::print(stderr, "bench_deform: skipping {} ({} not found)\n", spec.name, dir + "/" + spec.path);
+      continue;
+    }
+    ++found;
+    const std::string n = spec.name;
+    benchmark::RegisterBenchmark(("Precompute/" + n).c_str(), BM_Precompute, &spec)
+        ->Iterations(1)
+        ->Unit(benchmark::kSecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("OP/" + n).c_str(), BM_OP, &spec)->Unit(benchmark::kMillisecond)->UseRealTime();
+    benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration)
+        ->Unit(benchmark::kMicrosecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
+    benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+  }
+  if (found == 0) fmt::print(stderr, "bench_deform: no model found under {} (set QPREDUCE_SHARED_DATA)\n", dir);
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}
