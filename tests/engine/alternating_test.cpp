@@ -143,6 +143,18 @@ TEST_CASE("fused alternation gives the iterates of the plain one", "[alternating
   CHECK((y1 - y2).norm() <= 1e-12 * (1 + y1.norm()));
   CHECK((z1 - z2).norm() <= 1e-12 * (1 + z1.norm()));
   CHECK_THROWS_WITH(fused.set(phase1, Matrix<double>(f.k, f.d + 1), in.Gy), Catch::Contains("G_z columns"));
+
+  // Mixed precision: F_y·y in float changes the iterates only at float
+  // round-off, and Phase 1's final z = M_b·b + M_Y·y is still in double.
+  opts.float_products = true;
+  Vector<double> z3(f.d), y3 = gen::gaussian_vector(f.k, 35);
+  fused.run(phase1, fused_proj, b, opts, z3, y3);
+  const double yerr = (y3 - y1).norm() / (1 + y1.norm());
+  CHECK(yerr <= 1e-5);
+  CHECK(yerr > 0.0);  // the float path did run
+  Vector<double> z_expected(f.d);
+  phase1.solve(b, y3, z_expected);
+  CHECK((z3 - z_expected).norm() <= 1e-13 * (1 + z3.norm()));
 }
 
 TEST_CASE("alternating scheme rejects bad input", "[alternating][errors]") {
