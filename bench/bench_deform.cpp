@@ -16,6 +16,8 @@
 //                       buffer of the same size as the reconstruction basis,
 //                       the memory-bandwidth floor of reconstruction
 //   Frame/<M>           a whole frame (8 rounds + reconstruction)
+// Every per-iteration benchmark also reports the median of its samples as
+// the counter `median` (µs for Iteration, ms otherwise).
 // With QPREDUCE_BENCH_CACHE_DIR set, the untimed sessions (all but
 // Precompute) load the precomputed model from <dir>/<M>.qpr when it exists,
 // and write it there otherwise.
@@ -33,9 +35,12 @@
 #include <qpreduce/deform/proxies.h>
 #include <qpreduce/deform/tet_io.h>
 
+#include <qpreduce/detail/timer.h>
+
 #include <benchmark/benchmark.h>
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
@@ -175,12 +180,24 @@ void BM_Precompute(benchmark::State& state, const ModelSpec* spec) {
   }
 }
 
+// Median of per-iteration samples, as a counter (the reported time is the
+// mean; on a shared machine the median is the steadier figure).
+void set_median(benchmark::State& state, std::vector<double> samples, double unit) {
+  if (samples.empty()) return;
+  std::nth_element(samples.begin(), samples.begin() + samples.size() / 2, samples.end());
+  state.counters["median"] = samples[samples.size() / 2] / unit;
+}
+
 void BM_OP(benchmark::State& state, const ModelSpec* spec) {
   Session& s = session(*spec);
+  std::vector<double> samples;
   for (auto _ : state) {
+    const qpreduce::detail::Timer t;
     const ConstraintSummary cs = s.deformer.set_handles(s.handles);
+    samples.push_back(t.seconds());
     benchmark::DoNotOptimize(cs.rank);
   }
+  set_median(state, std::move(samples), 1e-3);
   set_sizes(state, s);
 }
 
@@ -189,6 +206,7 @@ enum class Part { Iteration, Reconstruction, Frame };
 
 void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part) {
   Session& s = session(*spec);
+  std::vector<double> samples;
   for (auto _ : state) {
     const HandleTargets t = next_targets(s);
     const FrameSummary f = s.deformer.frame(t, &s.out);
@@ -196,7 +214,9 @@ void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part) {
                            : part == Part::Reconstruction ? f.reconstruct_seconds
                                                           : f.total_seconds;
     state.SetIterationTime(seconds);
+    samples.push_back(seconds);
   }
+  set_median(state, std::move(samples), part == Part::Iteration ? 1e-6 : 1e-3);
   set_sizes(state, s);
 }
 
@@ -204,12 +224,16 @@ void BM_StreamRead(benchmark::State& state, const ModelSpec* spec) {
   Session& s = session(*spec);
   const Index count = 3 * s.pre.vertices * s.pre.reduced_size;
   std::vector<float> buffer(static_cast<size_t>(count), 1.0f);
+  std::vector<double> samples;
   for (auto _ : state) {
+    const qpreduce::detail::Timer t;
     float sum = 0.0f;
 #pragma omp parallel for reduction(+ : sum) schedule(static)
     for (Index i = 0; i < count; ++i) sum += buffer[static_cast<size_t>(i)];
     benchmark::DoNotOptimize(sum);
+    samples.push_back(t.seconds());
   }
+  set_median(state, std::move(samples), 1e-3);
   state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * count * static_cast<int64_t>(sizeof(float)));
   state.counters["MiB"] = static_cast<double>(count) * sizeof(float) / (1024.0 * 1024.0);
   set_sizes(state, s);

@@ -408,3 +408,35 @@ TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
     CHECK_THROWS_WITH(deformer.precompute(model, o), Catch::Contains("alpha"));
   }
 }
+
+TEST_CASE("deformer: vertices used by no element stay at rest and change nothing else", "[deformer]") {
+  const DeformableModel base = cylinder_model(6, 12);
+  DeformableModel loose = base;
+  // Two unreferenced vertices, one in the middle of the numbering.
+  const Index n = base.V.rows();
+  loose.V.conservativeResize(n + 2, 3);
+  loose.V.row(n) = Eigen::RowVector3d(5.0, 5.0, 5.0);
+  loose.V.row(n + 1) = Eigen::RowVector3d(-5.0, 0.0, 1.0);
+  if (!loose.clusters.empty()) loose.clusters.resize(static_cast<size_t>(n + 2), 0);  // elements without edges
+  Deformer a, b;
+  REQUIRE(a.precompute(base).ok());
+  const PrecomputeSummary pb = b.precompute(loose);
+  INFO(pb.message);
+  REQUIRE(pb.ok());
+  CHECK(pb.patches == 1);  // the internal Fixed patch
+  Handles h;
+  for (Index v : {0, 37, 85}) h.points.push_back({{v}, {}});
+  REQUIRE(a.set_handles(h).ok());
+  REQUIRE(b.set_handles(h).ok());
+  HandleTargets t = rigid_targets(base.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  t.points(0, 0) += 0.5;
+  Vertices va, vb;
+  for (int f = 0; f < 3; ++f) {
+    a.frame(t, &va);
+    b.frame(t, &vb);
+  }
+  const double moved = (va - base.V).cwiseAbs().maxCoeff();
+  CHECK(moved > 0.05);
+  CHECK((vb.topRows(n) - va).cwiseAbs().maxCoeff() <= 1e-6 * (1 + moved));
+  CHECK((vb.bottomRows(2) - loose.V.bottomRows(2)).cwiseAbs().maxCoeff() <= 1e-6);
+}

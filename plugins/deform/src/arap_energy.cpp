@@ -235,6 +235,9 @@ EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sy
     Eigen::Matrix4d B = Eigen::Matrix4d::Zero();
     for (int b = 0; b < 4; ++b)
       for (SparseMatrix<double>::InnerIterator it(LQQ, 4 * k + b); it; ++it) B(it.row() - 4 * k, b) = it.value();
+    // An element without edges (an unreferenced vertex's spokes-and-rims
+    // element) has no energy at all: its q_k is free and untouched (block 0).
+    if (B.isZero(0.0)) continue;
     const Eigen::LLT<Eigen::Matrix4d> llt(B);
     if (llt.info() != Eigen::Success || !(B.diagonal().minCoeff() > 0)) {
       throw std::invalid_argument(fmt::format(

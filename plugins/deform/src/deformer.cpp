@@ -12,6 +12,8 @@
 
 namespace qpreduce::deform {
 
+using detail_deformer::compact_mesh;
+using detail_deformer::CompactMesh;
 using detail_deformer::Triplets;
 
 
@@ -47,6 +49,28 @@ double RotationProjection::project(const Eigen::Ref<const Vector<double>>& g, Ei
 
 }  // namespace detail_deformer
 
+CompactMesh detail_deformer::compact_mesh(const Vertices& V, const ElementsRef& E,
+                                          const std::vector<Index>& unreferenced) {
+  CompactMesh cm;
+  const Index n = V.rows();
+  std::vector<Index> new_of_old(static_cast<size_t>(n), -1);
+  size_t next_unref = 0;
+  for (Index v = 0; v < n; ++v) {
+    if (next_unref < unreferenced.size() && unreferenced[next_unref] == v) {
+      ++next_unref;
+      continue;
+    }
+    new_of_old[static_cast<size_t>(v)] = static_cast<Index>(cm.old_of_new.size());
+    cm.old_of_new.push_back(v);
+  }
+  cm.V.resize(static_cast<Index>(cm.old_of_new.size()), 3);
+  for (size_t i = 0; i < cm.old_of_new.size(); ++i) cm.V.row(static_cast<Index>(i)) = V.row(cm.old_of_new[i]);
+  cm.E.resize(E.rows(), E.cols());
+  for (Index e = 0; e < E.rows(); ++e)
+    for (Index c = 0; c < E.cols(); ++c) cm.E(e, c) = static_cast<int>(new_of_old[static_cast<size_t>(E(e, c))]);
+  return cm;
+}
+
 void Deformer::State::set_topology(const DeformableModel& model) {
   const bool tet = model.is_tet();
   if (tet == (model.F.rows() > 0)) {
@@ -71,6 +95,18 @@ void Deformer::State::set_topology(const DeformableModel& model) {
                                                 v, p, patch_types.size()));
       }
     }
+  }
+  // Vertices used by no element carry no energy: an internal Fixed patch
+  // holds those that are not in a patch already at their rest positions.
+  const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
+  unreferenced = connected_components(n, E).unreferenced;
+  std::vector<Index> loose;
+  for (Index v : unreferenced)
+    if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) loose.push_back(v);
+  if (!loose.empty()) {
+    if (patch_of_vertex.empty()) patch_of_vertex.assign(static_cast<size_t>(n), -1);
+    for (Index v : loose) patch_of_vertex[v] = static_cast<int>(patch_types.size());
+    patch_types.push_back(PatchType::Fixed);
   }
   s = static_cast<Index>(patch_types.size());
   std::vector<Index> patch_size(static_cast<size_t>(s), 0);
@@ -205,22 +241,37 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     }
     S.set_clusters(model.clusters, 1 + *std::max_element(model.clusters.begin(), model.clusters.end()));
   } else {
+    // Clusters of the referenced part (surfaces: one label per vertex; an
+    // unreferenced vertex is an element without edges, labelled 0).
+    const CompactMesh cm = compact_mesh(model.V, E, S.unreferenced);
     Clustering clustering;
-    const ClusterSummary cs = rotation_clusters(model.V, E, tet ? ClusterElement::Element : ClusterElement::Vertex,
+    const ClusterSummary cs = rotation_clusters(cm.V, cm.E, tet ? ClusterElement::Element : ClusterElement::Vertex,
                                                 options.rotational_proxies, options.clustering, &clustering);
     if (!cs.ok()) {
       summary.status = cs.status;
       summary.message = "rotational clusters: " + cs.message;
       return summary;
     }
-    S.set_clusters(std::move(clustering.labels), clustering.count);
+    std::vector<int> labels = std::move(clustering.labels);
+    if (!tet && !S.unreferenced.empty()) {
+      std::vector<int> full(static_cast<size_t>(n), 0);
+      for (size_t i = 0; i < cm.old_of_new.size(); ++i) full[static_cast<size_t>(cm.old_of_new[i])] = labels[i];
+      labels = std::move(full);
+    }
+    S.set_clusters(std::move(labels), clustering.count);
   }
   summary.clustering_seconds = t.seconds();
 
   // Linear proxies, restricted to free vertices.
   report("linear proxies", 0.1);
-  LinearProxies proxies = model.linear.count() > 0 ? model.linear
-                                                  : linear_proxies_fps(model.V, E, options.linear_proxies);
+  LinearProxies proxies = model.linear;
+  if (proxies.count() == 0) {
+    // Farthest-point samples of the referenced part, in original indices.
+    const CompactMesh cm = compact_mesh(model.V, E, S.unreferenced);
+    proxies = linear_proxies_fps(cm.V, cm.E, options.linear_proxies);
+    for (auto& g : proxies.groups)
+      for (Index& v : g) v = cm.old_of_new[static_cast<size_t>(v)];
+  }
   std::vector<std::vector<Index>> groups;
   for (const auto& g : proxies.groups) {
     std::vector<Index> kept;

@@ -327,8 +327,9 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel&
   compare_vector(r, "given rotational clusters", r.get_vector<int>("given clusters"), model.clusters);
   compare_vector(r, "given linear proxy groups", r.get_vector<std::int64_t>("given groups"),
                  flatten(model.linear.groups));
-  compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), model.patch_of_vertex);
-  compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(model.patch_types));
+  // As set_topology made them (with the internal patch of unreferenced vertices).
+  compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), S.patch_of_vertex);
+  compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(S.patch_types));
   const auto opts = result_options(options);
   const Index stored_opts = r.get_count("options", sizeof(double));
   if (stored_opts != static_cast<Index>(opts.size())) {

@@ -10,6 +10,7 @@
 #pragma once
 
 #include "qpreduce/deform/deformer.h"
+#include "qpreduce/deform/geometry.h"
 
 #include <qpreduce/alternating.h>
 #include <qpreduce/subspace_solver.h>
@@ -27,6 +28,15 @@ class RotationProjection final : public InputProjection<double> {
  public:
   double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) override;
 };
+
+// A mesh without its unreferenced vertices; old_of_new maps back.
+struct CompactMesh {
+  Vertices V;
+  Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> E;
+  std::vector<Index> old_of_new;
+};
+// `unreferenced`: ascending vertex indices used by no row of E.
+CompactMesh compact_mesh(const Vertices& V, const ElementsRef& E, const std::vector<Index>& unreferenced);
 
 }  // namespace qpreduce::deform::detail_deformer
 
@@ -49,8 +59,11 @@ struct Deformer::State {
   Vertices rest;
   RotationElements elements;
   std::vector<int> clusters;
+  // The model's patches, plus an internal Fixed patch (last) for vertices
+  // used by no element, when there are any outside the model's patches.
   std::vector<int> patch_of_vertex;
   std::vector<PatchType> patch_types;
+  std::vector<Index> unreferenced;  // vertices used by no element, ascending
   Index n = 0, d = 0, m = 0, s = 0;
   Index nu = 0;                        // control-layer size
   std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
