@@ -169,11 +169,17 @@ SparseMatrix<double> Deformer::State::control_matrix() const {
   return P;
 }
 
-Matrix<double> Deformer::State::vertex_rows(const SparseMatrix<double>& P) const {
-  Matrix<double> PB(3 * n, nx + 9 * d);
-  PB.leftCols(nx) = P * solver.subspace().N;
-  PB.rightCols(9 * d) = P * solver.subspace().UD;
-  return PB;
+void Deformer::State::make_basis(const SparseMatrix<double>& P) {
+  const Matrix<double>& N = solver.subspace().N;
+  const Matrix<double>& U = solver.subspace().UD;
+  basis.resize(3 * n, nx + 9 * d);
+  constexpr Index kBlock = 32;  // columns per double temporary (3n × 32)
+  for (Index j = 0; j < nx + 9 * d; j += kBlock) {
+    const Index w = std::min(kBlock, nx + 9 * d - j);
+    Matrix<double> block(nu, w);
+    for (Index c = 0; c < w; ++c) block.col(c) = j + c < nx ? N.col(j + c) : U.col(j + c - nx);
+    basis.middleCols(j, w) = (P * block).cast<float>();
+  }
 }
 
 void Deformer::State::finish(const DeformerOptions& options) {
@@ -361,11 +367,12 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   report("reduction", 0.9);
   t.reset();
   {
-    const Matrix<double> PB = S.vertex_rows(P);
-    const SparseMatrix<double> DVt = elim.DV.transpose();
-    S.MN = DVt * PB.leftCols(S.nx);
-    S.MU = DVt * PB.rightCols(9 * S.d);
-    S.basis = PB.cast<float>();
+    // M_N, M_U = (D_Vᵀ·P)·[N UD] with the sparse 9d × n_u factor first, and
+    // the float basis block by block: no 3n × p double copy of P·[N UD].
+    const SparseMatrix<double> DVtP = SparseMatrix<double>(elim.DV.transpose()) * P;
+    S.MN = DVtP * S.solver.subspace().N;
+    S.MU = DVtP * S.solver.subspace().UD;
+    S.make_basis(P);
   }
   summary.reduction_seconds = t.seconds();
 

@@ -374,7 +374,7 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel&
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }
-  S.basis = S.vertex_rows(S.control_matrix()).cast<float>();
+  S.make_basis(S.control_matrix());
   S.finish(options);
   state_ = std::move(st);
   reset_pose();

@@ -104,8 +104,9 @@ struct Deformer::State {
   void control_row(Index v, int a, double scale, Index col, Triplets* t) const;
   // P (3n × n_u): V′ = P·u.
   SparseMatrix<double> control_matrix() const;
-  // P·[N UD] (3n × (nx + 9d), double), once the solver holds the subspace.
-  Matrix<double> vertex_rows(const SparseMatrix<double>& P) const;
+  // basis = P·[N UD] in float (3n × (nx + 9d)), once the solver holds the
+  // subspace; through 3n × 32 double blocks, never the whole double product.
+  void make_basis(const SparseMatrix<double>& P);
   // After the solver, basis, MN and MU are set: the frame workspaces and the
   // runtime options; ready = true.
   void finish(const DeformerOptions& options);
