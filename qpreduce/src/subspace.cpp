@@ -120,7 +120,8 @@ void blocked_pass(const SpD& H, const SpD& C, const SpD& D, const MatD& N, const
   }
   if (residual) {
     const double bnorm = std::sqrt(N.squaredNorm() + UD.squaredNorm());
-    const double scale1 = H.norm() * bnorm + D.norm();
+    // (Eigen asserts on the norm of a matrix with no columns: k = 0 is valid.)
+    const double scale1 = H.norm() * bnorm + (D.cols() > 0 ? D.norm() : 0.0);
     const double scale2 = C.norm() * bnorm;
     const double r1 = scale1 > 0 ? std::sqrt(r1sq) / scale1 : std::sqrt(r1sq);
     const double r2 = scale2 > 0 ? std::sqrt(r2sq) / scale2 : std::sqrt(r2sq);
