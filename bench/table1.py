@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The paper's Table 1 from bench_deform's JSON output, beside the paper's numbers.
 
-Usage: bench/table1.py RESULT.json
+Usage: bench/table1.py RESULT.json [RECON.json]
 
 RESULT.json comes from
     build/bin/bench_deform --benchmark_out=RESULT.json --benchmark_out_format=json
@@ -10,6 +10,9 @@ Prints a Markdown table: per model our median iteration (µs), reconstruction
 (ms), precompute (s) and peak resident memory (GB), OP (ms), and in
 parentheses the paper's figure for the same column (Table 1, i7-2670QM,
 serial). Then the issue-3 targets, each marked met / missed.
+With RECON.json (a second run, e.g. --benchmark_filter='(Reconstruction|StreamRead)/'),
+the reconstruction and streaming-read columns come from it: both figures of
+the ratio then come from the same run.
 """
 import json
 import sys
@@ -28,8 +31,11 @@ PAPER = {
 }
 
 
-def main(path):
+def main(path, recon_path=None):
     runs = json.load(open(path))["benchmarks"]
+    if recon_path:
+        runs = [r for r in runs if not r["name"].startswith(("Reconstruction/", "StreamRead/"))]
+        runs += json.load(open(recon_path))["benchmarks"]
     rows = {}
     for r in runs:
         if r.get("run_type") == "aggregate" or r.get("error_occurred"):
@@ -70,6 +76,6 @@ def main(path):
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
+    if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    main(sys.argv[1])
+    main(*sys.argv[1:])
