@@ -6,7 +6,6 @@
 #include <qpreduce/detail/timer.h>
 
 #include <fmt/format.h>
-#include <omp.h>
 
 #include <algorithm>
 #include <cmath>
@@ -513,14 +512,10 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   if (out->rows() != S.n) out->resize(S.n, 3);
   const Eigen::Matrix3f r0f = S.r0.cast<float>();
   const Index n = S.n;
-  // One row-major GEMV per thread over its share of the vertices (Eigen's
-  // kernel streams several rows at once), then r₀ per vertex.
-#pragma omp parallel
-  {
-    const Index threads = omp_get_num_threads(), me = omp_get_thread_num();
-    const Index v0 = n * me / threads, v1 = n * (me + 1) / threads;
-    S.vf.segment(3 * v0, 3 * (v1 - v0)).noalias() = S.basis.middleRows(3 * v0, 3 * (v1 - v0)) * S.wf;
-    for (Index v = v0; v < v1; ++v) out->row(v) = (r0f * S.vf.segment<3>(3 * v)).cast<double>().transpose();
+#pragma omp parallel for schedule(static)
+  for (Index v = 0; v < n; ++v) {
+    const Eigen::Vector3f p = S.basis.middleRows<3>(3 * v) * S.wf;
+    out->row(v) = (r0f * p).cast<double>().transpose();
   }
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds = total.seconds();
