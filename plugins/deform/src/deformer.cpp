@@ -8,6 +8,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <optional>
 #include <cmath>
 
 namespace qpreduce::deform {
@@ -233,6 +234,15 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   const Index n = S.n;
   const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
 
+  // The automatic proxies are placed on the referenced part of the mesh: a
+  // compacted copy only when some vertex is unreferenced, made once.
+  std::optional<CompactMesh> compact;
+  if (!S.unreferenced.empty() && (model.clusters.empty() || model.linear.count() == 0)) {
+    compact = compact_mesh(model.V, E, S.unreferenced);
+  }
+  const VerticesRef PV = compact ? VerticesRef(compact->V) : VerticesRef(model.V);
+  const ElementsRef PE = compact ? ElementsRef(compact->E) : E;
+
   // Rotation clusters.
   report("clusters", 0.0);
   detail::Timer t;
@@ -249,9 +259,8 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   } else {
     // Clusters of the referenced part (surfaces: one label per vertex; an
     // unreferenced vertex is an element without edges, labelled 0).
-    const CompactMesh cm = compact_mesh(model.V, E, S.unreferenced);
     Clustering clustering;
-    const ClusterSummary cs = rotation_clusters(cm.V, cm.E, tet ? ClusterElement::Element : ClusterElement::Vertex,
+    const ClusterSummary cs = rotation_clusters(PV, PE, tet ? ClusterElement::Element : ClusterElement::Vertex,
                                                 options.rotational_proxies, options.clustering, &clustering);
     if (!cs.ok()) {
       summary.status = cs.status;
@@ -259,9 +268,10 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
       return summary;
     }
     std::vector<int> labels = std::move(clustering.labels);
-    if (!tet && !S.unreferenced.empty()) {
+    if (!tet && compact) {
       std::vector<int> full(static_cast<size_t>(n), 0);
-      for (size_t i = 0; i < cm.old_of_new.size(); ++i) full[static_cast<size_t>(cm.old_of_new[i])] = labels[i];
+      for (size_t i = 0; i < compact->old_of_new.size(); ++i)
+        full[static_cast<size_t>(compact->old_of_new[i])] = labels[i];
       labels = std::move(full);
     }
     S.set_clusters(std::move(labels), clustering.count);
@@ -273,10 +283,10 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   LinearProxies proxies = model.linear;
   if (proxies.count() == 0) {
     // Farthest-point samples of the referenced part, in original indices.
-    const CompactMesh cm = compact_mesh(model.V, E, S.unreferenced);
-    proxies = linear_proxies_fps(cm.V, cm.E, options.linear_proxies);
-    for (auto& g : proxies.groups)
-      for (Index& v : g) v = cm.old_of_new[static_cast<size_t>(v)];
+    proxies = linear_proxies_fps(PV, PE, options.linear_proxies);
+    if (compact)
+      for (auto& g : proxies.groups)
+        for (Index& v : g) v = compact->old_of_new[static_cast<size_t>(v)];
   }
   std::vector<std::vector<Index>> groups;
   for (const auto& g : proxies.groups) {
