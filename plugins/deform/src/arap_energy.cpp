@@ -4,6 +4,8 @@
 #include <Eigen/SVD>
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 
 namespace qpreduce::deform {
@@ -62,6 +64,10 @@ bool EnergyParameters::is_valid(std::string* why) const {
   }
   if (!(beta >= 0.0) || !std::isfinite(beta)) {
     if (why) *why = fmt::format("beta must be finite and non-negative, got {}", beta);
+    return false;
+  }
+  if (!(gamma >= 0.0) || !std::isfinite(gamma)) {
+    if (why) *why = fmt::format("gamma must be finite and non-negative, got {}", gamma);
     return false;
   }
   if (alpha == 0.0 && beta == 0.0) {
@@ -155,6 +161,100 @@ RotationElements tet_elements(const Vertices& V, const Tetrahedra& T) {
   return el;
 }
 
+std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& el) {
+  std::vector<std::pair<Index, Index>> pairs;
+  if (el.is_surface) {
+    // Element k is vertex k: neighbours are the mesh edges.
+    pairs.reserve(el.edge_i.size() / 3);
+    for (size_t e = 0; e < el.edge_i.size(); ++e) {
+      const Index i = el.edge_i[e], j = el.edge_j[e];
+      if (i != j) pairs.emplace_back(std::min(i, j), std::max(i, j));
+    }
+  } else {
+    // Tets sharing a face: sort the (face, tet) records by face.
+    struct FaceOf {
+      std::array<int, 3> face;
+      Index tet;
+    };
+    std::vector<FaceOf> faces;
+    faces.reserve(static_cast<size_t>(el.size()) * 4);
+    for (Index k = 0; k < el.size(); ++k) {
+      std::vector<int> v;
+      for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+        v.push_back(el.edge_i[e]);
+        v.push_back(el.edge_j[e]);
+      }
+      std::sort(v.begin(), v.end());
+      v.erase(std::unique(v.begin(), v.end()), v.end());
+      if (v.size() != 4) continue;
+      for (int skip = 0; skip < 4; ++skip) {
+        FaceOf f{{0, 0, 0}, k};
+        for (int c = 0, o = 0; c < 4; ++c)
+          if (c != skip) f.face[static_cast<size_t>(o++)] = v[static_cast<size_t>(c)];
+        faces.push_back(f);
+      }
+    }
+    std::sort(faces.begin(), faces.end(), [](const FaceOf& a, const FaceOf& b) {
+      return a.face != b.face ? a.face < b.face : a.tet < b.tet;
+    });
+    for (size_t a = 0; a + 1 < faces.size(); ++a)
+      for (size_t b = a + 1; b < faces.size() && faces[b].face == faces[a].face; ++b)
+        pairs.emplace_back(faces[a].tet, faces[b].tet);
+  }
+  std::sort(pairs.begin(), pairs.end());
+  pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
+  return pairs;
+}
+
+namespace {
+
+// Column of s(row, col) for the basis matrices of Eq. 9 in the column-major 3×3
+// layout (index 3·col + row), with signs: d_0 = I, d_1..3 = [e_1..3]×.
+struct BasisEntry {
+  int index;
+  double sign;
+};
+const std::vector<BasisEntry>& basis_entries(int b) {
+  static const std::vector<BasisEntry> entries[4] = {
+      {{0, 1.0}, {4, 1.0}, {8, 1.0}},  // I
+      {{5, 1.0}, {7, -1.0}},           // [e_x]×: (2,1) = +1, (1,2) = −1
+      {{6, 1.0}, {2, -1.0}},           // [e_y]×: (0,2) = +1, (2,0) = −1
+      {{1, 1.0}, {3, -1.0}}};          // [e_z]×: (1,0) = +1, (0,1) = −1
+  return entries[b];
+}
+constexpr double kBasisNorm[4] = {3.0, 2.0, 2.0, 2.0};  // ‖d_b‖²_F
+
+// Eq. 11's terms for one neighbour pair (k, j) with weight w = γ·a_kj, in
+// clusters a and b: 2w·diag(3,2,2,2)·(Q_k − Q_j) in L_QQ; 2w⟨s_a − s_b, q_k − q_j⟩
+// as −Sᵀ Dᵀ u entries of D; w‖s_a − s_b‖² in N.
+void add_moving_frame_pair(Index qk, Index qj, Index a, Index b, double w, Triplets* tl, Triplets* td,
+                           Triplets* tn) {
+  for (int c = 0; c < 4; ++c) {
+    const double v = 2.0 * w * kBasisNorm[c];
+    tl->emplace_back(qk + c, qk + c, v);
+    tl->emplace_back(qj + c, qj + c, v);
+    tl->emplace_back(qk + c, qj + c, -v);
+    tl->emplace_back(qj + c, qk + c, -v);
+  }
+  if (a == b) return;
+  for (int c = 0; c < 4; ++c)
+    for (const BasisEntry& be : basis_entries(c)) {
+      const double v = 2.0 * w * be.sign;
+      td->emplace_back(qk + c, 9 * a + be.index, -v);
+      td->emplace_back(qk + c, 9 * b + be.index, v);
+      td->emplace_back(qj + c, 9 * a + be.index, v);
+      td->emplace_back(qj + c, 9 * b + be.index, -v);
+    }
+  for (int e = 0; e < 9; ++e) {
+    tn->emplace_back(9 * a + e, 9 * a + e, 2.0 * w);
+    tn->emplace_back(9 * b + e, 9 * b + e, 2.0 * w);
+    tn->emplace_back(9 * a + e, 9 * b + e, -2.0 * w);
+    tn->emplace_back(9 * b + e, 9 * a + e, -2.0 * w);
+  }
+}
+
+}  // namespace
+
 ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& el,
                                           const std::vector<int>& cluster, Index d,
                                           const EnergyParameters& params) {
@@ -170,14 +270,16 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
     }
   }
   const Index nv = 3 * n, nu = nv + 4 * r;
-  Triplets tl, td;
+  Triplets tl, td, tn;
   tl.reserve(static_cast<size_t>(el.weight.size()) * 60 + static_cast<size_t>(r) * 16);
+  tn.reserve(static_cast<size_t>(r) * 27);
   td.reserve(static_cast<size_t>(el.weight.size()) * 54);
   for (Index k = 0; k < r; ++k) {
     const Index qk = nv + 4 * k;
     const Index col0 = 9 * static_cast<Index>(cluster[k]);
     Eigen::Matrix4d Lqq = regulariser(el.measure(k), params, el.is_surface,
                                       el.is_surface ? Vec3(row(el.normal, k)) : Vec3::Zero());
+    Eigen::Matrix3d Nk = Eigen::Matrix3d::Zero();  // Σ c e eᵀ: ½Σc‖s e‖² = ½ Σ_rows s_row·Nk·s_rowᵀ
     for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
       const Index i = el.edge_i[e], j = el.edge_j[e];
       const double c = el.weight[e];
@@ -197,6 +299,7 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
         }
       }
       Lqq.noalias() += c * J.transpose() * J;
+      Nk.noalias() += c * ev * ev.transpose();
       // Linear term: coefficient of s(rr, cc) is c·e_cc·(e′ − J·Q)_rr.
       for (int cc = 0; cc < 3; ++cc) {
         const double ce = c * ev(cc);
@@ -211,8 +314,20 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
     }
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) tl.emplace_back(qk + a, qk + b, Lqq(a, b));
+    // s(rr, cc) sits at col0 + 3cc + rr; the entries of one row rr couple.
+    for (int rr = 0; rr < 3; ++rr)
+      for (int c1 = 0; c1 < 3; ++c1)
+        for (int c2 = 0; c2 < 3; ++c2)
+          if (Nk(c1, c2) != 0.0) tn.emplace_back(col0 + 3 * c1 + rr, col0 + 3 * c2 + rr, Nk(c1, c2));
+  }
+  if (params.gamma > 0.0) {
+    for (const auto& [k, j] : element_neighbours(el)) {
+      const double w = params.gamma * 0.5 * (el.measure(k) + el.measure(j));
+      add_moving_frame_pair(nv + 4 * k, nv + 4 * j, cluster[k], cluster[j], w, &tl, &td, &tn);
+    }
   }
   ModifiedArapSystem sys;
+  sys.q_separable = !(params.gamma > 0.0);
   sys.n = n;
   sys.r = r;
   sys.d = d;
@@ -220,10 +335,17 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
   sys.L.setFromTriplets(tl.begin(), tl.end());
   sys.D.resize(nu, 9 * d);
   sys.D.setFromTriplets(td.begin(), td.end());
+  sys.N.resize(9 * d, 9 * d);
+  sys.N.setFromTriplets(tn.begin(), tn.end());
   return sys;
 }
 
 EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sys) {
+  if (!sys.q_separable) {
+    throw std::invalid_argument(
+        "eliminate_rotation_corrections: L_QQ couples neighbouring elements (gamma > 0), so Q cannot be "
+        "eliminated element by element; keep Q in the factored system");
+  }
   const Index nv = 3 * sys.n, nq = 4 * sys.r;
   const SparseMatrix<double> LVV = sys.L.topLeftCorner(nv, nv);
   const SparseMatrix<double> LVQ = sys.L.block(0, nv, nv, nq);
@@ -280,6 +402,16 @@ double modified_arap_energy(const Vertices& V, const RotationElements& el, const
     }
     energy += params.alpha * el.measure(k) * qm.squaredNorm();
     if (el.is_surface) energy += params.beta * el.measure(k) * (qm * Vec3(row(el.normal, k))).squaredNorm();
+  }
+  if (params.gamma > 0.0) {
+    auto frame = [&](Index k) {  // s_{i_k} + q_k
+      const Eigen::Vector4d q = Q.segment<4>(4 * k);
+      Eigen::Matrix3d qm;
+      qm << q(0), -q(3), q(2), q(3), q(0), -q(1), -q(2), q(1), q(0);
+      return Eigen::Matrix3d(Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * cluster[k]) + qm);
+    };
+    for (const auto& [k, j] : element_neighbours(el))
+      energy += params.gamma * 0.5 * (el.measure(k) + el.measure(j)) * (frame(k) - frame(j)).squaredNorm();
   }
   return energy;
 }

@@ -5,6 +5,8 @@
 
 #include <qpreduce/detail/timer.h>
 
+#include <Eigen/LU>
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -30,25 +32,16 @@ bool DeformerOptions::is_valid(std::string* why) const {
   if (iterations < 1) return fail(fmt::format("iterations must be ≥ 1, got {}", iterations));
   if (!clustering.is_valid(&sub)) return fail("clustering: " + sub);
   if (!subspace.is_valid(&sub)) return fail("subspace: " + sub);
+  if (!custom_model && model == ModelKind::Conformal && (!(conformal_bound > 1.0) || !std::isfinite(conformal_bound))) {
+    return fail(fmt::format("conformal_bound must be finite and > 1, got {}", conformal_bound));
+  }
   return true;
 }
 
-namespace detail_deformer {
-
-double RotationProjection::project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) {
-  double change2 = 0.0;
-  const Index d = s.size() / 9;
-  for (Index i = 0; i < d; ++i) {
-    const Eigen::Map<const Eigen::Matrix3d> G(g.data() + 9 * i);
-    Eigen::Map<Eigen::Matrix3d> si(s.data() + 9 * i);
-    const Eigen::Matrix3d R = fit_rotation(G);
-    change2 += (R - si).squaredNorm();
-    si = R;
-  }
-  return std::sqrt(change2);
+std::shared_ptr<const DeformationModel> DeformerOptions::resolve_model() const {
+  if (custom_model) return custom_model;
+  return model == ModelKind::Conformal ? make_conformal_model(energy, conformal_bound) : make_arap_model(energy);
 }
-
-}  // namespace detail_deformer
 
 CompactMesh detail_deformer::compact_mesh(const Vertices& V, const ElementsRef& E,
                                           const std::vector<Index>& unreferenced) {
@@ -122,8 +115,16 @@ void Deformer::State::set_topology(const DeformableModel& model) {
   Index free_count = 0;
   for (Index v = 0; v < n; ++v)
     if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) control_of_free[v] = 3 * free_count++;
-  nu = 3 * free_count + 12 * s;
+  patch_base = 3 * free_count;
+  nu = patch_base + 12 * s;
+  keep_q = false;
   elements = tet ? tet_elements(model.V, model.T) : spokes_and_rims_elements(model.V, model.F);
+}
+
+void Deformer::State::keep_rotation_corrections() {
+  if (keep_q) return;
+  keep_q = true;
+  nu += 4 * elements.size();
 }
 
 void Deformer::State::set_clusters(std::vector<int> labels, Index count) {
@@ -151,7 +152,7 @@ void Deformer::State::control_row(Index v, int a, double scale, Index col, Tripl
     t->emplace_back(control_of_free[v] + a, col, scale);
     return;
   }
-  const Index base = nu - 12 * s + 12 * p;
+  const Index base = patch_base + 12 * p;
   for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
   t->emplace_back(base + 9 + a, col, scale);
 }
@@ -184,6 +185,7 @@ void Deformer::State::make_basis(const SparseMatrix<double>& P) {
 }
 
 void Deformer::State::finish(const DeformerOptions& options) {
+  projection = model->projection(cluster_geometry(rest, elements, clusters, d));
   S.resize(9 * d);
   x = Eigen::VectorXd::Zero(nx);
   s_local.resize(9 * d);
@@ -211,6 +213,12 @@ const std::vector<int>& Deformer::clusters() const { return state_->clusters; }
 const std::vector<int>& Deformer::patch_of_vertex() const { return state_->patch_of_vertex; }
 const RotationElements& Deformer::elements() const { return state_->elements; }
 const Eigen::VectorXd& Deformer::rotations() const { return state_->S; }
+Eigen::VectorXd Deformer::cluster_scales() const {
+  Eigen::VectorXd psi(state_->d);
+  for (Index a = 0; a < state_->d; ++a) psi(a) = std::cbrt(Eigen::Map<const Eigen::Matrix3d>(state_->S.data() + 9 * a).determinant());
+  return psi;
+}
+const std::shared_ptr<const DeformationModel>& Deformer::model() const { return state_->model; }
 const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->r0; }
 const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis() const {
   return state_->basis;
@@ -231,6 +239,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   PrecomputeSummary summary;
   S.set_topology(model);
   S.inputs = {model.F, model.T, model.clusters, model.linear.groups, options};
+  S.model = options.resolve_model();
   const Index n = S.n;
   const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
 
@@ -317,15 +326,43 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     }
   }
 
-  // Energy with Q eliminated, then the control layer.
+  // The model's energy (Q eliminated when L_QQ is block diagonal), then the
+  // control layer.
   report("energy", 0.15);
   t.reset();
-  const ModifiedArapSystem full = assemble_modified_arap(model.V, S.elements, S.clusters, S.d, options.energy);
-  const EliminatedArapSystem elim = eliminate_rotation_corrections(full);
-  const SparseMatrix<double> P = S.control_matrix();
-  const SparseMatrix<double> Pt = P.transpose();
-  const SparseMatrix<double> Hu = SparseMatrix<double>(Pt * elim.H * P);
-  const SparseMatrix<double> Du = Pt * elim.Ds;
+  ModifiedArapSystem full = S.model->assemble(model.V, S.elements, S.clusters, S.d);
+  detail::check_size("DeformationModel::assemble: L rows", 3 * n + 4 * r, full.L.rows());
+  detail::check_size("DeformationModel::assemble: D columns", 9 * S.d, full.D.cols());
+  SparseMatrix<double> Hu, Du, DV;
+  SparseMatrix<double> P;
+  if (full.q_separable) {
+    const EliminatedArapSystem elim = eliminate_rotation_corrections(full);
+    P = S.control_matrix();
+    const SparseMatrix<double> Pt = P.transpose();
+    Hu = Pt * elim.H * P;
+    Du = Pt * elim.Ds;
+    DV = elim.DV;
+  } else {
+    // Q stays: u = [control (n_u − 4r); Q], [V′; Q] = blockdiag(P_V, I)·u.
+    S.keep_rotation_corrections();
+    P = S.control_matrix();
+    SparseMatrix<double> Pfull(3 * n + 4 * r, S.nu);
+    {
+      Triplets tp;
+      tp.reserve(static_cast<size_t>(P.nonZeros() + 4 * r));
+      for (Index c = 0; c < P.outerSize(); ++c)
+        for (SparseMatrix<double>::InnerIterator it(P, c); it; ++it) tp.emplace_back(it.row(), c, it.value());
+      const Index q0 = S.patch_base + 12 * S.s;
+      for (Index i = 0; i < 4 * r; ++i) tp.emplace_back(3 * n + i, q0 + i, 1.0);
+      Pfull.setFromTriplets(tp.begin(), tp.end());
+    }
+    const SparseMatrix<double> Pt = Pfull.transpose();
+    Hu = Pt * full.L * Pfull;
+    Hu = 0.5 * (Hu + SparseMatrix<double>(Hu.transpose()));
+    Du = Pt * full.D;
+    DV = full.D.topRows(3 * n);
+  }
+  full = ModifiedArapSystem();  // free L, D before the factorization
   Triplets tc;
   for (Index j = 0; j < S.m; ++j) {
     const double w = 1.0 / static_cast<double>(groups[j].size());
@@ -333,7 +370,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
       for (int a = 0; a < 3; ++a) tc.emplace_back(S.control_of_free[v] + a, 3 * j + a, w);
   }
   for (Index p = 0; p < S.s; ++p)
-    for (int c = 0; c < 12; ++c) tc.emplace_back(S.nu - 12 * S.s + 12 * p + c, 3 * S.m + 12 * p + c, 1.0);
+    for (int c = 0; c < 12; ++c) tc.emplace_back(S.patch_base + 12 * p + c, 3 * S.m + 12 * p + c, 1.0);
   SparseMatrix<double> C(S.nu, S.nx);
   C.setFromTriplets(tc.begin(), tc.end());
   summary.assembly_seconds = t.seconds();
@@ -379,7 +416,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   {
     // M_N, M_U = (D_Vᵀ·P)·[N UD] with the sparse 9d × n_u factor first, and
     // the float basis block by block: no 3n × p double copy of P·[N UD].
-    const SparseMatrix<double> DVtP = SparseMatrix<double>(elim.DV.transpose()) * P;
+    const SparseMatrix<double> DVtP = SparseMatrix<double>(DV.transpose()) * P;
     S.MN = DVtP * S.solver.subspace().N;
     S.MU = DVtP * S.solver.subspace().UD;
     S.make_basis(P);
@@ -446,7 +483,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     patches.push_back(p);
   }
   for (Index p : patches) {
-    for (int c = 0; c < 12; ++c) ta.emplace_back(S.nu - 12 * S.s + 12 * p + c, col + c, 1.0);
+    for (int c = 0; c < 12; ++c) ta.emplace_back(S.patch_base + 12 * p + c, col + c, 1.0);
     col += 12;
   }
   SparseMatrix<double> A(S.nu, col);
@@ -503,7 +540,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   }
   detail::Timer t;
   AlternatingOptions opts = S.alternating;
-  const AlternatingSummary as = S.fused.run(S.phase1, S.projection, S.b, opts, S.x, S.s_local);
+  const AlternatingSummary as = S.fused.run(S.phase1, *S.projection, S.b, opts, S.x, S.s_local);
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
   for (Index i = 0; i < S.d; ++i) {

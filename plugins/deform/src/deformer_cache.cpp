@@ -1,6 +1,6 @@
 // Deformer::save / Deformer::load — the precomputed model on disk.
 //
-// Layout (little-endian, version 1; docs/formats.md):
+// Layout (little-endian, version 2; docs/formats.md):
 //   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
 //   payload  records in a fixed order (below): integers as i64, labels as i32,
 //            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
@@ -34,7 +34,7 @@ namespace qpreduce::deform {
 namespace {
 
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
-constexpr std::uint32_t kVersion = 1;
+constexpr std::uint32_t kVersion = 2;  // 2: the model's name and parameters, Q kept or not
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
 constexpr std::streamoff kTrailerBytes = 8 + 4;
@@ -216,10 +216,11 @@ class Reader {
 };
 
 // The options that change what precompute makes, as (name, value) pairs in
-// a fixed order. Runtime options (iterations, global_rotation) are not here.
-std::vector<std::pair<const char*, double>> result_options(const DeformerOptions& o) {
-  return {{"energy.alpha", o.energy.alpha},
-          {"energy.beta", o.energy.beta},
+// a fixed order: the model's parameters, then the deformer's. Runtime
+// options (iterations, global_rotation) are not here.
+std::vector<std::pair<std::string, double>> result_options(const DeformationModel& model, const DeformerOptions& o) {
+  std::vector<std::pair<std::string, double>> opts = model.parameters();
+  const std::vector<std::pair<std::string, double>> rest = {
           {"rotational_proxies", static_cast<double>(o.rotational_proxies)},
           {"linear_proxies", static_cast<double>(o.linear_proxies)},
           {"clustering.kmeans.seed", static_cast<double>(o.clustering.kmeans.seed)},
@@ -228,7 +229,11 @@ std::vector<std::pair<const char*, double>> result_options(const DeformerOptions
           {"clustering.spectral.eigenvectors", static_cast<double>(o.clustering.spectral.eigenvectors)},
           {"clustering.spectral.shift_scale", o.clustering.spectral.shift_scale},
           {"subspace.reduced_lift_tolerance", o.subspace.reduced_lift_tolerance}};
+  opts.insert(opts.end(), rest.begin(), rest.end());
+  return opts;
 }
+
+std::vector<int> name_codes(const std::string& name) { return std::vector<int>(name.begin(), name.end()); }
 
 std::vector<std::int64_t> flatten(const std::vector<std::vector<Index>>& groups) {
   std::vector<std::int64_t> flat;
@@ -281,9 +286,11 @@ void Deformer::save(const std::string& path) const {
     w.put_vector(flatten(S.inputs.groups));
     w.put_vector(S.patch_of_vertex);
     w.put_vector(patch_codes(S.patch_types));
-    const auto opts = result_options(S.inputs.options);
+    w.put_vector(name_codes(S.model->name()));
+    const auto opts = result_options(*S.model, S.inputs.options);
     w.put<std::int64_t>(static_cast<std::int64_t>(opts.size()));
     for (const auto& [name, value] : opts) w.put(value);
+    w.put<std::int64_t>(S.keep_q ? 1 : 0);
     // What precompute made.
     w.put_vector(S.clusters);
     w.put<std::int64_t>(S.d);
@@ -330,15 +337,24 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel&
   // As set_topology made them (with the internal patch of unreferenced vertices).
   compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), S.patch_of_vertex);
   compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(S.patch_types));
-  const auto opts = result_options(options);
+  S.model = options.resolve_model();
+  const std::vector<int> stored_name = r.get_vector<int>("model name");
+  if (stored_name != name_codes(S.model->name())) {
+    r.mismatch(fmt::format("the cache was made with the model \"{}\", \"{}\" given",
+                           std::string(stored_name.begin(), stored_name.end()), S.model->name()));
+  }
+  const auto opts = result_options(*S.model, options);
   const Index stored_opts = r.get_count("options", sizeof(double));
   if (stored_opts != static_cast<Index>(opts.size())) {
     r.mismatch(fmt::format("{} stored options, {} expected", stored_opts, opts.size()));
   }
   for (const auto& [name, value] : opts) {
-    const double stored = r.get<double>(name);
+    const double stored = r.get<double>(name.c_str());
     if (stored != value) r.mismatch(fmt::format("option {} is {} in the cache, {} given", name, stored, value));
   }
+  const auto keep_q = r.get<std::int64_t>("Q kept");
+  if (keep_q != 0 && keep_q != 1) throw IoError(path, 0, fmt::format("invalid Q-kept flag {}", keep_q));
+  if (keep_q == 1) S.keep_rotation_corrections();
 
   // What precompute made.
   std::vector<int> labels = r.get_vector<int>("cluster labels");

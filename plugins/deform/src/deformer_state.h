@@ -2,7 +2,8 @@
 // (precompute, on-site step, frames) and deformer_cache.cpp (save/load).
 //
 // Shapes (n vertices, r rotation elements, d clusters, m linear proxies,
-// s patches, n_u = 3·n_free + 12·s control unknowns, nx = 3m + 12s):
+// s patches, n_u = 3·n_free + 12·s (+ 4r when Q is kept) control unknowns,
+// nx = 3m + 12s):
 //   subspace B = [N UD]            n_u × (nx + 9d), inside `solver`
 //   P (control_row)                3n × n_u, sparse, V′ = P·u
 //   basis = P·B (float, row-major) 3n × (nx + 9d)
@@ -21,13 +22,6 @@ namespace qpreduce::deform::detail_deformer {
 
 using Triplets = std::vector<Eigen::Triplet<double>>;
 using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-
-// Phase 2 (Eq. 19): per cluster, s_i = nearest rotation of G_i, with
-// G = M_N·X + M_U·S formed by the engine's FusedAlternation.
-class RotationProjection final : public InputProjection<double> {
- public:
-  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> s) override;
-};
 
 // A mesh without its unreferenced vertices; old_of_new maps back.
 struct CompactMesh {
@@ -66,12 +60,15 @@ struct Deformer::State {
   std::vector<Index> unreferenced;  // vertices used by no element, ascending
   Index n = 0, d = 0, m = 0, s = 0;
   Index nu = 0;                        // control-layer size
+  Index patch_base = 0;                // first patch unknown (3·n_free); Q (when kept) starts at patch_base + 12s
+  bool keep_q = false;                 // Q not eliminated (the model's L_QQ is not block diagonal)
   std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
   std::vector<Index> fixed_patches;
   Eigen::VectorXd cluster_measure;     // Σ a_k per cluster (global rotation weights)
   // Subspace and reduced operators.
   SubspaceSolver<double> solver;
-  detail_deformer::RotationProjection projection;
+  std::shared_ptr<const DeformationModel> model;
+  std::unique_ptr<ClusterProjection> projection;  // the model's Phase 2
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   FusedAlternation<double> fused;
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
@@ -92,9 +89,11 @@ struct Deformer::State {
   bool ready = false;
 
   // Validates the mesh and the patches of `model`, and sets rest, n, the
-  // patches, control_of_free, nu and the rotation elements. Throws
-  // std::invalid_argument naming the problem.
+  // patches, control_of_free, nu (without Q) and the rotation elements.
+  // Throws std::invalid_argument naming the problem.
   void set_topology(const DeformableModel& model);
+  // Appends the 4r Q unknowns to the control layer (keep_q = true).
+  void keep_rotation_corrections();
   // Sets the cluster labels (r entries in [0, d), none empty) and their
   // measures. Throws std::invalid_argument.
   void set_clusters(std::vector<int> labels, Index count);
@@ -107,8 +106,8 @@ struct Deformer::State {
   // basis = P·[N UD] in float (3n × (nx + 9d)), once the solver holds the
   // subspace; through 3n × 32 double blocks, never the whole double product.
   void make_basis(const SparseMatrix<double>& P);
-  // After the solver, basis, MN and MU are set: the frame workspaces and the
-  // runtime options; ready = true.
+  // After the solver, basis, MN and MU are set: the model's projection, the
+  // frame workspaces and the runtime options; ready = true.
   void finish(const DeformerOptions& options);
 };
 

@@ -23,6 +23,10 @@ bool ReferenceOptions::is_valid(std::string* why) const {
   };
   std::string sub;
   if (energy == ReferenceEnergy::ModifiedArap && !parameters.is_valid(&sub)) return fail("parameters: " + sub);
+  if (energy == ReferenceEnergy::ModifiedArap && parameters.gamma != 0.0) {
+    return fail("parameters: gamma > 0 (the moving-frame term, Eq. 11) is not modelled by the full-space E' "
+                "references; compare with gamma = 0 or against classic ARAP");
+  }
   if (max_iterations < 1) return fail(fmt::format("max_iterations must be ≥ 1, got {}", max_iterations));
   for (const auto& [name, v] : {std::pair<const char*, double>{"step_tolerance", step_tolerance},
                                 {"energy_tolerance", energy_tolerance},

@@ -22,16 +22,27 @@
 // penalised by α·a_k‖q_k‖²_F = α·a_k(3q0² + 2‖ω‖²) and
 // β·a_k‖q_k n_k‖² = β·a_k(q0² + ‖ω‖² − (ω·n_k)²) (β surfaces only).
 //
+// Moving-frame penalty (Eq. 11), optional (γ > 0):
+//     γ·Σ_{(k,j)∈H} a_kj‖s_{i_k} + q_k − s_{i_j} − q_j‖²_F,   a_kj = (a_k + a_j)/2,
+// over neighbouring elements H (element_neighbours): vertices joined by an
+// edge (surfaces), tets sharing a face (solids). With d_0 = I, d_1..3 = [e_a]×
+// (⟨d_a, d_b⟩ = diag(3, 2, 2, 2)) it couples Q_k with Q_j, S with Q, and the
+// cluster rotations s_a, s_b of neighbouring elements in different clusters.
+//
 // Layout. Unknowns u = [V′; Q]: V′ is 3n with vertex i at rows 3i..3i+2 (x,
 // y, z interleaved), Q is 4r with element k at rows 3n + 4k..3n + 4k + 3.
 // Rotational proxies S are 9d: cluster i at 9i + 3c + r holds s_i(r, c)
 // (column-major). Then
-//     E′(u, S) = ½ uᵀ L u − Sᵀ Dᵀ u + ½ Σ c_ijk ‖s e_ij‖²,
-//     L: (3n + 4r)² symmetric PSD,  D: (3n + 4r) × 9d,
-// i.e. the linear term is q = D·S (the engine's "D" design space).
+//     E′(u, S) = ½ uᵀ L u − Sᵀ Dᵀ u + ½ Sᵀ N S           (exactly, no constant)
+//     L: (3n + 4r)² symmetric PSD,  D: (3n + 4r) × 9d,  N: 9d × 9d,
+// i.e. the linear term is q = D·S (the engine's "D" design space), and the
+// joint Hessian [[L, −D], [−Dᵀ, N]] of (u, S) is symmetric PSD (E′ is a sum
+// of squares). N = ½Σ c‖s e‖²'s Hessian plus γ's s–s coupling; it does not
+// enter Phase 1.
 //
-// Eliminating Q. L_QQ is block diagonal (one 4×4 SPD block per element when
-// α > 0), so Q can be minimised out element by element (DESIGN choice 3):
+// Eliminating Q. Without γ, L_QQ is block diagonal (one 4×4 SPD block per
+// element when α > 0), so Q can be minimised out element by element (DESIGN
+// choice 3); with γ > 0 it is not, and Q stays an unknown of the factored system:
 //     H = L_VV − L_VQ L_QQ⁻¹ L_QV   (3n × 3n, PSD, null space = translations),
 //     D_s = D_V − L_VQ L_QQ⁻¹ D_Q   (3n × 9d).
 // The minimum of E′ over Q for fixed (V′, S) is
@@ -44,6 +55,7 @@
 #include <qpreduce/common.h>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace qpreduce::deform {
@@ -76,6 +88,11 @@ struct EnergyParameters {
   // β: extra penalty on q_k's action on the normal (surfaces only), which
   // discourages out-of-surface distortion such as bulging.
   double beta = 0.1;
+  // γ: moving-frame differential penalty (Eq. 11) between neighbouring
+  // rotation elements; 0 (the default) switches it off. It counters folds
+  // in sharp bends (paper Fig. 8) at the cost of keeping Q (4 per element)
+  // in the factored system. See docs/plugins.md for its effect.
+  double gamma = 0.0;
 
   bool is_valid(std::string* why) const;
 };
@@ -84,7 +101,14 @@ struct ModifiedArapSystem {
   Index n = 0, r = 0, d = 0;
   SparseMatrix<double> L;  // (3n + 4r) × (3n + 4r)
   SparseMatrix<double> D;  // (3n + 4r) × 9d
+  SparseMatrix<double> N;  // 9d × 9d
+  bool q_separable = true;  // L_QQ block diagonal (γ = 0): Q can be eliminated
 };
+
+// Pairs (k, j), k < j, of neighbouring rotation elements (the set H of
+// Eq. 11): surface elements k, j whose vertices share an edge; tets sharing a
+// face. Sorted.
+std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& elements);
 
 // Assembles L and D of E′. cluster_of_element: r entries in [0, d).
 ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& elements,
@@ -99,10 +123,11 @@ struct EliminatedArapSystem {
 };
 
 // Eliminates Q. Throws std::invalid_argument when an L_QQ block is singular
-// (α = 0 with an element whose edges do not determine q_k).
+// (α = 0 with an element whose edges do not determine q_k), or when L_QQ is
+// not block diagonal (γ > 0; !system.q_separable).
 EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& system);
 
-// E′(V′, Q, S) evaluated term by term from Eq. 10 (for tests and reports).
+// E′(V′, Q, S) evaluated term by term from Eq. 10–11 (for tests and reports).
 // Vp: n × 3, Q: 4r, S: 9d.
 double modified_arap_energy(const Vertices& V, const RotationElements& elements,
                             const std::vector<int>& cluster_of_element, const EnergyParameters& params,

@@ -14,10 +14,17 @@
 // the rotational proxies (9 per cluster). Only V′ = P·[N UD] is kept for
 // reconstruction, in float, row-interleaved (3n × (3m + 12s + 9d)).
 //
+// The energy and the Phase 2 projection come from a DeformationModel
+// (model.h, the plugin contract): ARAP by default, conformal-like, or a
+// custom one. When the model's L_QQ is not block diagonal (γ > 0), Q is not
+// eliminated: u gets 4r more unknowns [.., Q], P has zero columns for them,
+// and the engine factors that larger system once.
+//
 // Per frame, k rounds of
 //   Phase 1 (Eq. 17): X = M_b·b + M_S·S   (engine FixedCoordinateSolver), and
-//   Phase 2 (Eq. 19): s_i = nearest rotation of G_i, G = M_N·X + M_U·S with
-//                     M_N = D_Vᵀ·P·N, M_U = D_Vᵀ·P·UD (9d × ·, precomputed),
+//   Phase 2 (Eq. 19): S = the model's projection of G = M_N·X + M_U·S with
+//                     M_N = D_Vᵀ·P·N, M_U = D_Vᵀ·P·UD (9d × ·, precomputed)
+//                     (ARAP: s_i = nearest rotation of G_i),
 // warm-started from the previous frame, with the global rotation adaptation
 // of the appendix: r₀ = nearest rotation of Σ_i a_i s_i is factored out before
 // the rounds (targets and S rotated by r₀ᵀ) and put back after.
@@ -25,6 +32,7 @@
 
 #include "qpreduce/deform/arap_energy.h"
 #include "qpreduce/deform/mesh.h"
+#include "qpreduce/deform/model.h"
 #include "qpreduce/deform/proxies.h"
 #include "qpreduce/deform/scene.h"
 
@@ -60,8 +68,23 @@ struct DeformableModel {
   bool is_tet() const { return T.rows() > 0; }
 };
 
+// The built-in models of model.h.
+enum class ModelKind { Arap, Conformal };
+
 struct DeformerOptions {
   EnergyParameters energy;
+  // The deformation model (plugin contract, model.h): ARAP (rotations) or
+  // conformal-like (scaled rotations within [1/conformal_bound,
+  // conformal_bound], Eq. 48–49), both over the energy E′ of `energy`.
+  ModelKind model = ModelKind::Arap;
+  // ψ_max of the conformal model (> 1). 2 lets a cluster shrink to half or
+  // grow to twice its size: enough for the uniform scalings of the paper's
+  // Fig. 10 setting, while keeping ψ from running away where few handles
+  // leave a region unconstrained.
+  double conformal_bound = 2.0;
+  // A model of your own (docs/plugins.md); when set, it replaces `model` and
+  // `energy`.
+  std::shared_ptr<const DeformationModel> custom_model;
   // Automatic proxy counts, used when the model does not give them. The
   // paper's Table 1 uses 20–60 of each; 27 rotational clusters and 33 linear
   // proxies are its Cactus/Bumpy Plane setting.
@@ -79,6 +102,9 @@ struct DeformerOptions {
   SubspaceOptions subspace;
 
   bool is_valid(std::string* why) const;
+  // The model these options select: custom_model, or make_arap_model(energy),
+  // or make_conformal_model(energy, conformal_bound).
+  std::shared_ptr<const DeformationModel> resolve_model() const;
 };
 
 // Called during precompute with a stage name and the overall fraction done.
@@ -177,6 +203,10 @@ class Deformer {
   const std::vector<int>& patch_of_vertex() const;
   const RotationElements& elements() const;
   const Eigen::VectorXd& rotations() const;  // S, 9d (world frame)
+  // ψ_a = det(s_a)^(1/3) per cluster (1 for rotations; the conformal scale).
+  Eigen::VectorXd cluster_scales() const;
+  // The model in use (name(), parameters()); null before precompute.
+  const std::shared_ptr<const DeformationModel>& model() const;
   const Eigen::Matrix3d& global_rotation() const;
   // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
   // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
