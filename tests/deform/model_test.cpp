@@ -439,3 +439,87 @@ TEST_CASE("model options are validated", "[model][errors]") {
   CHECK_FALSE(moving.q_separable);
   CHECK_THROWS_WITH(eliminate_rotation_corrections(moving), Catch::Contains("gamma > 0"));
 }
+
+TEST_CASE("rigid patches stay rigid and fixed patches do not move, under every model", "[model][patches]") {
+  const auto kind = GENERATE(ModelKind::Arap, ModelKind::Conformal);
+  CAPTURE(kind == ModelKind::Conformal);
+  const Index around = 10, rings = 17;
+  const TriangleMesh m = shapes::capped_cylinder(0.5, 4.0, around, rings);
+  DeformableModel model;
+  model.V = m.V;
+  model.F = m.F;
+  Handles h = end_patches(&model, around, rings, PatchType::Fixed);
+  // Rings 7–9 form a free Rigid patch (index 2).
+  model.patch_types.push_back(PatchType::Rigid);
+  for (Index ring = 7; ring <= 9; ++ring)
+    for (Index v = 0; v < around; ++v) model.patch_of_vertex[static_cast<size_t>(ring * around + v)] = 2;
+  DeformerOptions opts;
+  opts.model = kind;
+  opts.rotational_proxies = 10;
+  opts.linear_proxies = 12;
+  opts.iterations = 20;
+  Deformer deformer;
+  const PrecomputeSummary ps = deformer.precompute(model, opts);
+  INFO(ps.message);
+  REQUIRE(ps.ok());
+  REQUIRE(deformer.set_handles(h).ok());
+  // Turn the top patch about its centre (0, 0, 4), grow it 15 % and shift it
+  // sideways, over a few frames.
+  Vertices out;
+  for (int f = 1; f <= 4; ++f) {
+    const double a = f / 4.0;
+    HandleTargets t;
+    t.points.resize(0, 3);
+    Eigen::Matrix<double, 3, 4> T;
+    T.leftCols<3>() = (1.0 + 0.15 * a) * Eigen::AngleAxisd(-a * 1.4, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    const Eigen::Vector3d c(0, 0, 4.0);
+    T.col(3) = c - T.leftCols<3>() * c + a * Eigen::Vector3d(0.3, 1.5, -0.5);
+    t.patch_transforms = {T};
+    deformer.frame(t, &out);
+  }
+  const double diag = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
+  // Fixed: the identity, and its vertices at rest (float reconstruction).
+  const Eigen::Matrix<double, 3, 4> fixed = deformer.patch_transform(0);
+  CHECK((fixed - Eigen::Matrix<double, 3, 4>::Identity()).cwiseAbs().maxCoeff() < 1e-9);
+  // Rigid: singular values 1 ± 1e-6, det +1, and it did turn.
+  const Eigen::Matrix<double, 3, 4> rigid = deformer.patch_transform(2);
+  const Eigen::Vector3d sv = Eigen::JacobiSVD<Eigen::Matrix3d>(rigid.leftCols<3>()).singularValues();
+  CHECK((sv.array() - 1.0).abs().maxCoeff() < 1e-6);
+  CHECK(rigid.leftCols<3>().determinant() > 0);
+  const double angle = Eigen::AngleAxisd(Eigen::Matrix3d(rigid.leftCols<3>())).angle();
+  INFO("rigid patch turned by " << angle);
+  CHECK(angle > 0.2);
+  double fixed_err = 0.0, rigid_err = 0.0;
+  for (Index v = 0; v < model.V.rows(); ++v) {
+    const int p = model.patch_of_vertex[static_cast<size_t>(v)];
+    const Eigen::Vector3d rest = model.V.row(v).transpose(), now = out.row(v).transpose();
+    if (p == 0) fixed_err = std::max(fixed_err, (now - rest).norm());
+    if (p == 2) rigid_err = std::max(rigid_err, (now - (rigid.leftCols<3>() * rest + rigid.col(3))).norm());
+  }
+  CHECK(fixed_err < 1e-6 * diag);
+  CHECK(rigid_err < 1e-6 * diag);
+  if (kind == ModelKind::Conformal) {
+    // The patch's own cluster is a rotation, whatever ψ the others take.
+    const Eigen::VectorXd psi = deformer.cluster_scales();
+    CHECK(psi.maxCoeff() > 1.01);  // the 15 % stretch is taken up by scaling elsewhere
+  }
+
+  // The same session from a cache, and a prescribed Rigid patch must be a rotation.
+  const std::string path = "model_test_rigid.bin";
+  deformer.save(path);
+  Deformer loaded;
+  REQUIRE(loaded.load(path, model, opts).ok());
+  std::remove(path.c_str());
+  Handles prescribed = h;
+  prescribed.patches.push_back(2);
+  REQUIRE(loaded.set_handles(prescribed).ok());
+  HandleTargets bad;
+  bad.points.resize(0, 3);
+  Eigen::Matrix<double, 3, 4> T = Eigen::Matrix<double, 3, 4>::Identity();
+  bad.patch_transforms = {T, T};
+  bad.patch_transforms[1](0, 0) = 1.2;
+  CHECK_THROWS_WITH(loaded.frame(bad, &out), Catch::Contains("Rigid"));
+  bad.patch_transforms[1](0, 0) = 1.0;
+  loaded.frame(bad, &out);
+  CHECK((loaded.patch_transform(2) - T).cwiseAbs().maxCoeff() < 1e-9);
+}

@@ -146,6 +146,68 @@ void Deformer::State::set_clusters(std::vector<int> labels, Index count) {
   for (Index k = 0; k < r; ++k) cluster_measure(clusters[k]) += elements.measure(k);
 }
 
+std::vector<Index> Deformer::State::patch_elements(Index p, const Tetrahedra& T) const {
+  std::vector<Index> out;
+  if (T.rows() == 0) {
+    for (Index v = 0; v < n; ++v)
+      if (patch_of_vertex[v] == p) out.push_back(v);
+    return out;
+  }
+  for (int need = 4; need >= 1 && out.empty(); need -= 3) {  // all four corners, else any
+    for (Index t = 0; t < T.rows(); ++t) {
+      int inside = 0;
+      for (int c = 0; c < 4; ++c) inside += patch_of_vertex[T(t, c)] == p;
+      if (inside >= need) out.push_back(t);
+    }
+  }
+  return out;
+}
+
+void Deformer::State::separate_rigid_clusters(const Tetrahedra& T) {
+  rigid_cluster_of_patch.assign(static_cast<size_t>(s), -1);
+  std::vector<int> labels = clusters;
+  std::vector<char> taken(labels.size(), 0);
+  int next = static_cast<int>(d);
+  std::vector<Index> rigid;
+  for (Index p = 0; p < s; ++p) {
+    if (patch_types[p] != PatchType::Rigid) continue;
+    rigid.push_back(p);
+    for (Index k : patch_elements(p, T)) {
+      if (taken[k]) continue;  // a tet touching two rigid patches stays with the first
+      taken[k] = 1;
+      labels[k] = next;
+    }
+    ++next;
+  }
+  if (rigid.empty()) return;
+  // Drop emptied clusters, keeping the order.
+  std::vector<int> remap(static_cast<size_t>(next), -1);
+  for (int l : labels) remap[l] = 0;
+  int count = 0;
+  for (int& r : remap)
+    if (r == 0) r = count++;
+  for (int& l : labels) l = remap[l];
+  for (size_t i = 0; i < rigid.size(); ++i) {
+    const int c = remap[d + static_cast<Index>(i)];
+    if (c < 0) throw std::invalid_argument(fmt::format("Rigid patch {} has no element", rigid[i]));
+    rigid_cluster_of_patch[rigid[i]] = c;
+  }
+  set_clusters(std::move(labels), count);
+}
+
+void Deformer::State::find_rigid_clusters(const Tetrahedra& T) {
+  rigid_cluster_of_patch.assign(static_cast<size_t>(s), -1);
+  for (Index p = 0; p < s; ++p) {
+    if (patch_types[p] != PatchType::Rigid) continue;
+    const std::vector<Index> el = patch_elements(p, T);
+    if (el.empty()) throw std::invalid_argument(fmt::format("Rigid patch {} has no element", p));
+    const int c = clusters[el.front()];
+    for (Index k : el)
+      if (clusters[k] != c) throw std::invalid_argument(fmt::format("Rigid patch {} spans several clusters", p));
+    rigid_cluster_of_patch[p] = c;
+  }
+}
+
 void Deformer::State::control_row(Index v, int a, double scale, Index col, Triplets* t) const {
   const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
   if (p < 0) {
@@ -185,7 +247,10 @@ void Deformer::State::make_basis(const SparseMatrix<double>& P) {
 }
 
 void Deformer::State::finish(const DeformerOptions& options) {
-  projection = model->projection(cluster_geometry(rest, elements, clusters, d));
+  std::vector<char> rigid(static_cast<size_t>(d), 0);
+  for (Index c : rigid_cluster_of_patch)
+    if (c >= 0) rigid[static_cast<size_t>(c)] = 1;
+  projection = model->projection(cluster_geometry(rest, elements, clusters, d, std::move(rigid)));
   S.resize(9 * d);
   x = Eigen::VectorXd::Zero(nx);
   s_local.resize(9 * d);
@@ -219,6 +284,17 @@ Eigen::VectorXd Deformer::cluster_scales() const {
   return psi;
 }
 const std::shared_ptr<const DeformationModel>& Deformer::model() const { return state_->model; }
+Eigen::Matrix<double, 3, 4> Deformer::patch_transform(Index p) const {
+  const State& S = *state_;
+  if (p < 0 || p >= S.s) throw std::invalid_argument(fmt::format("patch_transform: patch {} outside [0, {})", p, S.s));
+  const Index base = 3 * S.m + 12 * p;
+  Eigen::Matrix<double, 3, 4> T;
+  for (int a = 0; a < 3; ++a) {
+    for (int c = 0; c < 3; ++c) T(a, c) = S.x(base + 3 * a + c);
+    T(a, 3) = S.x(base + 9 + a);
+  }
+  return S.r0 * T;
+}
 const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->r0; }
 const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis() const {
   return state_->basis;
@@ -285,6 +361,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     }
     S.set_clusters(std::move(labels), clustering.count);
   }
+  S.separate_rigid_clusters(model.T);
   summary.clustering_seconds = t.seconds();
 
   // Linear proxies, restricted to free vertices.
@@ -475,24 +552,50 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     col += 3;
   }
   std::vector<Index> patches = S.fixed_patches;
+  std::vector<char> prescribed(static_cast<size_t>(S.s), 0);
   for (Index p : handles.patches) {
     if (p < 0 || p >= S.s) throw std::invalid_argument(fmt::format("handle patch {} outside [0, {})", p, S.s));
     if (S.patch_types[p] == PatchType::Fixed) {
       throw std::invalid_argument(fmt::format("patch {} is Fixed: it is always constrained to the rest pose", p));
     }
+    if (prescribed[p]) throw std::invalid_argument(fmt::format("patch {} is prescribed twice", p));
+    prescribed[p] = 1;
     patches.push_back(p);
   }
   for (Index p : patches) {
     for (int c = 0; c < 12; ++c) ta.emplace_back(S.patch_base + 12 * p + c, col + c, 1.0);
     col += 12;
   }
+  // Free Rigid patches: t_s = s_c (rows 3a + c of t_s, row-major).
+  std::vector<Index> tied;
+  const Index tie_row0 = col;
+  for (Index p = 0; p < S.s; ++p) {
+    if (S.patch_types[p] != PatchType::Rigid || prescribed[p]) continue;
+    tied.push_back(p);
+    for (int c = 0; c < 9; ++c) ta.emplace_back(S.patch_base + 12 * p + c, col + c, 1.0);
+    col += 9;
+  }
   SparseMatrix<double> A(S.nu, col);
   A.setFromTriplets(ta.begin(), ta.end());
   const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
-  S.fused.set(S.phase1, S.MN, S.MU, options.threads);
+  S.tie_map.setZero(S.nx, 9 * S.d);
+  for (size_t i = 0; i < tied.size(); ++i) {
+    const Index k = S.rigid_cluster_of_patch[tied[i]];
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c)
+        S.tie_map.col(9 * k + 3 * c + a) += S.phase1.Mb().col(tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
+  }
+  if (tied.empty()) {
+    S.fused.set(S.phase1, S.MN, S.MU, options.threads);
+  } else {
+    S.MU_tied = S.MU + S.MN * S.tie_map;
+    S.fused.set(S.phase1, S.MN, S.MU_tied, options.threads);
+  }
+  S.tied_patches = std::move(tied);
+  S.tie_row0 = tie_row0;
   S.handles = handles;
   S.rows = col;
-  S.b.resize(col);
+  S.b.setZero(col);
   return cs;
 }
 
@@ -504,7 +607,20 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   detail::check_size("Deformer::frame: patch transforms", static_cast<Index>(S.handles.patches.size()),
                      static_cast<Index>(targets.patch_transforms.size()));
   if (targets.points.size() > 0) detail::check_finite("Deformer::frame: target points", targets.points);
-  for (const auto& T : targets.patch_transforms) detail::check_finite("Deformer::frame: patch transform", T);
+  for (size_t i = 0; i < targets.patch_transforms.size(); ++i) {
+    const auto& T = targets.patch_transforms[i];
+    detail::check_finite("Deformer::frame: patch transform", T);
+    const Index p = S.handles.patches[i];
+    if (S.patch_types[p] == PatchType::Rigid) {
+      const Eigen::Matrix3d A = T.leftCols<3>();
+      const double off = (A.transpose() * A - Eigen::Matrix3d::Identity()).norm();
+      if (off > 1e-6 || A.determinant() <= 0) {
+        throw std::invalid_argument(fmt::format(
+            "Deformer::frame: patch {} is Rigid but its transform is not a rotation (‖AᵀA − I‖ = {:.3e}, det = {:.3e})",
+            p, off, A.determinant()));
+      }
+    }
+  }
   const detail::Timer total;
   FrameSummary summary;
 
@@ -541,6 +657,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   detail::Timer t;
   AlternatingOptions opts = S.alternating;
   const AlternatingSummary as = S.fused.run(S.phase1, *S.projection, S.b, opts, S.x, S.s_local);
+  if (!S.tied_patches.empty()) S.x.noalias() += S.tie_map * S.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
   for (Index i = 0; i < S.d; ++i) {

@@ -363,6 +363,7 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel&
   if (d < 1 || m < 0) throw IoError(path, 0, fmt::format("invalid proxy counts d = {}, m = {}", d, m));
   try {
     S.set_clusters(std::move(labels), d);
+    S.find_rigid_clusters(model.T);
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }

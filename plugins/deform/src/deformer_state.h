@@ -64,6 +64,12 @@ struct Deformer::State {
   bool keep_q = false;                 // Q not eliminated (the model's L_QQ is not block diagonal)
   std::vector<Index> control_of_free;  // vertex → first control row (free vertices), −1 in a patch
   std::vector<Index> fixed_patches;
+  // Rigid patches (Eq. 47 with t_s ∈ SO(3)): each has its own rotational
+  // cluster, the rotation of its elements; when a handle does not prescribe
+  // the patch, Phase 1 ties t_s = s_c (9 constraint rows whose right-hand
+  // side is that cluster's rotation, folded into the y-map below), so the
+  // patch moves rigidly with the rotation Phase 2 fits.
+  std::vector<Index> rigid_cluster_of_patch;  // s entries, −1 if not Rigid
   Eigen::VectorXd cluster_measure;     // Σ a_k per cluster (global rotation weights)
   // Subspace and reduced operators.
   SubspaceSolver<double> solver;
@@ -77,6 +83,13 @@ struct Deformer::State {
   FixedCoordinateSolver<double> phase1;
   Handles handles;
   Index rows = 0;
+  // Ties of the current handle set: free Rigid patches, their rows start at
+  // tie_row0 of b. With E (9·ties × 9d) selecting s_c(a, c) for row 3a + c of
+  // tie i, X = M_b·b + M_Y·S + tie_map·S, tie_map = M_b[:, ties]·E (nx × 9d),
+  // and Phase 2 sees G = M_N·X + (M_U + M_N·tie_map)·S.
+  std::vector<Index> tied_patches;
+  Index tie_row0 = 0;
+  Matrix<double> tie_map, MU_tied;
   // Pose.
   Eigen::VectorXd S;  // 9d, world frame
   Eigen::VectorXd x;  // nx
@@ -94,6 +107,16 @@ struct Deformer::State {
   void set_topology(const DeformableModel& model);
   // Appends the 4r Q unknowns to the control layer (keep_q = true).
   void keep_rotation_corrections();
+  // Gives every Rigid patch its own cluster (its elements: the patch's
+  // vertices on surfaces; tets with all corners in the patch, else any
+  // corner), appended after the others; empty clusters are dropped. Sets
+  // rigid_cluster_of_patch. `T` are the tets (empty for surfaces).
+  void separate_rigid_clusters(const Tetrahedra& T);
+  // Finds rigid_cluster_of_patch in labels made by separate_rigid_clusters
+  // (after a load); throws std::invalid_argument if they do not fit.
+  void find_rigid_clusters(const Tetrahedra& T);
+  // The elements of patch p (see separate_rigid_clusters).
+  std::vector<Index> patch_elements(Index p, const Tetrahedra& T) const;
   // Sets the cluster labels (r entries in [0, d), none empty) and their
   // measures. Throws std::invalid_argument.
   void set_clusters(std::vector<int> labels, Index count);

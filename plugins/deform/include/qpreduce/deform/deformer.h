@@ -131,7 +131,9 @@ struct PointHandle {
 // The handle set of the on-site step.
 struct Handles {
   std::vector<PointHandle> points;
-  // Non-fixed patches whose transform is prescribed each frame.
+  // Non-fixed patches whose transform is prescribed each frame (a Rigid
+  // patch's must be a rotation). A Rigid patch not listed here moves with
+  // its own cluster's rotation (t_s = s_c), found by Phase 2.
   std::vector<Index> patches;
 };
 
@@ -203,6 +205,10 @@ class Deformer {
   const std::vector<int>& patch_of_vertex() const;
   const RotationElements& elements() const;
   const Eigen::VectorXd& rotations() const;  // S, 9d (world frame)
+  // The transform [t_s | d_s] (world frame) of patch p after the last frame:
+  // its vertices are at t_s·v + d_s (up to the float reconstruction). Rigid
+  // patches have t_s ∈ SO(3), Fixed ones the identity.
+  Eigen::Matrix<double, 3, 4> patch_transform(Index p) const;
   // ψ_a = det(s_a)^(1/3) per cluster (1 for rotations; the conformal scale).
   Eigen::VectorXd cluster_scales() const;
   // The model in use (name(), parameters()); null before precompute.
