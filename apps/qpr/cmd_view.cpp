@@ -35,9 +35,7 @@ int run_view(ViewArgs& a) {
   viewer::ViewerInput input;
   input.name = ls.name;
   input.options = ls.options;
-  if (ls.scenario.alpha) input.options.energy.alpha = *ls.scenario.alpha;
-  if (ls.scenario.beta) input.options.energy.beta = *ls.scenario.beta;
-  if (ls.scenario.iterations) input.options.iterations = *ls.scenario.iterations;
+  qpreduce::deform::apply_scenario_options(ls.scenario, &input.options);
   input.faces = !ls.tet ? ls.surface.F : ls.solid.F.rows() > 0 ? ls.solid.F : viewer::boundary_faces(ls.solid.T);
   input.scenario = std::move(ls.scenario);
   const auto save = [&ls](const std::string& path, const qpreduce::deform::Vertices& V) {

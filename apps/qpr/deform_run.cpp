@@ -89,6 +89,12 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame")->check(CLI::Range(1, 1000));
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--gamma", a->gamma, "Moving-frame penalty γ between neighbouring elements (Eq. 11), default 0")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_option("--model", a->model, "Deformation model: arap (rotations) or conformal (scaled rotations, Eq. 48–49)")
+      ->check(CLI::IsMember({"arap", "conformal"}));
+  cmd->add_option("--psi", a->psi, "Conformal model: scales within [1/ψ, ψ], default 2")
+      ->check(CLI::Range(1.0 + 1e-9, 1e6));
   cmd->add_option("--soft", a->soft, "Soft handle constraints with weight δ (Eq. 18) instead of hard ones")->check(CLI::PositiveNumber);
 }
 
@@ -175,6 +181,14 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   options.iterations = a.iterations;
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
+  if (a.gamma) options.energy.gamma = *a.gamma;
+  if (!a.model.empty()) options.model = a.model == "conformal" ? ModelKind::Conformal : ModelKind::Arap;
+  if (a.psi) {
+    if (options.model != ModelKind::Conformal && ls.scenario.model_kind != ModelKind::Conformal) {
+      throw std::invalid_argument("--psi applies to the conformal model (--model conformal)");
+    }
+    options.conformal_bound = *a.psi;
+  }
   if (tet) options.energy.beta = 0.0;
   return ls;
 }
@@ -195,9 +209,7 @@ void progress_bar(const std::string& stage, double fraction) {
 nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
                             const RunSettings& settings, RunOutputs* outputs) {
   DeformerOptions options = settings.options;
-  if (scenario.alpha) options.energy.alpha = *scenario.alpha;
-  if (scenario.beta) options.energy.beta = *scenario.beta;
-  if (scenario.iterations) options.iterations = *scenario.iterations;
+  apply_scenario_options(scenario, &options);
 
   Deformer deformer;
   const bool tty = isatty(fileno(stderr)) != 0;
@@ -264,6 +276,14 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["iterations"] = options.iterations;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
+  report["gamma"] = options.energy.gamma;
+  report["model"] = deformer.model() ? deformer.model()->name() : "";
+  if (options.model == ModelKind::Conformal) {
+    report["psi_bound"] = options.conformal_bound;
+    const Eigen::VectorXd psi = deformer.cluster_scales();
+    report["psi_min"] = psi.minCoeff();
+    report["psi_max"] = psi.maxCoeff();
+  }
   report["precompute_s"] = pre.total_seconds;
   report["precompute_from_cache"] = cache_loaded;
   report["precompute_breakdown_s"] = {{"clustering", pre.clustering_seconds},

@@ -25,7 +25,8 @@ struct ScenarioArgs {
   long linear_proxies = 0, rotational_proxies = 0;
   std::string linear_groups, rotational_clusters, affine_patches;
   int iterations = 8, frames = 1;
-  std::optional<double> alpha, beta, soft;
+  std::optional<double> alpha, beta, gamma, psi, soft;
+  std::string model;  // "", "arap" or "conformal"
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

@@ -274,6 +274,9 @@ class Interactive {
     ui_rotational_ = static_cast<int>(d.rotational_proxies);
     ui_alpha_ = static_cast<float>(d.energy.alpha);
     ui_beta_ = static_cast<float>(d.energy.beta);
+    ui_gamma_ = static_cast<float>(d.energy.gamma);
+    ui_conformal_ = d.model == ModelKind::Conformal;
+    ui_psi_ = static_cast<float>(d.conformal_bound);
     ui_iterations_ = d.iterations;
     ui_soft_ = session.constraint_options().soft;
     ui_delta_ = static_cast<float>(session.constraint_options().delta);
@@ -376,7 +379,8 @@ class Interactive {
   std::string message_, op_note_;
   // UI state.
   int ui_linear_ = 33, ui_rotational_ = 27, ui_iterations_ = 8;
-  float ui_alpha_ = 0.1f, ui_beta_ = 0.1f, ui_delta_ = 1e3f;
+  float ui_alpha_ = 0.1f, ui_beta_ = 0.1f, ui_gamma_ = 0.0f, ui_psi_ = 2.0f, ui_delta_ = 1e3f;
+  bool ui_conformal_ = false;
   bool ui_soft_ = false;
   char mesh_path_[256] = "deformed.obj", png_path_[256] = "screenshot.png", motion_path_[256] = "motion.json";
   // Interaction.
@@ -610,11 +614,19 @@ class Interactive {
     ImGui::Text("proxies: %ld linear, %ld rotational, %ld patches", long(pre.linear_proxies), long(pre.rotational_proxies),
                 long(pre.patches));
     ImGui::Text("reduced size %ld, precompute %.2f s", long(pre.reduced_size), pre.total_seconds);
+    if (session_.deformer().ready() && session_.deformer().model()) {
+      const Eigen::VectorXd psi = session_.deformer().cluster_scales();
+      ImGui::Text("model %s, cluster scales %.3f … %.3f", session_.deformer().model()->name().c_str(),
+                  psi.size() ? psi.minCoeff() : 1.0, psi.size() ? psi.maxCoeff() : 1.0);
+    }
     ImGui::Separator();
     ImGui::InputInt("linear proxies", &ui_linear_);
     ImGui::InputInt("rotational proxies", &ui_rotational_);
     ImGui::InputFloat("alpha", &ui_alpha_, 0.01f, 0.1f, "%.4g");
     ImGui::InputFloat("beta", &ui_beta_, 0.01f, 0.1f, "%.4g");
+    ImGui::InputFloat("gamma", &ui_gamma_, 0.1f, 1.0f, "%.4g");
+    ImGui::Checkbox("conformal (scaled rotations)", &ui_conformal_);
+    if (ui_conformal_) ImGui::InputFloat("psi bound", &ui_psi_, 0.1f, 0.5f, "%.3g");
     ImGui::InputInt("iterations", &ui_iterations_);
     if (session_.precomputing()) {
       ImGui::ProgressBar(static_cast<float>(session_.progress()), ImVec2(-1, 0), session_.progress_stage().c_str());
@@ -624,6 +636,9 @@ class Interactive {
       d.rotational_proxies = std::max(1, ui_rotational_);
       d.energy.alpha = std::max(0.0f, ui_alpha_);
       d.energy.beta = session_.input().scenario.model.is_tet() ? 0.0 : std::max(0.0f, ui_beta_);
+      d.energy.gamma = std::max(0.0f, ui_gamma_);
+      d.model = ui_conformal_ ? ModelKind::Conformal : ModelKind::Arap;
+      d.conformal_bound = std::max(1.01f, ui_psi_);
       d.iterations = std::clamp(ui_iterations_, 1, 1000);
       session_.precompute_async(d);
     }

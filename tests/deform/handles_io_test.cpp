@@ -133,7 +133,7 @@ TEST_CASE("JSON scene: every field, resolved and checked against the mesh", "[io
   const Scene sc = read_scene(s.scene(R"({
     "description": "everything at once",
     "mesh": "octa.off",
-    "energy": {"alpha": 1.0, "beta": 0.5, "gamma": 0},
+    "energy": {"alpha": 1.0, "beta": 0.5, "gamma": 0, "model": "conformal", "psi": 1.5},
     "solver": {"iterations": 4, "constraints": "soft", "delta": 1e-3},
     "proxies": {"linear": "lin.id", "rotational": "rot.id", "affine": "aff.id"},
     "patches": [
@@ -156,6 +156,8 @@ TEST_CASE("JSON scene: every field, resolved and checked against the mesh", "[io
   CHECK(*sc.alpha == 1.0);
   CHECK(*sc.beta == 0.5);
   CHECK(*sc.gamma == 0.0);
+  CHECK(*sc.model == "conformal");
+  CHECK(*sc.psi == 1.5);
   CHECK(*sc.iterations == 4);
   CHECK(sc.constraints == ConstraintMode::Soft);
   CHECK(*sc.delta == 1e-3);
@@ -197,6 +199,8 @@ TEST_CASE("JSON scene errors name the scene and the JSON pointer", "[io][scene][
   fails_with(R"({"mesh": "nowhere.off"})", "nowhere.off: cannot open file");
   fails_with(R"({"mesh": "octa.off", "energy": {"alpha": "big"}})", "scene.json: /energy/alpha: expected a number");
   fails_with(R"({"mesh": "octa.off", "energy": {"beta": -1}})", "/energy/beta: must be >= 0");
+  fails_with(R"({"mesh": "octa.off", "energy": {"model": "rigid"}})", "/energy/model: expected \"arap\" or \"conformal\"");
+  fails_with(R"({"mesh": "octa.off", "energy": {"psi": 0.5}})", "/energy/psi: must be > 1");
   fails_with(R"({"mesh": "octa.off", "solver": {"constraints": "firm"}})", "/solver/constraints: expected \"hard\" or \"soft\"");
   fails_with(R"({"mesh": "octa.off", "solver": {"iterations": 2.5}})", "/solver/iterations: expected an integer");
   fails_with(R"({"mesh": "octa.off", "solver": {"delta": 0}})", "/solver/delta: must be > 0");

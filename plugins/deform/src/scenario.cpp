@@ -113,6 +113,9 @@ Scenario scenario_from_scene(const Scene& scene) {
   }
   sc.alpha = scene.alpha;
   sc.beta = scene.beta;
+  sc.gamma = scene.gamma;
+  sc.psi = scene.psi;
+  if (scene.model) sc.model_kind = *scene.model == "conformal" ? ModelKind::Conformal : ModelKind::Arap;
   sc.iterations = scene.iterations;
   if (scene.constraints == ConstraintMode::Soft) {
     sc.constraints.soft = true;
@@ -170,6 +173,15 @@ double handle_residual(const Scenario& sc, const HandleTargets& targets, const V
     worst = std::max(worst, (deformed.row(v).transpose() - target).norm());
   }
   return worst;
+}
+
+void apply_scenario_options(const Scenario& sc, DeformerOptions* options) {
+  if (sc.alpha) options->energy.alpha = *sc.alpha;
+  if (sc.beta) options->energy.beta = *sc.beta;
+  if (sc.gamma) options->energy.gamma = *sc.gamma;
+  if (sc.model_kind) options->model = *sc.model_kind;
+  if (sc.psi) options->conformal_bound = *sc.psi;
+  if (sc.iterations) options->iterations = *sc.iterations;
 }
 
 }  // namespace qpreduce::deform

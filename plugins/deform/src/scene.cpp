@@ -155,7 +155,18 @@ class SceneParser {
   }
 
   void parse_energy(const json& j, Scene& s) const {
-    check_keys(j, "/energy", {"alpha", "beta", "gamma"});
+    check_keys(j, "/energy", {"alpha", "beta", "gamma", "model", "psi"});
+    if (j.contains("model")) {
+      if (!j["model"].is_string() || (j["model"] != "arap" && j["model"] != "conformal")) {
+        fail("/energy/model", "expected \"arap\" or \"conformal\"");
+      }
+      s.model = j["model"].get<std::string>();
+    }
+    if (j.contains("psi")) {
+      const double v = number(j["psi"], "/energy/psi");
+      if (!(v > 1.0)) fail("/energy/psi", "must be > 1 (scales within [1/psi, psi])");
+      s.psi = v;
+    }
     const std::pair<const char*, std::optional<double>*> fields[] = {
         {"alpha", &s.alpha}, {"beta", &s.beta}, {"gamma", &s.gamma}};
     for (const auto& [key, out] : fields) {

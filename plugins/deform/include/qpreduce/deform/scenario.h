@@ -20,9 +20,13 @@ struct Scenario {
   std::vector<HandleTargets> frames;  // at least one
   ConstraintOptions constraints;      // hard by default
   // Overrides from a scene file (unset: keep the caller's options).
-  std::optional<double> alpha, beta;
+  std::optional<double> alpha, beta, gamma, psi;
+  std::optional<ModelKind> model_kind;
   std::optional<int> iterations;
 };
+
+// Applies the scenario's overrides (α, β, γ, model, ψ, iterations) to `options`.
+void apply_scenario_options(const Scenario& scenario, DeformerOptions* options);
 
 // .sel/.def: a Fixed patch (role 0) and an Affine handle patch (role 2) moved
 // by `def`; `frames` frames interpolate from the rest pose to `def` (the

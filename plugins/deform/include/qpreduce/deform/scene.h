@@ -74,6 +74,10 @@ struct Scene {
 
   // Energy weights of the modified energy E′ (Eq. 8–11); unset: plugin default.
   std::optional<double> alpha, beta, gamma;
+  // Deformation model, "arap" or "conformal", and the conformal bound ψ > 1
+  // (/energy/model, /energy/psi); unset: plugin default.
+  std::optional<std::string> model;
+  std::optional<double> psi;
   // Alternation iterations per frame; unset: plugin default.
   std::optional<int> iterations;
   ConstraintMode constraints = ConstraintMode::Hard;
