@@ -19,3 +19,10 @@ view bar         $BS/bar.off         --sel $BS/bar.sel         --def $BS/bar.def
 view bumpy_plane $BS/bumpy_plane.off --sel $BS/bumpy_plane.sel --def $BS/bumpy_plane.def --frames 8 --up z --pitch 35 --color deviation
 view cactus_anim $BS/cactus.off --anim $DATA/paper-examples/cactus/rotated_hansel.anim --up z --yaw 20 --color linear
 view solid_cylinder $DATA/tets/solid_cylinder.node --sel $BS/cylinder.sel --def $BS/cylinder.def --frames 8 --up z --yaw 90
+# Dinosaur and dragon: the shared data has no handles for them; these scenes
+# pose them with patches (scripts/make_showcase_scenes.py).
+SCENES=$(mktemp -d)
+python3 scripts/make_showcase_scenes.py "$DATA" "$SCENES"
+view dinosaur --scene "$SCENES/dinosaur.json" --up z --color patches
+view dragon   --scene "$SCENES/dragon.json" --yaw 25
+rm -rf "$SCENES"

@@ -278,6 +278,10 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["beta"] = options.energy.beta;
   report["gamma"] = options.energy.gamma;
   report["model"] = deformer.model() ? deformer.model()->name() : "";
+  // Σ_{a<b} W_ab‖s_a − s_b‖²_F over neighbouring clusters (what γ, Eq. 11, penalises).
+  report["cluster_rotation_roughness"] = cluster_rotation_roughness(
+      cluster_geometry(scenario.model.V, deformer.elements(), deformer.clusters(), deformer.rotational_proxies()),
+      deformer.rotations());
   if (options.model == ModelKind::Conformal) {
     report["psi_bound"] = options.conformal_bound;
     const Eigen::VectorXd psi = deformer.cluster_scales();

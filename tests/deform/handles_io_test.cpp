@@ -3,6 +3,7 @@
 
 #include "qpreduce/deform/handles_io.h"
 #include "qpreduce/deform/mesh_io.h"
+#include "qpreduce/deform/scenario.h"
 #include "qpreduce/deform/scene.h"
 #include "qpreduce/deform/tet_io.h"
 
@@ -253,4 +254,24 @@ TEST_CASE("JSON scene with a shared tet mesh and the Botsch-Sorkine files", "[io
   CHECK(sc.patches[0].vertices.size() == 241);
   CHECK(sc.handles[0].points() == 241);
   CHECK(sc.frames == 1);
+}
+
+TEST_CASE("JSON scene: a transform handle on exactly a patch prescribes that patch", "[io][scene]") {
+  const SceneDir s;
+  const Scenario sc = scenario_from_scene(read_scene(s.scene(R"({
+    "mesh": "octa.off",
+    "patches": [{"type": "fixed", "vertices": [0]}, {"type": "rigid", "vertices": [3, 1]}],
+    "handles": [
+      {"name": "turn", "vertices": [1, 3], "transforms": [[[0, -1, 0, 0], [1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]]},
+      {"name": "pin", "vertices": [5], "transforms": [[1, 0, 0, 0.5, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]]}
+    ]
+  })")));
+  REQUIRE(sc.handles.patches.size() == 1);
+  CHECK(sc.model.patch_types[static_cast<size_t>(sc.handles.patches[0])] == PatchType::Rigid);
+  REQUIRE(sc.handles.points.size() == 1);  // vertex 5 is not a patch: a point handle
+  CHECK(sc.handles.points[0].vertices == std::vector<Index>{5});
+  REQUIRE(sc.frames.size() == 1);
+  REQUIRE(sc.frames[0].patch_transforms.size() == 1);
+  CHECK(sc.frames[0].patch_transforms[0](0, 1) == -1.0);
+  CHECK(sc.frames[0].points(0, 0) == Approx(sc.model.V(5, 0) + 0.5));
 }

@@ -330,14 +330,7 @@ TEST_CASE("gamma > 0 reduces the rotation differences between neighbouring clust
     // Σ_{a<b} W_ab‖s_a − s_b‖² over neighbouring clusters.
     const ClusterGeometry g = cluster_geometry(model.V, deformer.elements(), deformer.clusters(),
                                                deformer.rotational_proxies());
-    const Eigen::VectorXd& S = deformer.rotations();
-    double rough = 0.0;
-    for (Index a = 0; a < g.d; ++a)
-      for (SparseMatrix<double>::InnerIterator it(g.coupling, a); it; ++it)
-        if (it.row() > a)
-          rough += it.value() * (Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * a) -
-                                 Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * it.row()))
-                                    .squaredNorm();
+    const double rough = cluster_rotation_roughness(g, deformer.rotations());
     if (psi_out) *psi_out = deformer.cluster_scales();
     return rough;
   };

@@ -50,6 +50,18 @@ ClusterGeometry cluster_geometry(const Vertices& V, const RotationElements& el, 
   return g;
 }
 
+double cluster_rotation_roughness(const ClusterGeometry& g, const Eigen::VectorXd& S) {
+  detail::check_size("cluster_rotation_roughness: S", 9 * g.d, S.size());
+  double rough = 0.0;
+  for (Index a = 0; a < g.d; ++a)
+    for (SparseMatrix<double>::InnerIterator it(g.coupling, a); it; ++it)
+      if (it.row() > a)
+        rough += it.value() * (Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * a) -
+                               Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * it.row()))
+                                  .squaredNorm();
+  return rough;
+}
+
 namespace {
 
 // Phase 2 for rotations (psi_max == 1) and scaled rotations (psi_max > 1):

@@ -121,9 +121,24 @@ Scenario scenario_from_scene(const Scene& scene) {
     sc.constraints.soft = true;
     if (scene.delta) sc.constraints.delta = *scene.delta;
   }
-  // Handles: a group is one weighted point; a vertex list pins each vertex.
-  for (const SceneHandle& h : scene.handles) {
-    if (h.is_group()) {
+  // Handles: a group is one weighted point; a vertex list pins each vertex,
+  // unless it moves by transforms and is exactly a Rigid or Affine scene
+  // patch: then it prescribes that patch's transform (12 rows, not 3 per vertex).
+  std::vector<Index> patch_of_handle(scene.handles.size(), -1);
+  for (size_t k = 0; k < scene.handles.size(); ++k) {
+    const SceneHandle& h = scene.handles[k];
+    if (h.is_group() || h.transforms.empty()) continue;
+    std::vector<int> vs = h.vertices;
+    std::sort(vs.begin(), vs.end());
+    for (size_t p = 0; p < scene.patches.size(); ++p)
+      if (scene.patches[p].type != PatchType::Fixed && scene.patches[p].vertices == vs)
+        patch_of_handle[k] = sc.model.patch_of_vertex[static_cast<size_t>(vs.front())];
+  }
+  for (size_t k = 0; k < scene.handles.size(); ++k) {
+    const SceneHandle& h = scene.handles[k];
+    if (patch_of_handle[k] >= 0) {
+      sc.handles.patches.push_back(patch_of_handle[k]);
+    } else if (h.is_group()) {
       PointHandle ph;
       ph.vertices.assign(h.vertices.begin(), h.vertices.end());
       ph.weights = h.weights;
@@ -137,7 +152,13 @@ Scenario scenario_from_scene(const Scene& scene) {
     HandleTargets t;
     t.points.resize(static_cast<Index>(sc.handles.points.size()), 3);
     Index row = 0;
-    for (const SceneHandle& h : scene.handles) {
+    for (size_t k = 0; k < scene.handles.size(); ++k) {
+      const SceneHandle& h = scene.handles[k];
+      if (patch_of_handle[k] >= 0) {
+        const size_t i = static_cast<size_t>(std::min<Index>(f, static_cast<Index>(h.transforms.size()) - 1));
+        t.patch_transforms.push_back(h.transforms[i].topRows<3>());
+        continue;
+      }
       const Vertices pts = h.targets_at(f, sc.model.V);
       t.points.middleRows(row, pts.rows()) = pts;
       row += pts.rows();

@@ -59,6 +59,10 @@ struct ClusterGeometry {
 ClusterGeometry cluster_geometry(const Vertices& V, const RotationElements& elements,
                                  const std::vector<int>& clusters, Index d, std::vector<char> rigid = {});
 
+// Σ_{a<b} W_ab‖s_a − s_b‖²_F: how much neighbouring cluster transforms S
+// (9d) differ, what γ (Eq. 11) penalises.
+double cluster_rotation_roughness(const ClusterGeometry& geometry, const Eigen::VectorXd& S);
+
 // Phase 2 of a model: an InputProjection (engine) that also knows its
 // manifold, so the invariant kit (qpreduce/testing) can check it.
 class ClusterProjection : public InputProjection<double> {
