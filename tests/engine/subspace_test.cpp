@@ -361,6 +361,7 @@ TEST_CASE("set_constraints fast path agrees with the null-space method", "[solve
       {"soft point handles", gen::selection(n, handles), true, Status::Success, true},
       {"differences only (constant mode free)", Adiff, false, Status::Unbounded, false},
       {"repeated handle", gen::selection(n, repeated), false, Status::ConstraintsLeastSquares, false},
+      {"no constraints (constant mode free)", SparseMatrix<double>(n, 0), false, Status::Unbounded, false},
   };
   for (const Demand& demand : demands) {
     CAPTURE(demand.name);

@@ -41,15 +41,24 @@
 // is accepted only when λ_max(H̄)·‖M̄_q‖_F < 1/rank_tolerance, a bound on the
 // condition number the null-space method tests; anything else (and rank-
 // deficient hard constraints) goes to the null-space method, which decides the
-// status. Both give the same unique minimiser when it exists.
+// status. Both give the same unique minimiser when it exists. (The same
+// range-space code, src/range_space.h, serves Phase 1 in alternating.h.)
 #pragma once
 
 #include "qpreduce/common.h"
 #include "qpreduce/subspace.h"
 
+#include <cstdint>
+#include <memory>
 #include <string>
 
 namespace qpreduce {
+
+namespace detail {
+struct RangeSpace;  // range_space.h (private to the engine)
+}  // namespace detail
+template <typename Scalar>
+class FixedCoordinateSolver;  // alternating.h
 
 struct ConstraintOptions {
   // false: hard constraints (Eq. 17); true: soft constraints (Eq. 18).
@@ -60,7 +69,8 @@ struct ConstraintOptions {
   // Singular values of Ā (and eigenvalues of the reduced Hessian on the
   // constraint set) below rank_tolerance × the largest count as zero.
   double rank_tolerance = 1e-10;
-  // Use the precomputed range-space fast path when it applies (see above);
+  // Use the precomputed range-space fast path when it applies (see above;
+  // likewise FixedCoordinateSolver and FusedAlternation, alternating.h);
   // false forces the O(p³) null-space method (for comparison and tests).
   bool fast_path = true;
   // OpenMP threads for the dense algebra of this step. At p ≈ 300 a step is
@@ -148,13 +158,15 @@ class SubspaceSolver {
   using MatD = Matrix<double>;
   void require_ready(const char* what) const;
   void require_constrained(const char* what) const;
+  // The fast path's p×p preparation and a new generation (precompute, restore).
   void prepare_fast_path(double lift_tolerance);
   // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
-  bool fast_operators(const MatD& Ar, bool soft, double delta, double rank_tolerance, MatD* Mb, MatD* Mq,
-                      MatD* MY) const;
   void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,
                            MatD* Mq, MatD* MY) const;
+  // Phase 1 (alternating.h) prepares its own fast path from H_r, BᵀD, the
+  // lift tolerance, once per generation.
+  friend class FixedCoordinateSolver<Scalar>;
 
   VariationalSubspace<Scalar> subspace_;
   MatrixS Hr_;   // p × p
@@ -164,15 +176,16 @@ class SubspaceSolver {
   MatrixS Mq_;   // p × p, symmetric: only its lower triangle is kept current (solve reads that)
   MatrixS MY_;   // p × k
   // Precomputed, in double (see "Fast path" above), in unscaled coordinates.
-  MatD Hr_d_;                   // H_r
-  MatD BtD_d_;                  // BᵀD
-  Eigen::VectorXd scale_;       // diagonal of D_s
-  Eigen::VectorXd inv_scale_;   // its inverse
-  double hbar_max_ = 0.0;       // λ_max(H̄) = σ
-  MatD Minv0_;                  // D_s·H̃⁻¹·D_s (p × p)
-  MatD P0_;                     // D_s·H̃⁻¹·D_s·BᵀD (p × k)
-  MatD lift_cols_;              // D_s·V_L/σ (p × ν)
-  Eigen::VectorXd lift_block_;  // −λ_i/(σ(σ − λ_i)), the V_L block of Σ (ν)
+  MatD Hr_d_;   // H_r
+  MatD BtD_d_;  // BᵀD
+  // D_s, λ_max(H̄), D_s·H̃⁻¹·D_s and the lifted directions (range_space.h);
+  // immutable once made, so copies of the solver share it.
+  std::shared_ptr<const detail::RangeSpace> range_;
+  MatD P0_;  // D_s·H̃⁻¹·D_s·BᵀD (p × k)
+  double lift_tolerance_ = 0.0;  // SubspaceOptions::reduced_lift_tolerance of the precompute
+  // Changes with every precompute/restore (process-wide counter), so that
+  // state derived from this solver (Phase 1's fast path) knows when to redo it.
+  std::uint64_t generation_ = 0;
   Index n_ = 0, m_ = 0;
   bool ready_ = false, constrained_ = false;
 };

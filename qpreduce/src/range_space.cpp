@@ -1,0 +1,163 @@
+#include "range_space.h"
+
+#include "blas.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+namespace qpreduce::detail {
+
+namespace {
+using MatD = Matrix<double>;
+}  // namespace
+
+RangeSpace prepare_range_space(const MatD& H, double lift_tolerance) {
+  RangeSpace rs;
+  const Index p = H.rows();
+  // D_s = diag(H)^(−1/2); a column without energy keeps the largest scale.
+  const double max_diag = p > 0 ? H.diagonal().maxCoeff() : 0.0;
+  rs.scale.resize(p);
+  for (Index i = 0; i < p; ++i) {
+    const double h = H(i, i);
+    rs.scale(i) = h > std::numeric_limits<double>::epsilon() * max_diag ? 1.0 / std::sqrt(h)
+                  : max_diag > 0                                          ? 1.0 / std::sqrt(max_diag)
+                                                                          : 1.0;
+  }
+  rs.inv_scale = rs.scale.cwiseInverse();
+  const MatD Hbar = rs.scale.asDiagonal() * H * rs.scale.asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<MatD> es(0.5 * (Hbar + Hbar.transpose()));
+  const Eigen::VectorXd& lambda = es.eigenvalues();
+  rs.hbar_max = p > 0 ? std::max(lambda.maxCoeff(), std::numeric_limits<double>::min()) : 1.0;
+  const double sigma = rs.hbar_max;
+  Eigen::VectorXd inv(p);
+  std::vector<Index> lifted;
+  for (Index i = 0; i < p; ++i) {
+    if (lambda(i) <= lift_tolerance * sigma) {
+      lifted.push_back(i);
+      inv(i) = 1.0 / sigma;
+    } else {
+      inv(i) = 1.0 / lambda(i);
+    }
+  }
+  const MatD DV = rs.scale.asDiagonal() * es.eigenvectors();  // D_s·V
+  rs.Minv0 = DV * inv.asDiagonal() * DV.transpose();
+  rs.Minv0 = 0.5 * (rs.Minv0 + rs.Minv0.transpose()).eval();
+  const Index nu = static_cast<Index>(lifted.size());
+  rs.lift_cols.resize(p, nu);
+  rs.lift_block.resize(nu);
+  for (Index j = 0; j < nu; ++j) {
+    const Index i = lifted[static_cast<size_t>(j)];
+    rs.lift_cols.col(j) = DV.col(i) / sigma;
+    rs.lift_block(j) = -lambda(i) / (sigma * (sigma - lambda(i)));  // = 1/σ − 1/(σ − λ), without cancellation
+  }
+  return rs;
+}
+
+namespace {
+
+// Σ, its eigendecomposition, W, T and the lower triangle of M_g; false when
+// Σ is singular or the condition bound fails (see the header).
+bool bordered_operators(const RangeSpace& rs, const MatD& A, bool soft, double delta, double rank_tolerance,
+                        RangeSpaceOperators* out) {
+  const Index p = A.cols(), m = A.rows(), nu = rs.lift_cols.cols(), q = m + nu;
+  MatD Y(p, q);
+  blas_gemm(false, true, 1.0, rs.Minv0, A, 0.0, Y.leftCols(m));
+  Y.rightCols(nu) = rs.lift_cols;
+  MatD Sigma(q, q);
+  blas_gemm(false, false, 1.0, A, Y.leftCols(m), 0.0, Sigma.topLeftCorner(m, m));
+  if (soft) Sigma.topLeftCorner(m, m).diagonal().array() += 1.0 / (2.0 * delta);
+  Sigma.topRightCorner(m, nu).noalias() = A * rs.lift_cols;
+  Sigma.bottomLeftCorner(nu, m) = Sigma.topRightCorner(m, nu).transpose();
+  Sigma.bottomRightCorner(nu, nu) = rs.lift_block.asDiagonal();
+  Sigma = 0.5 * (Sigma + Sigma.transpose()).eval();
+  if (!Sigma.allFinite()) return false;
+  // Σ = U·diag(s)·Uᵀ (Eigen's eigensolver does not take a 0 × 0 matrix).
+  Eigen::SelfAdjointEigenSolver<MatD> es;
+  if (q > 0) es.compute(Sigma);
+  const Eigen::VectorXd s = q > 0 ? es.eigenvalues() : Eigen::VectorXd();  // ascending: negative ones first
+  const MatD U = q > 0 ? es.eigenvectors() : MatD();
+  if (q > 0 && !(s.cwiseAbs().minCoeff() > 0.0)) return false;
+  out->W.resize(p, q);
+  blas_gemm(false, false, 1.0, Y, U, 0.0, out->W);
+  const MatD& W = out->W;
+  // Lower triangle of M_g = M0 − Σ_i w_i w_iᵀ / s_i: two symmetric rank
+  // updates, one per sign of s.
+  Index negative = 0;
+  while (negative < q && s(negative) < 0.0) ++negative;
+  const MatD Wscaled = W * s.cwiseAbs().cwiseSqrt().cwiseInverse().asDiagonal();
+  MatD& Mg = out->Mg;
+  Mg = rs.Minv0;
+  blas_syrk_lower(1.0, Wscaled.leftCols(negative), 1.0, Mg);
+  blas_syrk_lower(-1.0, Wscaled.rightCols(q - negative), 1.0, Mg);
+  // Accept only when the null-space method would call the problem
+  // nonsingular: with M̄_g = D_s⁻¹M_gD_s⁻¹, ‖M̄_g‖₂ = 1/λ_min on the
+  // constraint set (hard) or 1/λ_min(K̄) (soft), and λ_max there is at most
+  // λ_max(H̄) (+ 2δ‖Ā‖² for soft).
+  // (A NaN or Inf in M_g makes the bound non-finite, so this also checks M_g.)
+  double norm2 = 0.0;
+  for (Index j = 0; j < p; ++j) {
+    const double sj = rs.inv_scale(j);
+    const double diag = Mg(j, j) * sj * sj;
+    double col = 0.0;
+    for (Index i = j + 1; i < p; ++i) {
+      const double v = Mg(i, j) * rs.inv_scale(i);
+      col += v * v;
+    }
+    norm2 += diag * diag + 2.0 * col * sj * sj;
+  }
+  const double lambda_up = rs.hbar_max + (soft ? 2.0 * delta * (A * rs.scale.asDiagonal()).squaredNorm() : 0.0);
+  const double cond_bound = lambda_up * std::sqrt(norm2);
+  if (!std::isfinite(cond_bound) || !(cond_bound * rank_tolerance < 1.0)) return false;
+  out->T = W * s.cwiseInverse().asDiagonal();
+  out->Um = U.topRows(m);
+  return out->T.allFinite();
+}
+
+}  // namespace
+
+bool range_space_operators(const RangeSpace& rs, const MatD& A, const ConstraintOptions& options,
+                           ConstraintSummary* summary, RangeSpaceOperators* out) {
+  const Index m = A.rows();
+  summary->m = m;
+  const MatD Abar = A * rs.scale.asDiagonal();
+  if (options.soft) {
+    if (!bordered_operators(rs, A, true, options.delta, options.rank_tolerance, out)) return false;
+    summary->rank = m > 0 ? Eigen::ColPivHouseholderQR<MatD>(Abar).rank() : 0;
+    summary->condition = 0.0;
+    summary->status = Status::Success;
+    summary->message = fmt::format("{} soft constraints, δ = {:.3g}", m, options.delta);
+    return true;
+  }
+  // Hard constraints: the fast path needs full row rank; the null-space
+  // method handles the rest (least squares).
+  // (Eigen's QR of a matrix without columns crashes: m = 0 skips it.)
+  Eigen::ColPivHouseholderQR<MatD> qr;
+  Index r = 0;
+  if (m > 0) {
+    qr.setThreshold(options.rank_tolerance);
+    qr.compute(Abar.transpose());
+    if (qr.matrixQR().diagonal().cwiseAbs().maxCoeff() > 0) r = qr.rank();
+  }
+  if (r != m || !bordered_operators(rs, A, false, 0.0, options.rank_tolerance, out)) return false;
+  summary->rank = r;
+  summary->condition = 0.0;
+  if (m > 0) {
+    // Ā's singular values are R's (ĀᵀΠ = QR).
+    const MatD R = qr.matrixQR().topRows(m).template triangularView<Eigen::Upper>();
+    const Eigen::JacobiSVD<MatD> svd(R);
+    const auto& sv = svd.singularValues();
+    summary->condition = sv(0) / sv(m - 1);
+  }
+  summary->status = Status::Success;
+  summary->message = fmt::format("{} hard constraints, rank {}", m, r);
+  return true;
+}
+
+}  // namespace qpreduce::detail

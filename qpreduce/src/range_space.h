@@ -1,0 +1,67 @@
+// Private to the engine: the range-space ("fast path") operators of the small
+// equality-constrained QP
+//
+//     min_w ½wᵀH w − gᵀw   s.t.  A w = c          (hard, Eq. 17 form)
+//     min_w ½wᵀH w − gᵀw + δ‖A w − c‖²            (soft, Eq. 18 form)
+//     H: p×p symmetric PSD, A: m×p,   w = M_c·c + M_g·g,
+//
+// shared by SubspaceSolver (H = H_r, w = [z; y]) and FixedCoordinateSolver
+// (H = H_zz, w = z). detail/qp_operators.h is the null-space method for the
+// same operators; this is the O(p²·(m+ν)) alternative once H̃⁻¹ is known.
+//
+// Once per H (`prepare_range_space`, O(p³)): in energy-normalised
+// coordinates w = D_s·w̄, D_s = diag(H)^(−1/2), H̄ = D_sHD_s = VΛVᵀ; the
+// near-null directions V_L (λ_i ≤ lift_tolerance·λ_max, ν of them) are lifted
+// to σ = λ_max: H̃ = H̄ + V_L(σ − Λ_L)V_Lᵀ is SPD, and
+//     M0 = D_s·H̃⁻¹·D_s                   (p × p)
+//     L  = D_s·V_L/σ                     (p × ν)
+//     β  = −λ_L/(σ(σ − λ_L))             (ν;  = 1/σ − 1/(σ − λ_L))
+// are kept.
+//
+// Per demand (`range_space_operators`): with Y' = [M0·Aᵀ, L] (p × q,
+// q = m + ν) the bordered Schur complement is
+//     Σ = [[A·M0·Aᵀ + c·I_m, A·L], [Lᵀ·Aᵀ, diag(β)]]   (q × q),
+//     c = 0 (hard) or 1/(2δ) (soft),
+// and, with Σ = U·diag(s)·Uᵀ, W = Y'·U (p × q), T = W·diag(1/s) (p × q):
+//     M_g = M0 − T·Wᵀ,      M_c = T·U_mᵀ   (U_m: U's first m rows, m × q),
+// so M_g·G = M0·G − T·(WᵀG) for any G (p × k). The answer is accepted only
+// when λ_max(H̄)·‖D_s⁻¹M_gD_s⁻¹‖_F < 1/rank_tolerance (the condition bound
+// the null-space method tests) and, for hard constraints, when Ā = A·D_s has
+// full row rank m; anything else goes to the null-space method, which decides
+// the status. Both give the same unique minimiser when it exists.
+#pragma once
+
+#include "qpreduce/common.h"
+#include "qpreduce/subspace_solver.h"
+
+namespace qpreduce::detail {
+
+struct RangeSpace {
+  Eigen::VectorXd scale;       // diagonal of D_s (p)
+  Eigen::VectorXd inv_scale;   // its inverse (p)
+  double hbar_max = 0.0;       // λ_max(H̄) = σ
+  Matrix<double> Minv0;        // M0 = D_s·H̃⁻¹·D_s (p × p, symmetric)
+  Matrix<double> lift_cols;    // L = D_s·V_L/σ (p × ν)
+  Eigen::VectorXd lift_block;  // β (ν)
+  Index p() const { return Minv0.rows(); }
+};
+
+// H: p×p symmetric (PSD up to round-off), finite. O(p³).
+RangeSpace prepare_range_space(const Matrix<double>& H, double lift_tolerance);
+
+struct RangeSpaceOperators {
+  Matrix<double> W;   // Y'·U (p × q)
+  Matrix<double> T;   // W·diag(1/s) (p × q)
+  Matrix<double> Um;  // U_m: the first m rows of Σ's eigenvectors (m × q)
+  Matrix<double> Mg;  // lower triangle of M_g (p × p); the strict upper triangle is M0's
+};
+
+// The fast path for the constraints A (m × p, unscaled, finite) under
+// `options` (soft, delta, rank_tolerance; the BLAS threads are the caller's).
+// true: *out holds the operators and *summary its status (Success), message,
+// rank and condition (summary->m is set either way). false: not taken; the
+// caller runs the null-space method (and overwrites the summary).
+bool range_space_operators(const RangeSpace& rs, const Matrix<double>& A, const ConstraintOptions& options,
+                           ConstraintSummary* summary, RangeSpaceOperators* out);
+
+}  // namespace qpreduce::detail

@@ -1,0 +1,202 @@
+// Private to the engine: the per-frame dense matrix–vector products.
+//
+// The engine is compiled for baseline x86-64, where Eigen's matrix–vector
+// products use SSE2 without FMA and run compute-bound on the small dense
+// operators of a frame (SubspaceSolver::solve's p × p M_q, about 20 µs at
+// p = 300; FusedAlternation's q × k F_y). These kernels are compiled for
+// AVX2 + FMA and chosen at run time when the CPU has both; otherwise Eigen's
+// products are used. All matrices are column-major with leading dimension ld.
+#pragma once
+
+#include "qpreduce/common.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <string>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
+
+namespace qpreduce::detail {
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define QPREDUCE_HAVE_AVX2_KERNELS 1
+
+__attribute__((target("avx2,fma"))) inline double hsum(__m256d v) {
+  const __m128d lo = _mm256_castpd256_pd128(v), hi = _mm256_extractf128_pd(v, 1);
+  const __m128d s = _mm_add_pd(lo, hi);
+  return _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)));
+}
+__attribute__((target("avx2,fma"))) inline float hsum(__m256 v) {
+  const __m128 lo = _mm256_castps256_ps128(v), hi = _mm256_extractf128_ps(v, 1);
+  __m128 s = _mm_add_ps(lo, hi);
+  s = _mm_add_ps(s, _mm_movehl_ps(s, s));
+  s = _mm_add_ss(s, _mm_shuffle_ps(s, s, 1));
+  return _mm_cvtss_f32(s);
+}
+
+// SIMD traits: 4 doubles or 8 floats per register.
+template <typename T>
+struct Avx;
+template <>
+struct Avx<double> {
+  using V = __m256d;
+  static constexpr int width = 4;
+  __attribute__((target("avx2,fma"))) static V load(const double* p) { return _mm256_loadu_pd(p); }
+  __attribute__((target("avx2,fma"))) static void store(double* p, V v) { _mm256_storeu_pd(p, v); }
+  __attribute__((target("avx2,fma"))) static V set1(double a) { return _mm256_set1_pd(a); }
+  __attribute__((target("avx2,fma"))) static V zero() { return _mm256_setzero_pd(); }
+  __attribute__((target("avx2,fma"))) static V fma(V a, V b, V c) { return _mm256_fmadd_pd(a, b, c); }
+};
+template <>
+struct Avx<float> {
+  using V = __m256;
+  static constexpr int width = 8;
+  __attribute__((target("avx2,fma"))) static V load(const float* p) { return _mm256_loadu_ps(p); }
+  __attribute__((target("avx2,fma"))) static void store(float* p, V v) { _mm256_storeu_ps(p, v); }
+  __attribute__((target("avx2,fma"))) static V set1(float a) { return _mm256_set1_ps(a); }
+  __attribute__((target("avx2,fma"))) static V zero() { return _mm256_setzero_ps(); }
+  __attribute__((target("avx2,fma"))) static V fma(V a, V b, V c) { return _mm256_fmadd_ps(a, b, c); }
+};
+
+// y += M·x, M column-major rows × cols with leading dimension ld.
+template <typename T>
+__attribute__((target("avx2,fma"))) void gemv_add_avx2(const T* M, Index rows, Index cols, Index ld, const T* x,
+                                                        T* y) {
+  using A = Avx<T>;
+  constexpr Index W = A::width;
+  const Index vrows = rows - rows % W;
+  Index j = 0;
+  for (; j + 4 <= cols; j += 4) {
+    const T* c0 = M + j * ld;
+    const T* c1 = c0 + ld;
+    const T* c2 = c1 + ld;
+    const T* c3 = c2 + ld;
+    const auto x0 = A::set1(x[j]), x1 = A::set1(x[j + 1]), x2 = A::set1(x[j + 2]), x3 = A::set1(x[j + 3]);
+    for (Index i = 0; i < vrows; i += W) {
+      auto acc = A::load(y + i);
+      acc = A::fma(A::load(c0 + i), x0, acc);
+      acc = A::fma(A::load(c1 + i), x1, acc);
+      acc = A::fma(A::load(c2 + i), x2, acc);
+      acc = A::fma(A::load(c3 + i), x3, acc);
+      A::store(y + i, acc);
+    }
+    for (Index i = vrows; i < rows; ++i) y[i] += c0[i] * x[j] + c1[i] * x[j + 1] + c2[i] * x[j + 2] + c3[i] * x[j + 3];
+  }
+  for (; j < cols; ++j) {
+    const T* c = M + j * ld;
+    const auto xj = A::set1(x[j]);
+    for (Index i = 0; i < vrows; i += W) A::store(y + i, A::fma(A::load(c + i), xj, A::load(y + i)));
+    for (Index i = vrows; i < rows; ++i) y[i] += c[i] * x[j];
+  }
+}
+
+// y += M·x for symmetric M (n × n, leading dimension ld) of which only the
+// lower triangle is read: four columns at a time, each below-diagonal entry
+// is used twice (y_i += m_ij·x_j and y_j += m_ij·x_i).
+template <typename T>
+__attribute__((target("avx2,fma"))) void symv_lower_add_avx2(const T* M, Index n, Index ld, const T* x, T* y) {
+  using A = Avx<T>;
+  constexpr Index W = A::width;
+  Index j = 0;
+  for (; j + 4 <= n; j += 4) {
+    // The 4 × 4 diagonal block.
+    for (Index a = 0; a < 4; ++a)
+      for (Index b = 0; b < 4; ++b) {
+        const Index r = j + std::max(a, b), c = j + std::min(a, b);
+        y[j + a] += M[r + c * ld] * x[j + b];
+      }
+    const T* c0 = M + j * ld;
+    const T* c1 = c0 + ld;
+    const T* c2 = c1 + ld;
+    const T* c3 = c2 + ld;
+    const auto x0 = A::set1(x[j]), x1 = A::set1(x[j + 1]), x2 = A::set1(x[j + 2]), x3 = A::set1(x[j + 3]);
+    auto d0 = A::zero(), d1 = A::zero(), d2 = A::zero(), d3 = A::zero();
+    Index i = j + 4;
+    for (; i + W <= n; i += W) {
+      const auto m0 = A::load(c0 + i), m1 = A::load(c1 + i), m2 = A::load(c2 + i), m3 = A::load(c3 + i);
+      const auto xi = A::load(x + i);
+      auto yi = A::load(y + i);
+      yi = A::fma(m0, x0, yi);
+      yi = A::fma(m1, x1, yi);
+      yi = A::fma(m2, x2, yi);
+      yi = A::fma(m3, x3, yi);
+      A::store(y + i, yi);
+      d0 = A::fma(m0, xi, d0);
+      d1 = A::fma(m1, xi, d1);
+      d2 = A::fma(m2, xi, d2);
+      d3 = A::fma(m3, xi, d3);
+    }
+    T t0 = hsum(d0), t1 = hsum(d1), t2 = hsum(d2), t3 = hsum(d3);
+    for (; i < n; ++i) {
+      y[i] += c0[i] * x[j] + c1[i] * x[j + 1] + c2[i] * x[j + 2] + c3[i] * x[j + 3];
+      t0 += c0[i] * x[i];
+      t1 += c1[i] * x[i];
+      t2 += c2[i] * x[i];
+      t3 += c3[i] * x[i];
+    }
+    y[j] += t0;
+    y[j + 1] += t1;
+    y[j + 2] += t2;
+    y[j + 3] += t3;
+  }
+  for (; j < n; ++j) {  // the last n mod 4 columns
+    const T* c = M + j * ld;
+    y[j] += c[j] * x[j];
+    for (Index i = j + 1; i < n; ++i) {
+      y[i] += c[i] * x[j];
+      y[j] += c[i] * x[i];
+    }
+  }
+}
+
+// True when the CPU has AVX2 and FMA and the environment variable
+// QPREDUCE_DISABLE_AVX2 is unset or "0" (set it to compare against Eigen's
+// baseline kernels in the same build). Read once.
+inline bool cpu_has_avx2_fma() {
+  static const bool yes = [] {
+    const char* off = std::getenv("QPREDUCE_DISABLE_AVX2");
+    if (off != nullptr && std::string(off) != "0") return false;
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }();
+  return yes;
+}
+#endif
+
+// y += M·x for a column-major block M (rows × cols, leading dimension ld).
+template <typename T>
+void gemv_add(const T* M, Index rows, Index cols, Index ld, const T* x, T* y) {
+#ifdef QPREDUCE_HAVE_AVX2_KERNELS
+  if (cpu_has_avx2_fma()) {
+    gemv_add_avx2(M, rows, cols, ld, x, y);
+    return;
+  }
+#endif
+  const Eigen::Map<const Matrix<T>, 0, Eigen::OuterStride<>> Mv(M, rows, cols, Eigen::OuterStride<>(ld));
+  Eigen::Map<Vector<T>>(y, rows).noalias() += Mv * Eigen::Map<const Vector<T>>(x, cols);
+}
+
+// y = M·x (+ y when accumulate), M a whole column-major matrix.
+template <typename T>
+void gemv(const Matrix<T>& M, const T* x, T* y, bool accumulate) {
+  if (!accumulate) Eigen::Map<Vector<T>>(y, M.rows()).setZero();
+  gemv_add(M.data(), M.rows(), M.cols(), M.outerStride(), x, y);
+}
+
+// y += M·x for symmetric M, reading its lower triangle.
+template <typename T>
+void symv_lower_add(const Matrix<T>& M, const T* x, T* y) {
+#ifdef QPREDUCE_HAVE_AVX2_KERNELS
+  if (cpu_has_avx2_fma()) {
+    symv_lower_add_avx2(M.data(), M.rows(), M.outerStride(), x, y);
+    return;
+  }
+#endif
+  const Eigen::Map<const Vector<T>> xv(x, M.cols());
+  Eigen::Map<Vector<T>> yv(y, M.rows());
+  yv.noalias() += M.template selfadjointView<Eigen::Lower>() * xv;
+}
+
+
+}  // namespace qpreduce::detail
