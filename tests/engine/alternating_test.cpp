@@ -6,6 +6,8 @@
 
 #include <Eigen/Dense>
 
+#include <limits>
+
 using namespace qpreduce;
 namespace gen = qpreduce::generators;
 
@@ -170,4 +172,210 @@ TEST_CASE("alternating scheme rejects bad input", "[alternating][errors]") {
   std::string why;
   CHECK_FALSE(o.is_valid(&why));
   CHECK_THAT(why, Catch::Contains("iterations"));
+}
+
+// ---- Phase 1's range-space fast path against the null-space method --------
+
+namespace {
+
+double rel_diff(const Matrix<double>& a, const Matrix<double>& b) {
+  return (a - b).norm() / std::max(1.0, b.norm());
+}
+
+// A fixture whose H_zz is positive definite (ridge > 0), so that even an
+// empty constraint set has a unique Phase 1 answer; the plain Fixture's grid
+// Laplacian has the constants in its kernel (ν = 1 lifted direction).
+struct RidgeFixture {
+  Index n = 14 * 11, d = 9, k = 4;
+  SparseMatrix<double> H = gen::grid_laplacian_2d(14, 11, 0.05);
+  SparseMatrix<double> C = gen::selection(n, gen::random_subset(n, d, 5));
+  SparseMatrix<double> D = gen::gaussian_sparse(n, k, 6);
+  SubspaceSolver<double> solver;
+  RidgeFixture() { REQUIRE(solver.precompute(H, C, D).ok()); }
+};
+
+// Phase 1's operators for soft constraints, solved in long double:
+// (H_zz + 2δA_zᵀA_z)·z = G·Y + 2δA_zᵀ(b − A_y·Y).
+struct ExactOperators {
+  Matrix<double> Mb, MY;
+};
+ExactOperators exact_soft_phase1(const SubspaceSolver<double>& s, const SparseMatrix<double>& A, double delta) {
+  using ML = Eigen::Matrix<long double, Eigen::Dynamic, Eigen::Dynamic>;
+  const Index d = s.d(), k = s.k();
+  const ML Hr = s.reduced_hessian().cast<long double>();
+  const ML G = s.reduced_linear_map().topRows(d).cast<long double>() - Hr.topRightCorner(d, k);
+  const ML Az = Matrix<double>(A.transpose() * s.subspace().N).cast<long double>();
+  const ML Ay = Matrix<double>(A.transpose() * s.subspace().UD).cast<long double>();
+  const long double two_delta = 2.0L * static_cast<long double>(delta);
+  const ML K = Hr.topLeftCorner(d, d) + two_delta * Az.transpose() * Az;
+  const Eigen::FullPivLU<ML> lu(K);
+  const ML Mb = lu.solve(ML(two_delta * Az.transpose()));
+  const ML MY = lu.solve(ML(G - two_delta * Az.transpose() * Ay));
+  return {Mb.cast<double>(), MY.cast<double>()};
+}
+
+// The fused alternation of `phase1` (already set with G_z, G_y) and one set
+// up from the reference Phase 1 give the same iterates (4 rounds).
+void check_fused_agree(FusedAlternation<double>& fused, const FixedCoordinateSolver<double>& phase1,
+                       const FixedCoordinateSolver<double>& ref, const Matrix<double>& Gz, const Matrix<double>& Gy,
+                       double tol = 1e-10) {
+  FusedAlternation<double> fref;
+  fref.set(ref, Gz, Gy);
+  NormalizeG proj;
+  const Vector<double> b = gen::gaussian_vector(phase1.m(), 64);
+  AlternatingOptions opts;
+  opts.iterations = 4;
+  Vector<double> z1(phase1.d()), z2(phase1.d()), y1 = gen::gaussian_vector(phase1.k(), 65), y2 = y1;
+  fused.run(phase1, proj, b, opts, z1, y1);
+  fref.run(ref, proj, b, opts, z2, y2);
+  CHECK((y1 - y2).norm() <= tol * std::max(1.0, y2.norm()));
+  CHECK((z1 - z2).norm() <= tol * std::max(1.0, z2.norm()));
+}
+
+// Phase 1 and its fused alternation on the fast path and on the null-space
+// method; returns the fast path's summary after checking both agree.
+ConstraintSummary check_paths_agree(const SubspaceSolver<double>& solver, const SparseMatrix<double>& A,
+                                    ConstraintOptions o, double tol) {
+  o.fast_path = true;
+  FixedCoordinateSolver<double> fast;
+  const ConstraintSummary fs = fast.set_constraints(solver, A, o);
+  o.fast_path = false;
+  FixedCoordinateSolver<double> ref;
+  const ConstraintSummary rs = ref.set_constraints(solver, A, o);
+  INFO(fs.message << " | " << rs.message);
+  CHECK_FALSE(rs.fast_path);
+  CHECK(fs.status == rs.status);
+  CHECK(fs.rank == rs.rank);
+  CHECK(rel_diff(fast.Mb(), ref.Mb()) <= tol);
+  CHECK(rel_diff(fast.MY(), ref.MY()) <= tol);
+  CHECK(fast.Mb().allFinite());
+  CHECK(fast.MY().allFinite());
+
+  // The fused alternation built on each: the same iterates.
+  const Index q = 2 * solver.k() + 3;
+  FusedAlternation<double> ffast;
+  const Matrix<double> Gz = 0.3 * gen::gaussian_matrix(q, solver.d(), 41);
+  const Matrix<double> Gy = gen::gaussian_matrix(q, solver.k(), 42);
+  ffast.set(fast, Gz, Gy);
+  check_fused_agree(ffast, fast, ref, Gz, Gy, tol);
+  return fs;
+}
+
+}  // namespace
+
+TEST_CASE("Phase 1 fast path gives the null-space method's operators", "[alternating][fast]") {
+  Fixture f;
+  RidgeFixture r;
+  const SparseMatrix<double> A = gen::selection(f.n, gen::random_subset(f.n, f.m, 51));
+  ConstraintOptions o;
+
+  SECTION("hard, full rank (ker H_zz lifted)") {
+    const ConstraintSummary s = check_paths_agree(f.solver, A, o, 1e-10);
+    CHECK(s.fast_path);
+    CHECK(s.status == Status::Success);
+  }
+  SECTION("hard, full rank, positive definite H_zz") {
+    CHECK(check_paths_agree(r.solver, A, o, 1e-10).fast_path);
+  }
+  SECTION("soft") {
+    o.soft = true;
+    o.delta = GENERATE(1.0, 1e3);
+    CAPTURE(o.delta);
+    CHECK(check_paths_agree(f.solver, A, o, 1e-10).fast_path);
+    CHECK(check_paths_agree(r.solver, A, o, 1e-10).fast_path);
+  }
+  SECTION("very stiff soft constraints") {
+    // cond(H_zz + 2δA_zᵀA_z) ≈ 1e9 here: the null-space method (a Cholesky
+    // of that matrix) loses about cond·ε, the range-space path (whose Σ
+    // carries 1/(2δ) on its diagonal) less. Both agree to that accuracy, and
+    // the fast path is at least as close as the old one to the exact answer.
+    o.soft = true;
+    o.delta = 1e9;
+    CHECK(check_paths_agree(f.solver, A, o, 1e-6).fast_path);
+    FixedCoordinateSolver<double> fast, ref;
+    fast.set_constraints(f.solver, A, o);
+    o.fast_path = false;
+    ref.set_constraints(f.solver, A, o);
+    const ExactOperators ex = exact_soft_phase1(f.solver, A, o.delta);
+    const double err_fast = rel_diff(fast.MY(), ex.MY), err_ref = rel_diff(ref.MY(), ex.MY);
+    CAPTURE(err_fast, err_ref);
+    CHECK(err_fast <= std::max(1e-10, 2.0 * err_ref));
+    CHECK(rel_diff(fast.Mb(), ex.Mb) <= std::max(1e-10, 2.0 * rel_diff(ref.Mb(), ex.Mb)));
+  }
+  SECTION("no constraints") {
+    const SparseMatrix<double> none(f.n, 0);
+    // Singular H_zz: neither path has a unique answer; the fast one declines.
+    const ConstraintSummary s = check_paths_agree(f.solver, none, o, 1e-10);
+    CHECK_FALSE(s.fast_path);
+    CHECK(s.status == Status::Unbounded);
+    // Positive definite H_zz: z = H_zz⁻¹·G·Y, on the fast path.
+    const ConstraintSummary t = check_paths_agree(r.solver, none, o, 1e-10);
+    CHECK(t.fast_path);
+    CHECK(t.status == Status::Success);
+  }
+  SECTION("dependent constraints: least squares through the null-space method") {
+    std::vector<Index> rows = gen::random_subset(f.n, f.m, 52);
+    rows.push_back(rows.front());  // the same row twice
+    const SparseMatrix<double> Adup = gen::selection(f.n, rows);
+    const ConstraintSummary s = check_paths_agree(f.solver, Adup, o, 1e-12);
+    CHECK_FALSE(s.fast_path);
+    CHECK(s.status == Status::ConstraintsLeastSquares);
+  }
+  SECTION("more constraints than the subspace has linear coordinates") {
+    const SparseMatrix<double> Amany = gen::selection(f.n, gen::random_subset(f.n, f.d + 2, 53));
+    const ConstraintSummary s = check_paths_agree(f.solver, Amany, o, 1e-12);
+    CHECK_FALSE(s.fast_path);
+    CHECK(s.status == Status::ConstraintsLeastSquares);
+  }
+}
+
+TEST_CASE("Phase 1 fast path follows its solver through restore, and C0 its G_z", "[alternating][fast]") {
+  Fixture f;
+  const SparseMatrix<double> A = gen::selection(f.n, gen::random_subset(f.n, f.m, 61));
+  ConstraintOptions slow;
+  slow.fast_path = false;
+  FixedCoordinateSolver<double> phase1, ref;
+  REQUIRE(phase1.set_constraints(f.solver, A).fast_path);
+  REQUIRE(ref.set_constraints(f.solver, A, slow).ok());
+  const Index q = 7;
+  Matrix<double> Gz = gen::gaussian_matrix(q, f.d, 62), Gy = gen::gaussian_matrix(q, f.k, 63);
+  FusedAlternation<double> fused;
+  fused.set(phase1, Gz, Gy);
+  check_fused_agree(fused, phase1, ref, Gz, Gy);
+
+  // G_z, G_y changed in place (same objects, same addresses), Phase 1 not:
+  // C0 = G_z·P0 is formed again.
+  Gz *= -0.5;
+  Gy(0, 0) += 1.0;
+  fused.set(phase1, Gz, Gy);
+  check_fused_agree(fused, phase1, ref, Gz, Gy);
+  // And a second handle set with unchanged G_z, G_y (C0 reused).
+  const SparseMatrix<double> A2 = gen::selection(f.n, gen::random_subset(f.n, f.m - 1, 66));
+  FixedCoordinateSolver<double> ref2;
+  REQUIRE(phase1.set_constraints(f.solver, A2).fast_path);
+  REQUIRE(ref2.set_constraints(f.solver, A2, slow).ok());
+  fused.set(phase1, Gz, Gy);
+  check_fused_agree(fused, phase1, ref2, Gz, Gy);
+
+  // The same solver object, restored with another H_r (twice the energy):
+  // Phase 1 must not use what it prepared from the old one.
+  const Matrix<double> Hr2 = 2.0 * f.solver.reduced_hessian();
+  const Matrix<double> BtD = f.solver.reduced_linear_map();
+  f.solver.restore(f.solver.subspace(), Hr2, BtD);
+  SubspaceSolver<double> fresh;
+  fresh.restore(f.solver.subspace(), Hr2, BtD);
+  FixedCoordinateSolver<double> ref3;
+  REQUIRE(ref3.set_constraints(fresh, A, slow).ok());
+  const ConstraintSummary s = phase1.set_constraints(f.solver, A);
+  CHECK(s.fast_path);
+  CHECK(rel_diff(phase1.Mb(), ref3.Mb()) <= 1e-10);
+  CHECK(rel_diff(phase1.MY(), ref3.MY()) <= 1e-10);
+  CHECK(rel_diff(phase1.MY(), ref.MY()) > 1e-3);  // the restore did change the answer
+  fused.set(phase1, Gz, Gy);
+  check_fused_agree(fused, phase1, ref3, Gz, Gy);
+
+  // NaN in G_y is refused, also when only G_y changed.
+  Gy(1, 1) = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(fused.set(phase1, Gz, Gy), Catch::Contains("G_y"));
+  CHECK_FALSE(fused.ready());
 }

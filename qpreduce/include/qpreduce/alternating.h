@@ -17,12 +17,40 @@
 // `FixedCoordinateSolver::set_constraints` forms M_b, M_Y (cost independent of
 // n beyond AᵀB); `solve` is two GEMVs with no heap allocation. Soft
 // constraints (Eq. 18 form) work the same way.
+//
+// Fast path (ConstraintOptions::fast_path, the default), the range-space
+// form of subspace_solver.h applied to H_zz. Once per precomputed solver (at
+// the first set_constraints after its precompute or restore): with
+// D_s = diag(H_zz)^(−1/2), H_zz's lifted inverse M0 = D_s·H̃_zz⁻¹·D_s (d×d),
+// its ν lifted directions V_L, and the unconstrained z-response to Y,
+// P0 = M0·G (d×k). Per constraint set, with
+// Y' = [M0·A_zᵀ, D_sV_L/σ] (d×μ, μ = m + ν), the bordered Schur complement
+// Σ = U·diag(s)·Uᵀ (μ×μ), W = Y'·U, T = W·diag(1/s) (d×μ), U_m = U's first m
+// rows (m×μ):
+//
+//     M_b = T·U_mᵀ,   M_Y = P0 − T·R,   R = WᵀG + U_mᵀ·A_y   (μ×k),
+//
+// O(d·μ·(d + k)) instead of the null-space method's O(d³ + d²k). It is taken
+// for full-rank hard and for soft constraints when the problem is well
+// conditioned (the test of subspace_solver.h); anything else (rank-deficient
+// or least-squares constraint sets, an energy that is not convex on the
+// constraint set) falls back to the null-space method, which decides the
+// status. ConstraintSummary::fast_path says which ran.
 #pragma once
 
 #include "qpreduce/common.h"
 #include "qpreduce/subspace_solver.h"
 
+#include <memory>
+
 namespace qpreduce {
+
+namespace detail {
+struct FixedCoordinatePrep;  // alternating.cpp: the fast path's per-solver part
+}  // namespace detail
+
+template <typename Scalar>
+class FusedAlternation;
 
 template <typename Scalar>
 class FixedCoordinateSolver {
@@ -32,7 +60,9 @@ class FixedCoordinateSolver {
   using Ref = Eigen::Ref<VectorS>;
 
   // A: n×m sparse constraint columns (AᵀX = b). `solver` must be ready; it is
-  // read here and not kept. Throws std::invalid_argument on bad sizes/NaN.
+  // read here and not kept (the fast path keeps what it prepared from it, and
+  // redoes that after the solver's next precompute or restore). Throws
+  // std::invalid_argument on bad sizes/NaN.
   ConstraintSummary set_constraints(const SubspaceSolver<Scalar>& solver, const SparseMatrix<Scalar>& A,
                                     const ConstraintOptions& options = {});
 
@@ -47,8 +77,15 @@ class FixedCoordinateSolver {
   Index m() const { return Mb_.cols(); }
 
  private:
+  friend class FusedAlternation<Scalar>;
   Matrix<Scalar> Mb_;  // d × m
   Matrix<Scalar> MY_;  // d × k
+  // Fast path (see above), in double: the per-solver part, and M_Y = P0 − T·R.
+  std::shared_ptr<const detail::FixedCoordinatePrep> prep_;
+  Matrix<double> T_;   // d × μ
+  Matrix<double> Um_;  // m × μ
+  Matrix<double> R_;   // μ × k
+  bool fast_ = false;  // the current M_b, M_Y came from the fast path
   bool ready_ = false;
 };
 
@@ -98,6 +135,17 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
 //     g = (G_z·M_b)·b + (G_z·M_Y + G_y)·y = g_b + F_y·y,
 // so a round costs one q×k GEMV plus Π, g_b is formed once per call, and z
 // once after the last round. The iterates are those of `alternate` exactly.
+//
+// When Phase 1 came from its fast path (M_Y = P0 − T·R, M_b = T·U_mᵀ above),
+// `set` splits F_y into a part that depends on G_z and Phase 1's solver only
+// and a rank-μ correction:
+//
+//     F_y = C0 + G_y − (G_z·T)·R,   C0 = G_z·P0   (q×k),   F_b = (G_z·T)·U_mᵀ.
+//
+// C0 is formed once and kept for as long as Phase 1's precomputed solver and
+// the contents of G_z stay the same (compared bitwise on each `set`; G_y may
+// change freely), so a new constraint set costs O(q·μ·(d + k)) instead of
+// O(q·d·k).
 template <typename Scalar>
 class InputProjection {
  public:
@@ -127,6 +175,11 @@ class FusedAlternation {
 
  private:
   Matrix<Scalar> Fb_, Fy_;
+  // Fast path: C0 = G_z·P0 (q×k, double), with the Phase 1 preparation and
+  // a copy of the G_z it was formed from.
+  std::shared_ptr<const detail::FixedCoordinatePrep> prep_;
+  Matrix<Scalar> Gz_;
+  Matrix<double> C0_;
   Matrix<float> Fy_f_;  // F_y in float (AlternatingOptions::float_products)
   Vector<Scalar> gb_, g_;
   Vector<float> gf_, yf_;
