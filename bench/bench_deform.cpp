@@ -8,7 +8,10 @@
 //   Precompute/<M>      clusters, proxies, energy, subspace, reduced matrices
 //                       (one iteration; counters peak_MiB, extra_MiB)
 //   OP/<M>              set_handles for 8 point handles (farthest-point
-//                       vertices): the on-site preconditioner
+//                       vertices): the on-site preconditioner (counter
+//                       fast_path: 1 when Phase 1's range-space path ran)
+//   OPNullSpace/<M>     the same with ConstraintOptions::fast_path = false
+//                       (Phase 1's null-space method), for an A/B
 //   Iteration/<M>       one Phase 1 + Phase 2 round (a frame's alternation
 //                       divided by its rounds; manual time)
 //   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices (manual time)
@@ -190,15 +193,22 @@ void set_median(benchmark::State& state, std::vector<double> samples, double uni
   state.counters["median"] = samples[samples.size() / 2] / unit;
 }
 
-void BM_OP(benchmark::State& state, const ModelSpec* spec) {
+// fast_path = false: the null-space method for Phase 1 and F_y formed in
+// full (ConstraintOptions::fast_path), for an A/B in the same run.
+void BM_OP(benchmark::State& state, const ModelSpec* spec, bool fast_path) {
   Session& s = session(*spec);
+  ConstraintOptions options;
+  options.fast_path = fast_path;
   std::vector<double> samples;
+  bool fast = false;
   for (auto _ : state) {
     const qpreduce::detail::Timer t;
-    const ConstraintSummary cs = s.deformer.set_handles(s.handles);
+    const ConstraintSummary cs = s.deformer.set_handles(s.handles, options);
     samples.push_back(t.seconds());
+    fast = cs.fast_path;
     benchmark::DoNotOptimize(cs.rank);
   }
+  state.counters["fast_path"] = fast ? 1.0 : 0.0;
   set_median(state, std::move(samples), 1e-3);
   set_sizes(state, s);
 }
@@ -269,7 +279,10 @@ int main(int argc, char** argv) {
         ->Iterations(1)
         ->Unit(benchmark::kSecond)
         ->UseRealTime();
-    benchmark::RegisterBenchmark(("OP/" + n).c_str(), BM_OP, &spec)->Unit(benchmark::kMillisecond)->UseRealTime();
+    benchmark::RegisterBenchmark(("OP/" + n).c_str(), BM_OP, &spec, true)->Unit(benchmark::kMillisecond)->UseRealTime();
+    benchmark::RegisterBenchmark(("OPNullSpace/" + n).c_str(), BM_OP, &spec, false)
+        ->Unit(benchmark::kMillisecond)
+        ->UseRealTime();
     benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration)
         ->Unit(benchmark::kMicrosecond)
         ->UseManualTime();
