@@ -270,48 +270,76 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
     }
   }
   const Index nv = 3 * n, nu = nv + 4 * r;
-  Triplets tl, td, tn;
-  tl.reserve(static_cast<size_t>(el.weight.size()) * 60 + static_cast<size_t>(r) * 16);
+  // Each element's contributions are first summed on its own vertices (a
+  // spokes-and-rims element has about 7, a tet 4) and only then become
+  // triplets; L_VV comes from the scalar cotangent Laplacian ⊗ I₃. One set
+  // of triplets per edge was 5–10× more and was the precompute's memory
+  // peak on 40k-vertex meshes (1.3 GB of triplets on the Bumpy Plane).
+  Triplets tlap, tl, td, tn;
+  tlap.reserve(static_cast<size_t>(el.weight.size()) * 4);
+  tl.reserve(static_cast<size_t>(r) * (16 + 2 * 12 * 8));
+  td.reserve(static_cast<size_t>(r) * (9 * 8 + 36));
   tn.reserve(static_cast<size_t>(r) * 27);
-  td.reserve(static_cast<size_t>(el.weight.size()) * 54);
+  std::vector<Index> local;                                 // the element's vertices
+  std::vector<Eigen::Matrix<double, 3, 4>> vq;              // L_VQ block per local vertex
+  std::vector<Vec3> dv;                                     // D_V: Σ ±c·e per local vertex
+  auto slot = [&](Index v) {
+    for (size_t t = 0; t < local.size(); ++t)
+      if (local[t] == v) return t;
+    local.push_back(v);
+    vq.push_back(Eigen::Matrix<double, 3, 4>::Zero());
+    dv.push_back(Vec3::Zero());
+    return local.size() - 1;
+  };
   for (Index k = 0; k < r; ++k) {
     const Index qk = nv + 4 * k;
     const Index col0 = 9 * static_cast<Index>(cluster[k]);
     Eigen::Matrix4d Lqq = regulariser(el.measure(k), params, el.is_surface,
                                       el.is_surface ? Vec3(row(el.normal, k)) : Vec3::Zero());
     Eigen::Matrix3d Nk = Eigen::Matrix3d::Zero();  // Σ c e eᵀ: ½Σc‖s e‖² = ½ Σ_rows s_row·Nk·s_rowᵀ
+    Eigen::Matrix<double, 4, 9> dq = Eigen::Matrix<double, 4, 9>::Zero();  // D_Q block of element k
+    local.clear();
+    vq.clear();
+    dv.clear();
     for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
       const Index i = el.edge_i[e], j = el.edge_j[e];
       const double c = el.weight[e];
       const Vec3 ev = row(V, i) - row(V, j);
       const Eigen::Matrix<double, 3, 4> J = J_of(ev);
-      for (int a = 0; a < 3; ++a) {
-        tl.emplace_back(3 * i + a, 3 * i + a, c);
-        tl.emplace_back(3 * j + a, 3 * j + a, c);
-        tl.emplace_back(3 * i + a, 3 * j + a, -c);
-        tl.emplace_back(3 * j + a, 3 * i + a, -c);
-        for (int b = 0; b < 4; ++b) {
-          const double v = c * J(a, b);
-          tl.emplace_back(3 * i + a, qk + b, -v);
-          tl.emplace_back(qk + b, 3 * i + a, -v);
-          tl.emplace_back(3 * j + a, qk + b, v);
-          tl.emplace_back(qk + b, 3 * j + a, v);
-        }
-      }
+      tlap.emplace_back(i, i, c);
+      tlap.emplace_back(j, j, c);
+      tlap.emplace_back(i, j, -c);
+      tlap.emplace_back(j, i, -c);
+      const size_t si = slot(i), sj = slot(j);
+      // ½c‖e′ − J·Q‖²: L[v′_i, Q_k] = −c·J, L[v′_j, Q_k] = +c·J.
+      vq[si].noalias() -= c * J;
+      vq[sj].noalias() += c * J;
       Lqq.noalias() += c * J.transpose() * J;
       Nk.noalias() += c * ev * ev.transpose();
       // Linear term: coefficient of s(rr, cc) is c·e_cc·(e′ − J·Q)_rr.
-      for (int cc = 0; cc < 3; ++cc) {
-        const double ce = c * ev(cc);
-        if (ce == 0.0) continue;
-        for (int rr = 0; rr < 3; ++rr) {
-          const Index col = col0 + 3 * cc + rr;
-          td.emplace_back(3 * i + rr, col, ce);
-          td.emplace_back(3 * j + rr, col, -ce);
-          for (int b = 0; b < 4; ++b) td.emplace_back(qk + b, col, -ce * J(rr, b));
+      dv[si] += c * ev;
+      dv[sj] -= c * ev;
+      for (int cc = 0; cc < 3; ++cc)
+        for (int rr = 0; rr < 3; ++rr) dq.col(3 * cc + rr) -= c * ev(cc) * J.row(rr).transpose();
+    }
+    for (size_t t = 0; t < local.size(); ++t) {
+      const Index v = local[t];
+      for (int a = 0; a < 3; ++a) {
+        for (int b = 0; b < 4; ++b) {
+          const double x = vq[t](a, b);
+          if (x == 0.0) continue;
+          tl.emplace_back(3 * v + a, qk + b, x);
+          tl.emplace_back(qk + b, 3 * v + a, x);
         }
       }
+      for (int cc = 0; cc < 3; ++cc) {
+        if (dv[t](cc) == 0.0) continue;
+        for (int rr = 0; rr < 3; ++rr) td.emplace_back(3 * v + rr, col0 + 3 * cc + rr, dv[t](cc));
+      }
     }
+    for (int b = 0; b < 4; ++b)
+      for (int c = 0; c < 9; ++c)
+        if (dq(b, c) != 0.0) td.emplace_back(qk + b, col0 + c, dq(b, c));
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) tl.emplace_back(qk + a, qk + b, Lqq(a, b));
     // s(rr, cc) sits at col0 + 3cc + rr; the entries of one row rr couple.
@@ -319,6 +347,16 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
       for (int c1 = 0; c1 < 3; ++c1)
         for (int c2 = 0; c2 < 3; ++c2)
           if (Nk(c1, c2) != 0.0) tn.emplace_back(col0 + 3 * c1 + rr, col0 + 3 * c2 + rr, Nk(c1, c2));
+  }
+  {
+    // L_VV = Lap ⊗ I₃.
+    SparseMatrix<double> lap(n, n);
+    lap.setFromTriplets(tlap.begin(), tlap.end());
+    Triplets().swap(tlap);
+    tl.reserve(tl.size() + 3 * static_cast<size_t>(lap.nonZeros()));
+    for (Index c = 0; c < n; ++c)
+      for (SparseMatrix<double>::InnerIterator it(lap, c); it; ++it)
+        for (int a = 0; a < 3; ++a) tl.emplace_back(3 * it.row() + a, 3 * c + a, it.value());
   }
   if (params.gamma > 0.0) {
     for (const auto& [k, j] : element_neighbours(el)) {
