@@ -4,6 +4,8 @@
 // the camera looks down −z; clip z in [−w, w]).
 #pragma once
 
+#include <vector>
+
 #include <Eigen/Core>
 
 namespace qpr::viewer {
@@ -31,5 +33,17 @@ struct Camera {
   Eigen::Vector3f right() const;
   Eigen::Vector3f up() const;
 };
+
+// Whether (x, y) lies inside the closed polygon (px[i], py[i]) (even–odd
+// rule; the lasso selection). Fewer than 3 corners: never inside.
+inline bool inside_polygon(float x, float y, const std::vector<float>& px, const std::vector<float>& py) {
+  bool inside = false;
+  const size_t n = px.size();
+  if (n < 3 || py.size() != n) return false;
+  for (size_t i = 0, j = n - 1; i < n; j = i++) {
+    if ((py[i] > y) != (py[j] > y) && x < (px[j] - px[i]) * (y - py[i]) / (py[j] - py[i]) + px[i]) inside = !inside;
+  }
+  return inside;
+}
 
 }  // namespace qpr::viewer

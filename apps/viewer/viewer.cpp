@@ -384,7 +384,8 @@ class Interactive {
   bool ui_soft_ = false;
   char mesh_path_[256] = "deformed.obj", png_path_[256] = "screenshot.png", motion_path_[256] = "motion.json";
   // Interaction.
-  enum class Drag { None, Orbit, Pan, Box, Translate, Rotate } drag_ = Drag::None;
+  enum class Drag { None, Orbit, Pan, Box, Lasso, Translate, Rotate } drag_ = Drag::None;
+  std::vector<float> lasso_x_, lasso_y_;  // the lasso's corners, framebuffer pixels
   double last_x_ = 0, last_y_ = 0, start_x_ = 0, start_y_ = 0;
   int active_ = -1;  // handle being edited
   std::set<int> selection_;
@@ -444,28 +445,54 @@ class Interactive {
   }
 
   // Visible vertices inside the pixel rectangle (or the nearest one to a click).
-  void select(float x0, float y0, float x1, float y1, bool click) {
+  // Adds the visible vertices inside the lasso polygon to the selection.
+  void select_lasso() {
+    select_where([this](float px, float py) { return inside_polygon(px, py, lasso_x_, lasso_y_); });
+    lasso_x_.clear();
+    lasso_y_.clear();
+  }
+
+  // Calls fn(vertex, projection) for every vertex visible on screen
+  // (projected inside the framebuffer and not hidden in the depth buffer).
+  template <typename Fn>
+  void for_visible(const Fn& fn) {
     Vertices V;
     session_.positions(renderer_, &V);
     if (V.rows() == 0) V = session_.rest();
     const std::vector<float> depth = target_.read_depth_buffer();
     const Eigen::Matrix4f m = pv();
-    const float lo_x = std::min(x0, x1), hi_x = std::max(x0, x1), lo_y = std::min(y0, y1), hi_y = std::max(y0, y1);
-    int nearest = -1;
-    float nearest_d = (10.0f * scale_) * (10.0f * scale_);
     for (Index v = 0; v < V.rows(); ++v) {
       const Projected p = project(m, V.row(v).transpose(), fb_w_, fb_h_);
       const int px = static_cast<int>(p.x), py = static_cast<int>(p.y);
       if (!p.in_front || px < 0 || py < 0 || px >= fb_w_ || py >= fb_h_) continue;
       if (p.depth > depth[static_cast<size_t>(py) * fb_w_ + px] + 2e-3f) continue;  // hidden
-      if (click) {
-        const float d = (p.x - x0) * (p.x - x0) + (p.y - y0) * (p.y - y0);
-        if (d < nearest_d) nearest_d = d, nearest = static_cast<int>(v);
-      } else if (p.x >= lo_x && p.x <= hi_x && p.y >= lo_y && p.y <= hi_y) {
-        selection_.insert(static_cast<int>(v));
-      }
+      fn(static_cast<int>(v), p);
     }
-    if (click && nearest >= 0 && !selection_.erase(nearest)) selection_.insert(nearest);
+  }
+
+  template <typename Inside>
+  void select_where(const Inside& inside) {
+    for_visible([&](int v, const Projected& p) {
+      if (inside(p.x, p.y)) selection_.insert(v);
+    });
+    renderer_.set_markers(1, std::vector<unsigned>(selection_.begin(), selection_.end()));
+  }
+
+  // A box (x0, y0)–(x1, y1) adds the visible vertices inside it; a click
+  // toggles the nearest visible vertex within 10 pixels.
+  void select(float x0, float y0, float x1, float y1, bool click) {
+    if (!click) {
+      const float lo_x = std::min(x0, x1), hi_x = std::max(x0, x1), lo_y = std::min(y0, y1), hi_y = std::max(y0, y1);
+      select_where([&](float x, float y) { return x >= lo_x && x <= hi_x && y >= lo_y && y <= hi_y; });
+      return;
+    }
+    int nearest = -1;
+    float nearest_d = (10.0f * scale_) * (10.0f * scale_);
+    for_visible([&](int v, const Projected& p) {
+      const float d = (p.x - x0) * (p.x - x0) + (p.y - y0) * (p.y - y0);
+      if (d < nearest_d) nearest_d = d, nearest = v;
+    });
+    if (nearest >= 0 && !selection_.erase(nearest)) selection_.insert(nearest);
     renderer_.set_markers(1, std::vector<unsigned>(selection_.begin(), selection_.end()));
   }
 
@@ -512,11 +539,13 @@ class Interactive {
                        glfwGetMouseButton(w, GLFW_MOUSE_BUTTON_MIDDLE) == GLFW_PRESS;
     const bool shift = glfwGetKey(w, GLFW_KEY_LEFT_SHIFT) == GLFW_PRESS || glfwGetKey(w, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS;
     const bool rotate = glfwGetKey(w, GLFW_KEY_R) == GLFW_PRESS;
+    const bool ctrl = glfwGetKey(w, GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS || glfwGetKey(w, GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS;
     if (drag_ == Drag::None && !io.WantCaptureMouse) {
       if (left) {
         start_x_ = x, start_y_ = y;
         const int h = shift ? -1 : pick_handle(static_cast<float>(x), static_cast<float>(y));
-        if (shift) drag_ = Drag::Box;
+        if (shift && ctrl) drag_ = Drag::Lasso, lasso_x_ = {float(x)}, lasso_y_ = {float(y)};
+        else if (shift) drag_ = Drag::Box;
         else if (h >= 0) active_ = h, drag_ = rotate ? Drag::Rotate : Drag::Translate, playing_ = replaying_ = false;
         else drag_ = Drag::Orbit;
       } else if (right) {
@@ -529,11 +558,17 @@ class Interactive {
       if (drag_ == Drag::Box) {
         const bool click = std::hypot(x - start_x_, y - start_y_) < 4.0 * scale_;
         select(static_cast<float>(start_x_), static_cast<float>(start_y_), static_cast<float>(x), static_cast<float>(y), click);
+      } else if (drag_ == Drag::Lasso) {
+        select_lasso();
       }
       drag_ = Drag::None;
       return;
     }
     switch (drag_) {
+      case Drag::Lasso:
+        if (std::hypot(x - lasso_x_.back(), y - lasso_y_.back()) > 3.0 * scale_)
+          lasso_x_.push_back(float(x)), lasso_y_.push_back(float(y));
+        break;
       case Drag::Orbit: camera_.orbit(dx, dy); break;
       case Drag::Pan: camera_.pan(dx, dy, static_cast<float>(fb_h_)); break;
       case Drag::Translate:
@@ -564,6 +599,14 @@ class Interactive {
   }
 
   void draw_box() {
+    if (drag_ == Drag::Lasso && lasso_x_.size() >= 2) {
+      const float s = 1.0f / scale_;
+      std::vector<ImVec2> pts;
+      for (size_t i = 0; i < lasso_x_.size(); ++i) pts.emplace_back(lasso_x_[i] * s, lasso_y_[i] * s);
+      ImGui::GetForegroundDrawList()->AddPolyline(pts.data(), static_cast<int>(pts.size()), IM_COL32(20, 150, 230, 255),
+                                                  ImDrawFlags_Closed, 1.5f);
+      return;
+    }
     if (drag_ != Drag::Box) return;
     double x = 0, y = 0;
     glfwGetCursorPos(context_.window(), &x, &y);

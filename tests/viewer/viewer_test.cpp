@@ -2,6 +2,7 @@
 // GPU reconstruction (basis in a texture buffer, transform feedback) against
 // the Deformer's own CPU reconstruction, a scripted drag that must change the
 // picture, recorded motion round trips, and bad input.
+#include <camera.h>
 #include <context.h>
 #include <image.h>
 #include <motion.h>
@@ -180,4 +181,15 @@ TEST_CASE("boundary faces of a tet box are its surface") {
   for (Index f = 0; f < F.rows(); ++f)
     volume += box.V.row(F(f, 0)).dot(box.V.row(F(f, 1)).cross(box.V.row(F(f, 2)))) / 6.0;
   CHECK(volume == Approx(1.0));
+}
+
+TEST_CASE("lasso: inside_polygon by the even-odd rule, concave outlines included") {
+  // An L-shaped outline: (0,0) (4,0) (4,1) (1,1) (1,4) (0,4).
+  const std::vector<float> x{0, 4, 4, 1, 1, 0}, y{0, 0, 1, 1, 4, 4};
+  CHECK(qpr::viewer::inside_polygon(0.5f, 0.5f, x, y));
+  CHECK(qpr::viewer::inside_polygon(3.5f, 0.5f, x, y));
+  CHECK(qpr::viewer::inside_polygon(0.5f, 3.5f, x, y));
+  CHECK_FALSE(qpr::viewer::inside_polygon(2.0f, 2.0f, x, y));  // the notch
+  CHECK_FALSE(qpr::viewer::inside_polygon(5.0f, 0.5f, x, y));
+  CHECK_FALSE(qpr::viewer::inside_polygon(0.5f, 0.5f, {0, 1}, {0, 1}));  // not a polygon
 }
