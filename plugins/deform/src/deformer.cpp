@@ -575,8 +575,26 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     for (int c = 0; c < 9; ++c) ta.emplace_back(S.patch_base + 12 * p + c, col + c, 1.0);
     col += 9;
   }
+  // A (n_u × col) straight from the column-sorted entries: setFromTriplets
+  // would pass through an n_u-long row index, a cost growing with the mesh.
+  std::sort(ta.begin(), ta.end(), [](const Eigen::Triplet<double>& x, const Eigen::Triplet<double>& y) {
+    return x.col() != y.col() ? x.col() < y.col() : x.row() < y.row();
+  });
   SparseMatrix<double> A(S.nu, col);
-  A.setFromTriplets(ta.begin(), ta.end());
+  {
+    Eigen::VectorXi per_column = Eigen::VectorXi::Zero(col);
+    for (size_t e = 0; e < ta.size(); ++e)
+      if (e == 0 || ta[e].col() != ta[e - 1].col() || ta[e].row() != ta[e - 1].row()) ++per_column(ta[e].col());
+    A.reserve(per_column);
+    for (size_t e = 0; e < ta.size(); ++e) {
+      if (e > 0 && ta[e].col() == ta[e - 1].col() && ta[e].row() == ta[e - 1].row()) {
+        A.coeffRef(ta[e].row(), ta[e].col()) += ta[e].value();  // a repeated entry (two vertices of one patch)
+      } else {
+        A.insert(ta[e].row(), ta[e].col()) = ta[e].value();
+      }
+    }
+    A.makeCompressed();
+  }
   const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
   S.tie_map.setZero(S.nx, 9 * S.d);
   for (size_t i = 0; i < tied.size(); ++i) {
