@@ -18,7 +18,7 @@ namespace {
 using MatD = Matrix<double>;
 }  // namespace
 
-RangeSpace prepare_range_space(const MatD& H, double lift_tolerance) {
+RangeSpace prepare_range_space(const MatD& H, double lift_tolerance, bool factored_terms) {
   RangeSpace rs;
   const Index p = H.rows();
   // D_s = diag(H)^(−1/2); a column without energy keeps the largest scale.
@@ -57,7 +57,113 @@ RangeSpace prepare_range_space(const MatD& H, double lift_tolerance) {
     rs.lift_cols.col(j) = DV.col(i) / sigma;
     rs.lift_block(j) = -lambda(i) / (sigma * (sigma - lambda(i)));  // = 1/σ − 1/(σ − λ), without cancellation
   }
+  if (factored_terms) {
+    // T_j = (D_sV)·Λ̃⁻ʲ·(D_sV)ᵀ.
+    const MatD DV2 = DV * inv.array().square().matrix().asDiagonal();
+    const MatD DV3 = DV2 * inv.asDiagonal();
+    rs.T2.resize(p, p);
+    rs.T3.resize(p, p);
+    blas_gemm(false, true, 1.0, DV2, DV, 0.0, rs.T2);
+    blas_gemm(false, true, 1.0, DV3, DV, 0.0, rs.T3);
+    rs.T2 = 0.5 * (rs.T2 + rs.T2.transpose()).eval();
+    rs.T3 = 0.5 * (rs.T3 + rs.T3.transpose()).eval();
+    rs.inv_fro2 = inv.squaredNorm();
+  }
   return rs;
+}
+
+namespace {
+
+// Ā's nonzero columns and whether Ā is a scaled selection (every row has one
+// nonzero, no two rows in the same column; then row_col[i] is row i's column).
+struct NonzeroPattern {
+  std::vector<Index> cols;
+  std::vector<Index> row_col;
+  bool selection = false;
+};
+
+NonzeroPattern nonzero_pattern(const MatD& Abar) {
+  const Index m = Abar.rows(), p = Abar.cols();
+  NonzeroPattern pat;
+  std::vector<Index> row_count(static_cast<size_t>(m), 0);
+  pat.row_col.assign(static_cast<size_t>(m), 0);
+  Index nnz = 0;
+  for (Index j = 0; j < p; ++j) {
+    Index count = 0;
+    for (Index i = 0; i < m; ++i) {
+      if (Abar(i, j) == 0.0) continue;
+      ++count;
+      ++row_count[static_cast<size_t>(i)];
+      pat.row_col[static_cast<size_t>(i)] = j;
+    }
+    if (count > 0) pat.cols.push_back(j);
+    nnz += count;
+  }
+  pat.selection = m > 0 && nnz == m && static_cast<Index>(pat.cols.size()) == m &&
+                  std::all_of(row_count.begin(), row_count.end(), [](Index c) { return c == 1; });
+  return pat;
+}
+
+Index default_rank(const MatD& Abar, const NonzeroPattern& pat) {
+  const Index m = Abar.rows(), p = Abar.cols();
+  if (m == 0 || pat.cols.empty()) return 0;
+  Eigen::ColPivHouseholderQR<MatD> qr(Abar(Eigen::all, pat.cols));
+  qr.setThreshold(std::numeric_limits<double>::epsilon() * static_cast<double>(std::min(m, p)));
+  return qr.rank();
+}
+
+}  // namespace
+
+Index default_rank(const MatD& Abar) { return default_rank(Abar, nonzero_pattern(Abar)); }
+
+bool range_space_rank(const RangeSpace& rs, const MatD& A, const ConstraintOptions& options,
+                      ConstraintSummary* summary) {
+  const Index m = A.rows();
+  summary->m = m;
+  const MatD Abar = A * rs.scale.asDiagonal();
+  const NonzeroPattern pat = nonzero_pattern(Abar);
+  if (options.soft) {
+    summary->rank = default_rank(Abar, pat);
+    summary->condition = 0.0;
+    summary->status = Status::Success;
+    summary->message = fmt::format("{} soft constraints, δ = {:.3g}", m, options.delta);
+    return true;
+  }
+  // Hard constraints: the fast path needs full row rank; the null-space
+  // method handles the rest (least squares).
+  Index r = 0;
+  double condition = 0.0;
+  if (pat.selection) {
+    double sv_max = 0.0, sv_min = 0.0;
+    for (Index i = 0; i < m; ++i) {
+      const double v = std::abs(Abar(i, pat.row_col[static_cast<size_t>(i)]));
+      sv_max = i == 0 ? v : std::max(sv_max, v);
+      sv_min = i == 0 ? v : std::min(sv_min, v);
+    }
+    // As ColPivHouseholderQR::rank: |R_ii| above threshold × max |R_ii|.
+    for (Index i = 0; i < m; ++i)
+      r += std::abs(Abar(i, pat.row_col[static_cast<size_t>(i)])) > options.rank_tolerance * sv_max;
+    condition = sv_max / sv_min;
+  } else if (m > 0 && !pat.cols.empty()) {
+    // (Eigen's QR of a matrix without columns crashes: m = 0 or Ā = 0 skips it.)
+    Eigen::ColPivHouseholderQR<MatD> qr;  // of Āᵀ's nonzero rows, |J| × m
+    qr.setThreshold(options.rank_tolerance);
+    qr.compute(Abar(Eigen::all, pat.cols).transpose());
+    if (qr.matrixQR().diagonal().cwiseAbs().maxCoeff() > 0) r = qr.rank();
+    if (r == m) {
+      // Ā's singular values are R's (ĀᵀΠ = QR).
+      const MatD R = qr.matrixQR().topRows(m).template triangularView<Eigen::Upper>();
+      const Eigen::JacobiSVD<MatD> svd(R);
+      const auto& sv = svd.singularValues();
+      condition = sv(0) / sv(m - 1);
+    }
+  }
+  if (r != m) return false;
+  summary->rank = r;
+  summary->condition = condition;
+  summary->status = Status::Success;
+  summary->message = fmt::format("{} hard constraints, rank {}", m, r);
+  return true;
 }
 
 namespace {
@@ -124,40 +230,8 @@ bool bordered_operators(const RangeSpace& rs, const MatD& A, bool soft, double d
 
 bool range_space_operators(const RangeSpace& rs, const MatD& A, const ConstraintOptions& options,
                            ConstraintSummary* summary, RangeSpaceOperators* out) {
-  const Index m = A.rows();
-  summary->m = m;
-  const MatD Abar = A * rs.scale.asDiagonal();
-  if (options.soft) {
-    if (!bordered_operators(rs, A, true, options.delta, options.rank_tolerance, out)) return false;
-    summary->rank = m > 0 ? Eigen::ColPivHouseholderQR<MatD>(Abar).rank() : 0;
-    summary->condition = 0.0;
-    summary->status = Status::Success;
-    summary->message = fmt::format("{} soft constraints, δ = {:.3g}", m, options.delta);
-    return true;
-  }
-  // Hard constraints: the fast path needs full row rank; the null-space
-  // method handles the rest (least squares).
-  // (Eigen's QR of a matrix without columns crashes: m = 0 skips it.)
-  Eigen::ColPivHouseholderQR<MatD> qr;
-  Index r = 0;
-  if (m > 0) {
-    qr.setThreshold(options.rank_tolerance);
-    qr.compute(Abar.transpose());
-    if (qr.matrixQR().diagonal().cwiseAbs().maxCoeff() > 0) r = qr.rank();
-  }
-  if (r != m || !bordered_operators(rs, A, false, 0.0, options.rank_tolerance, out)) return false;
-  summary->rank = r;
-  summary->condition = 0.0;
-  if (m > 0) {
-    // Ā's singular values are R's (ĀᵀΠ = QR).
-    const MatD R = qr.matrixQR().topRows(m).template triangularView<Eigen::Upper>();
-    const Eigen::JacobiSVD<MatD> svd(R);
-    const auto& sv = svd.singularValues();
-    summary->condition = sv(0) / sv(m - 1);
-  }
-  summary->status = Status::Success;
-  summary->message = fmt::format("{} hard constraints, rank {}", m, r);
-  return true;
+  return range_space_rank(rs, A, options, summary) &&
+         bordered_operators(rs, A, options.soft, options.soft ? options.delta : 0.0, options.rank_tolerance, out);
 }
 
 }  // namespace qpreduce::detail

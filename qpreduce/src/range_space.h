@@ -29,6 +29,11 @@
 // the null-space method tests) and, for hard constraints, when Ā = A·D_s has
 // full row rank m; anything else goes to the null-space method, which decides
 // the status. Both give the same unique minimiser when it exists.
+//
+// The rank test (a column-pivoted QR of Āᵀ, p×m) runs on Ā's nonzero columns
+// only: the other rows of Āᵀ are zero and change neither R nor the rank; for
+// a scaled selection (one nonzero per row of Ā, in distinct columns) R is
+// diagonal and rank and condition are read off Ā's nonzeros, without a QR.
 #pragma once
 
 #include "qpreduce/common.h"
@@ -43,11 +48,27 @@ struct RangeSpace {
   Matrix<double> Minv0;        // M0 = D_s·H̃⁻¹·D_s (p × p, symmetric)
   Matrix<double> lift_cols;    // L = D_s·V_L/σ (p × ν)
   Eigen::VectorXd lift_block;  // β (ν)
+  // Only with factored_terms (SubspaceSolver's factored fast path,
+  // detail/factored_operators.h); empty and 0 otherwise.
+  Matrix<double> T2;           // D_s·H̃⁻²·D_s (p × p, symmetric)
+  Matrix<double> T3;           // D_s·H̃⁻³·D_s (p × p, symmetric)
+  double inv_fro2 = 0.0;       // ‖H̃⁻¹‖_F²
   Index p() const { return Minv0.rows(); }
 };
 
-// H: p×p symmetric (PSD up to round-off), finite. O(p³).
-RangeSpace prepare_range_space(const Matrix<double>& H, double lift_tolerance);
+// H: p×p symmetric (PSD up to round-off), finite. O(p³); factored_terms adds
+// T₂, T₃ and ‖H̃⁻¹‖_F² (two more p³ products).
+RangeSpace prepare_range_space(const Matrix<double>& H, double lift_tolerance, bool factored_terms = false);
+
+// The fast path's rank test for the constraints A (m × p, unscaled, finite):
+// sets summary->m, rank and (hard) condition, status Success and message.
+// false: hard constraints without full row rank (the fast path is not taken).
+bool range_space_rank(const RangeSpace& rs, const Matrix<double>& A, const ConstraintOptions& options,
+                      ConstraintSummary* summary);
+
+// rank(Ā) with Eigen's default threshold for an m × p matrix (soft
+// constraints' summary), from Ā's nonzero columns only.
+Index default_rank(const Matrix<double>& Abar);
 
 struct RangeSpaceOperators {
   Matrix<double> W;   // Y'·U (p × q)
@@ -57,8 +78,8 @@ struct RangeSpaceOperators {
 };
 
 // The fast path for the constraints A (m × p, unscaled, finite) under
-// `options` (soft, delta, rank_tolerance; the BLAS threads are the caller's).
-// true: *out holds the operators and *summary its status (Success), message,
+// `options` (soft, delta, rank_tolerance; the BLAS threads are the caller's):
+// range_space_rank, then the bordered operators. true: *out holds the operators and *summary its status (Success), message,
 // rank and condition (summary->m is set either way). false: not taken; the
 // caller runs the null-space method (and overwrites the summary).
 bool range_space_operators(const RangeSpace& rs, const Matrix<double>& A, const ConstraintOptions& options,

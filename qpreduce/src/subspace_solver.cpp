@@ -30,6 +30,8 @@ bool ConstraintOptions::is_valid(std::string* why) const {
   if (soft && !(delta > 0.0 && std::isfinite(delta))) return fail("delta must be positive and finite");
   if (!(rank_tolerance > 0.0 && rank_tolerance < 1.0)) return fail("rank_tolerance must lie in (0, 1)");
   if (threads < 0) return fail("threads must be non-negative");
+  if (!(factored_cost_ratio > 0.0 && std::isfinite(factored_cost_ratio)))
+    return fail("factored_cost_ratio must be positive and finite");
   return true;
 }
 
@@ -113,8 +115,12 @@ void SubspaceSolver<Scalar>::prepare_fast_path(double lift_tolerance) {
   static std::atomic<std::uint64_t> generations{0};
   generation_ = ++generations;
   lift_tolerance_ = lift_tolerance;
-  auto range = std::make_shared<detail::RangeSpace>(detail::prepare_range_space(Hr_d_, lift_tolerance));
+  // T₂, T₃ for the factored fast path, which only the double solver takes.
+  constexpr bool factored_terms = std::is_same_v<Scalar, double>;
+  auto range =
+      std::make_shared<detail::RangeSpace>(detail::prepare_range_space(Hr_d_, lift_tolerance, factored_terms));
   P0_ = range->Minv0 * BtD_d_;
+  if constexpr (factored_terms) lift_btd_ = range->lift_cols.transpose() * BtD_d_;
   range_ = std::move(range);
 }
 
@@ -178,9 +184,19 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints_in_design(const Matrix
 template <typename Scalar>
 ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const ConstraintOptions& options) {
   ConstraintSummary summary;
-  const Index m = Ar.rows();
+  const Index m = Ar.rows(), p = Ar.cols();
   summary.m = m;
+  factored_ = false;
   const MatD Abar = Ar * range_->scale.asDiagonal();
+  // The operator form: multiply-adds of the factored form's sparse products
+  // against the explicit form's GEMMs (ConstraintOptions::explicit_operators).
+  const Index q = m + range_->lift_cols.cols();
+  const double nz = static_cast<double>((Ar.array() != 0.0).count());
+  const double pd = static_cast<double>(p), md = static_cast<double>(m);
+  const double factored_madds = pd * nz + 3.0 * std::min(nz * nz, nz * (pd + md));
+  const double explicit_madds = pd * pd * (md + 0.5 * static_cast<double>(q));
+  const bool factored = std::is_same_v<Scalar, double> && !options.explicit_operators && q <= kMaxFactoredRank &&
+                        options.factored_cost_ratio * factored_madds <= explicit_madds;
   // The operators are formed in double: in place for Scalar = double (no
   // p × p copy), in scratch that is cast afterwards otherwise.
   MatD scratch_b, scratch_q, scratch_y;
@@ -200,7 +216,14 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
     std::optional<detail::ScopedBlasThreads> blas;
     if (options.threads > 0) blas.emplace(options.threads);
     detail::RangeSpaceOperators rso;
-    if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
+    if (factored) {
+      if (detail::range_space_rank(*range_, Ar, options, &summary)) {
+        const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
+        factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
+                                               options.rank_tolerance, Abar.squaredNorm(), &factored_ops_);
+      }
+      fast = factored_;
+    } else if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
       // M_q = M_g (lower triangle), M_b = T·U_mᵀ, M_Y = P0 − T·(WᵀBᵀD).
       Mq = std::move(rso.Mg);
       Mb.resize(Ar.cols(), m);
@@ -218,9 +241,10 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
     summary = ConstraintSummary{};
     summary.m = m;
     reference_operators(Abar, options, &summary, &Mb, &Mq, &MY);
-    if (options.soft) summary.rank = m > 0 ? Eigen::ColPivHouseholderQR<MatD>(Abar).rank() : 0;
+    if (options.soft) summary.rank = detail::default_rank(Abar);
   }
   summary.fast_path = fast;
+  summary.factored = factored_;
 
   Ar_ = Ar.template cast<Scalar>();
   if constexpr (!std::is_same_v<Scalar, double>) {
@@ -260,6 +284,25 @@ void SubspaceSolver<Scalar>::reduce_linear_term_in_D(const ConstRef& Y, Ref q_r)
 template <typename Scalar>
 void SubspaceSolver<Scalar>::solve(const ConstRef& b, const ConstRef& q_r, Ref w) const {
   assert(constrained_ && b.size() == m_ && q_r.size() == p() && w.size() == p());
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (factored_) {
+      // w = M0·q_r + Y·(Σ⁻¹·([b; 0] − Yᵀq_r)); r and t live on the stack.
+      const MatD& Y = factored_ops_.Y;
+      const Index q = Y.cols();
+      assert(q <= kMaxFactoredRank);
+      double r_buf[kMaxFactoredRank], t_buf[kMaxFactoredRank];
+      Eigen::Map<Eigen::VectorXd> r(r_buf, q);
+      r.head(m_) = b;
+      r.tail(q - m_).setZero();
+      r.noalias() -= Y.transpose() * q_r;  // Eigen's row-major GEMV: no temporary for a contiguous q_r
+      std::fill(t_buf, t_buf + q, 0.0);
+      detail::symv_lower_add(factored_ops_.Sinv, r_buf, t_buf);
+      std::fill(w.data(), w.data() + w.size(), 0.0);
+      detail::symv_lower_add(range_->Minv0, q_r.data(), w.data());
+      detail::gemv_add(Y.data(), Y.rows(), q, Y.outerStride(), t_buf, w.data());
+      return;
+    }
+  }
   detail::gemv(Mb_, b.data(), w.data(), false);
   detail::symv_lower_add(Mq_, q_r.data(), w.data());
 }
@@ -267,6 +310,23 @@ void SubspaceSolver<Scalar>::solve(const ConstRef& b, const ConstRef& q_r, Ref w
 template <typename Scalar>
 void SubspaceSolver<Scalar>::solve_in_D(const ConstRef& b, const ConstRef& Y, Ref w) const {
   assert(constrained_ && b.size() == m_ && Y.size() == k() && w.size() == p());
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (factored_) {
+      // w = P0·Y + Yf·(Σ⁻¹[I_m; 0]·b − Φ·Y); t lives on the stack.
+      const MatD& Yf = factored_ops_.Y;
+      const MatD& Sinv = factored_ops_.Sinv;
+      const MatD& PhiNeg = factored_ops_.PhiNeg;
+      const Index q = Yf.cols();
+      assert(q <= kMaxFactoredRank);
+      double t_buf[kMaxFactoredRank];
+      std::fill(t_buf, t_buf + q, 0.0);
+      detail::gemv_add(Sinv.data(), q, m_, Sinv.outerStride(), b.data(), t_buf);
+      detail::gemv_add(PhiNeg.data(), q, PhiNeg.cols(), PhiNeg.outerStride(), Y.data(), t_buf);
+      detail::gemv(P0_, Y.data(), w.data(), false);
+      detail::gemv_add(Yf.data(), Yf.rows(), q, Yf.outerStride(), t_buf, w.data());
+      return;
+    }
+  }
   detail::gemv(Mb_, b.data(), w.data(), false);
   detail::gemv(MY_, Y.data(), w.data(), true);
 }

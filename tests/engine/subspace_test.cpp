@@ -393,6 +393,102 @@ TEST_CASE("set_constraints fast path agrees with the null-space method", "[solve
   }
 }
 
+TEST_CASE("factored fast path agrees with the explicit one", "[solver][fast][factored]") {
+  // ridge 0: H̄ has a lifted direction (ν = 1, constants); ridge > 0: ν = 0.
+  const double ridge = GENERATE(0.0, 1e-2);
+  CAPTURE(ridge);
+  const Index nx = 20, ny = 20, n = nx * ny, d = 30, k = 6;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny, ridge);
+  const SparseMatrix<double> C = gen::selection(n, gen::random_subset(n, d, 51));
+  const SparseMatrix<double> D = gen::grid_trend_basis(nx, ny, k);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(H, C, D).ok());
+  const Index p = solver.p();
+
+  auto columns = [&](std::initializer_list<std::initializer_list<std::pair<Index, double>>> cols) {
+    Matrix<double> Ac = Matrix<double>::Zero(d, static_cast<Index>(cols.size()));
+    Index j = 0;
+    for (const auto& col : cols) {
+      for (const auto& [i, v] : col) Ac(i, j) = v;
+      ++j;
+    }
+    return Ac;
+  };
+  struct Demand {
+    const char* name;
+    Matrix<double> Ac;
+    bool soft;
+    bool factored;  // whether the default options must keep M_q factored
+  };
+  const std::vector<Demand> demands = {
+      {"selection", columns({{{0, 1.0}}, {{3, 1.0}}, {{7, 1.0}}, {{12, 1.0}}, {{20, 1.0}}}), false, true},
+      {"sparse sums", columns({{{0, 1.0}, {1, 0.5}}, {{2, 1.0}, {9, -2.0}}, {{4, 1.0}, {5, 1.0}, {6, 1.0}}}), false,
+       true},
+      {"soft selection", columns({{{0, 1.0}}, {{3, 1.0}}, {{7, 1.0}}}), true, true},
+      {"no constraints", Matrix<double>(d, 0), false, false},
+      {"differences only", columns({{{0, 1.0}, {1, -1.0}}, {{2, 1.0}, {3, -1.0}}}), false, false},
+      {"repeated", columns({{{0, 1.0}}, {{3, 1.0}}, {{0, 1.0}}}), false, false},
+      {"dense combinations", gen::gaussian_matrix(d, 7, 52), false, false},
+  };
+  for (const Demand& demand : demands) {
+    CAPTURE(demand.name);
+    const Index m = demand.Ac.cols();
+    const Vector<double> b = gen::gaussian_vector(m, 53), Y = gen::gaussian_vector(k, 54);
+    Vector<double> q_r(p);
+    solver.reduce_linear_term(gen::gaussian_vector(n, 55), q_r);
+    ConstraintSummary cs[2];
+    Vector<double> w[2], wY[2];
+    for (int explicit_ops = 0; explicit_ops < 2; ++explicit_ops) {
+      ConstraintOptions o;
+      o.soft = demand.soft;
+      o.delta = 1e2;
+      o.explicit_operators = explicit_ops == 1;
+      cs[explicit_ops] = solver.set_constraints_in_design(demand.Ac, o);
+      INFO(cs[explicit_ops].message);
+      w[explicit_ops].resize(p);
+      wY[explicit_ops].resize(p);
+      solver.solve(b, q_r, w[explicit_ops]);
+      solver.solve_in_D(b, Y, wY[explicit_ops]);
+      REQUIRE(w[explicit_ops].allFinite());
+      REQUIRE(wY[explicit_ops].allFinite());
+    }
+    CHECK(cs[0].status == cs[1].status);
+    CHECK(cs[0].rank == cs[1].rank);
+    CHECK(cs[0].fast_path == cs[1].fast_path);
+    CHECK(cs[0].condition == Approx(cs[1].condition).epsilon(1e-12));
+    CHECK_FALSE(cs[1].factored);
+    if (demand.factored) CHECK(cs[0].factored);
+    if (cs[0].factored) CHECK(cs[0].fast_path);
+    // Dense A_c: more than half of A_r's entries are nonzero.
+    if (std::string(demand.name) == "dense combinations") CHECK_FALSE(cs[0].factored);
+    if (cs[0].status != Status::Unbounded) {  // otherwise the answer is not unique
+      CHECK((w[0] - w[1]).norm() <= 1e-10 * w[1].norm());
+      CHECK((wY[0] - wY[1]).norm() <= 1e-10 * wY[1].norm());
+    }
+    if (std::string(demand.name) == "selection") {
+      // Rank and condition read off a scaled selection, as the null-space
+      // method's pivoted QR (diagonal R) reports them.
+      ConstraintOptions o;
+      o.fast_path = false;
+      const ConstraintSummary ref = solver.set_constraints_in_design(demand.Ac, o);
+      CHECK(ref.rank == cs[0].rank);
+      CHECK(ref.condition == Approx(cs[0].condition).epsilon(1e-12));
+      CHECK(cs[0].condition > 1.0);  // D_s scales differ
+    }
+    if (cs[0].status == Status::Success && !demand.soft) {
+      const Vector<double> Aw = solver.reduced_constraints() * wY[0];
+      CHECK((Aw - b).norm() <= 1e-10 * (1.0 + b.norm()));
+    }
+  }
+
+  // The float solver always forms its operators (see subspace_solver.h).
+  SubspaceSolver<float> single;
+  REQUIRE(single.precompute(H.cast<float>(), C.cast<float>(), D.cast<float>()).ok());
+  const ConstraintSummary cf = single.set_constraints_in_design(demands.front().Ac.cast<float>());
+  CHECK(cf.fast_path);
+  CHECK_FALSE(cf.factored);
+}
+
 TEST_CASE("the PSD certificate decides like the factorization check", "[subspace][psd]") {
   const Index nx = 10, ny = 10, n = nx * ny;
   const SparseMatrix<double> L = gen::grid_laplacian_2d(nx, ny);

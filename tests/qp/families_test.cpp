@@ -89,6 +89,38 @@ TEST_CASE("QP families: in-design demands are reproduced exactly", "[qp][familie
   }
 }
 
+TEST_CASE("QP families: factored and explicit operators agree on every generated demand", "[qp][families][factored]") {
+  const Family f = GENERATE(Family::Gmrf, Family::Trajectory, Family::Portfolio);
+  const bool soft = GENERATE(false, true);
+  INFO(families::to_string(f) << (soft ? " soft" : " hard"));
+  const families::QpFamily fam = families::make_family(f, 3000, 3);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(fam.H, fam.C, fam.D, families::recommended_options(fam)).ok());
+  const Index p = solver.p();
+  for (std::uint64_t i = 0; i < 6; ++i) {
+    const families::QpDemand dem = families::make_demand(fam, i);
+    Vector<double> q_r(p);
+    solver.reduce_linear_term(dem.q + 0.1 * Vector<double>::Ones(fam.n()), q_r);  // q ∉ Span(D) too
+    Vector<double> w[2], wY[2];
+    for (int explicit_ops = 0; explicit_ops < 2; ++explicit_ops) {
+      ConstraintOptions o;
+      o.soft = soft;
+      o.explicit_operators = explicit_ops == 1;
+      const ConstraintSummary cs = solver.set_constraints_in_design(dem.A_c, o);
+      INFO(cs.message);
+      REQUIRE(cs.status == Status::Success);
+      CHECK(cs.fast_path);
+      CHECK(cs.factored == (explicit_ops == 0));  // A_c: a selection or a few sums
+      w[explicit_ops].resize(p);
+      wY[explicit_ops].resize(p);
+      solver.solve(dem.b, q_r, w[explicit_ops]);
+      solver.solve_in_D(dem.b, dem.Y, wY[explicit_ops]);
+    }
+    CHECK((w[0] - w[1]).norm() <= 1e-10 * w[1].norm());
+    CHECK((wY[0] - wY[1]).norm() <= 1e-10 * wY[1].norm());
+  }
+}
+
 TEST_CASE("QP families: generators are deterministic and validate their options", "[qp][families]") {
   const Family f = GENERATE(Family::Gmrf, Family::Trajectory, Family::Portfolio);
   const families::QpFamily a = families::make_family(f, 500, 3), b = families::make_family(f, 500, 3);

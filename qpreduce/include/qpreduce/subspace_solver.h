@@ -43,9 +43,39 @@
 // deficient hard constraints) goes to the null-space method, which decides the
 // status. Both give the same unique minimiser when it exists. (The same
 // range-space code, src/range_space.h, serves Phase 1 in alternating.h.)
+// The rank test (a column-pivoted QR of Āᵀ, p×m) runs on Ā's nonzero columns
+// only: the other rows of Āᵀ are zero and change neither R nor the rank; for
+// a scaled selection (one nonzero per row of Ā, in distinct columns) R is
+// diagonal and rank and condition are read off Ā's nonzeros.
+//
+// Factored fast path (double, when A_r is sparse: constraints in design
+// coordinates, A_r = [A_cᵀ 0], with A_c a selection or a few sums). Forming
+// the p×p M̄_q above is then the only O(p²·(m+ν)) term; instead keep, in
+// unscaled coordinates (q = m + ν; M0 = D_sH̃⁻¹D_s and P0 = M0·BᵀD (p×k)
+// precomputed; L = D_sV_L/σ, p×ν),
+//     Y  = [M0·A_rᵀ, L]                                          p×q,
+//     Σ  = [[A_r·M0·A_rᵀ + c·I_m, A_r·L], [Lᵀ·A_rᵀ, −λ_L/(σ(σ − λ_L))]],
+//     Σ⁻¹ from Cholesky factors of Σ's m×m block and of its negated ν×ν
+//         Schur complement (Σ has m positive, ν negative eigenvalues), q×q,
+//     Φ  = Σ⁻¹·YᵀBᵀD = Σ⁻¹·[A_r·P0; LᵀBᵀD]                       q×k,
+// so that M_q = M0 − YΣ⁻¹Yᵀ, M_b = YΣ⁻¹[I_m; 0], M_Y = P0 − YΦ, applied as
+//     solve:       w = M0·q_r + Y·(Σ⁻¹·([b; 0] − Yᵀq_r))   p² + 2pq + q² flops,
+//     solve_in_D:  w = P0·Y_D + Y·(Σ⁻¹[I_m; 0]·b − Φ·Y_D)  p(k + q) + q(m + k).
+// The acceptance test needs ‖M̄_q‖_F without M̄_q: with K_j = ÃH̃⁻ʲÃᵀ (q×q),
+//     ‖M̄_q‖_F² = ‖H̃⁻¹‖_F² − 2·tr(Σ⁻¹K₃) + tr(Σ⁻¹K₂Σ⁻¹K₂),
+//     K_j = [[A_r·T_j·A_rᵀ, σ^(1−j)·A_r·L], [·, σ^(−j)·I_ν]],  T_j = D_sH̃⁻ʲD_s,
+// T₂, T₃ (p×p) precomputed next to M0: the same norm and the same bound.
+// Every product with A_r touches only its nonzeros, so the on-site step costs
+// O(nnz(A_r)·(p + m + k) + q³) — for a selection of m design coordinates
+// O(p·m + m³) — instead of about 4·p²·q. Round-off: the explicit path forms
+// M_q = M0 − YΣ⁻¹Yᵀ in double too, so both carry errors of order ε·‖M0‖; in
+// float the factored form would carry ε_float·‖M0‖ where the explicit M_q
+// (formed in double, then rounded) has ε_float·‖M_q‖, so the float solver
+// always keeps explicit operators.
 #pragma once
 
 #include "qpreduce/common.h"
+#include "qpreduce/detail/factored_operators.h"
 #include "qpreduce/subspace.h"
 
 #include <cstdint>
@@ -77,6 +107,22 @@ struct ConstraintOptions {
   // about a millisecond of GEMMs, where waking a second thread on a shared
   // machine costs more than it saves; 0 means omp_get_max_threads().
   int threads = 1;
+  // false: the fast path keeps M_q factored (see "Factored fast path") when
+  // Scalar is double, m + ν ≤ SubspaceSolver::kMaxFactoredRank and it is
+  // cheaper: factored_cost_ratio × its sparse products' multiply-adds,
+  // p·nnz + 3·min(nnz², nnz·(p + m)) (nnz = nnz(A_r): Y, then A_r·T·A_rᵀ for
+  // T = M0, T₂, T₃), at most the explicit form's p²·(m + (m + ν)/2) (Y and
+  // the rank-(m + ν) update of M0); otherwise it forms M_b, M_q, M_Y.
+  // true: always form them (the explicit path, for comparison and tests).
+  bool explicit_operators = false;
+  // Cost of one multiply-add in the factored form's sparse loops relative to
+  // one in the explicit form's BLAS GEMMs; only the automatic choice uses it.
+  // Streaming column axpys measured about 10 (trajectory family, n = 10⁵,
+  // a sparse A with nnz(A_r) = 5,384 of 16,320: 8.6 ms factored, 2.7 ms
+  // explicit); the in-cache gathers of a selection less (portfolio, p = 70:
+  // factored 14% faster although it counts 1.3 times the explicit work).
+  // 5 takes the faster form on both and on every family's A_c demands.
+  double factored_cost_ratio = 5.0;
 
   bool is_valid(std::string* why) const;
 };
@@ -88,6 +134,7 @@ struct ConstraintSummary {
   Index rank = 0;         // numerical rank of Ā = AᵀB·D_s (= rank of A_r)
   double condition = 0.0; // σ_max/σ_min(Ā) over its rank
   bool fast_path = false; // the answer came from the precomputed fast path
+  bool factored = false;  // ... with M_q kept factored (no p×p operator formed)
   double seconds = 0.0;
 
   bool ok() const { return usable(status); }
@@ -100,6 +147,9 @@ class SubspaceSolver {
   using MatrixS = Matrix<Scalar>;
   using ConstRef = Eigen::Ref<const VectorS>;
   using Ref = Eigen::Ref<VectorS>;
+  // Largest m + ν for which the fast path keeps M_q factored: `solve` keeps
+  // two vectors of that length on the stack (8 KiB) to stay allocation-free.
+  static constexpr Index kMaxFactoredRank = 512;
 
   // Builds the subspace from one factorization (build_subspace) and the
   // reduced matrices H_r = BᵀHB and BᵀD. Throws std::invalid_argument on bad
@@ -135,9 +185,11 @@ class SubspaceSolver {
   // q_r = BᵀD·Y for q = D·Y (Y: k). Cost O(p·k).
   void reduce_linear_term_in_D(const ConstRef& Y, Ref q_r) const;
 
-  // w = M_b·b + M_q·q_r. b: m, q_r: p, w: p. No heap allocation.
+  // w = M_b·b + M_q·q_r. b: m, q_r: p, w: p (not aliasing q_r). No heap
+  // allocation. Cost p² + p·m (explicit), p² + 2p·(m + ν) (factored).
   void solve(const ConstRef& b, const ConstRef& q_r, Ref w) const;
-  // Same with q = D·Y (Y: k). No heap allocation.
+  // Same with q = D·Y (Y: k). No heap allocation. Cost p·(m + k) (explicit),
+  // p·(k + m + ν) + (m + ν)·(m + k) (factored).
   void solve_in_D(const ConstRef& b, const ConstRef& Y, Ref w) const;
   // X = N·z + UD·y for w = [z; y]. X: n. Cost O(n·p).
   void reconstruct(const ConstRef& w, Ref X) const;
@@ -186,8 +238,12 @@ class SubspaceSolver {
   // Changes with every precompute/restore (process-wide counter), so that
   // state derived from this solver (Phase 1's fast path) knows when to redo it.
   std::uint64_t generation_ = 0;
+  // For the factored fast path (double only; range_ then has T₂, T₃, ‖H̃⁻¹‖_F²).
+  MatD lift_btd_;  // LᵀBᵀD (ν × k)
+  // The factored operators of the current constraint set (when factored_).
+  detail::FactoredOperators factored_ops_;
   Index n_ = 0, m_ = 0;
-  bool ready_ = false, constrained_ = false;
+  bool ready_ = false, constrained_ = false, factored_ = false;
 };
 
 }  // namespace qpreduce
