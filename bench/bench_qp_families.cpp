@@ -8,8 +8,12 @@
 //                       reconstructs all n values of X; design:1 passes the
 //                       constraints as A_c (A = C·A_c) to
 //                       set_constraints_in_design, without the nnz(A)·p
-//                       product AᵀB;
-//   BM_QpSolve          solve_in_D alone (same constraint set, new b and Y);
+//                       product AᵀB; explicit:1 forms the p×p operators
+//                       (ConstraintOptions::explicit_operators) where
+//                       explicit:0 may keep them factored (only A_c
+//                       demands are sparse enough), the A/B of one run;
+//   BM_QpSolve          solve_in_D alone (same constraint set, new b and Y;
+//                       design and explicit as above);
 //   BM_QpCachedSchur    the strongest simple competitor: a Cholesky of
 //                       H (+ W·Wᵀ, one pinned site, when H is singular) cached at
 //                       set-up, then per demand m + 1 solves, the Schur
@@ -125,24 +129,35 @@ void BM_QpPrecompute(benchmark::State& state) {
 void BM_QpDemand(benchmark::State& state) {
   Fixture& f = fixture(static_cast<int>(state.range(0)), state.range(1));
   const bool reconstruct = state.range(2) != 0, in_design = state.range(3) != 0;
+  ConstraintOptions options;
+  options.explicit_operators = state.range(4) != 0;
   Vector<double> w(f.solver.p()), X(f.solver.n());
   int i = 0;
+  bool factored = true;
   for (auto _ : state) {
     const families::QpDemand& d = f.demands[static_cast<size_t>(i++ % kDemands)];
-    const ConstraintSummary cs = in_design ? f.solver.set_constraints_in_design(d.A_c) : f.solver.set_constraints(d.A);
+    const ConstraintSummary cs =
+        in_design ? f.solver.set_constraints_in_design(d.A_c, options) : f.solver.set_constraints(d.A, options);
     if (!cs.ok()) state.SkipWithError(cs.message.c_str());
+    factored = factored && cs.factored;
     f.solver.solve_in_D(d.b, d.Y, w);
     if (reconstruct) f.solver.reconstruct(w, X);
     benchmark::DoNotOptimize(w.data());
     benchmark::DoNotOptimize(X.data());
   }
   counters(state, f);
+  state.counters["factored"] = factored ? 1.0 : 0.0;  // every demand kept M_q factored
 }
 
 void BM_QpSolve(benchmark::State& state) {
   Fixture& f = fixture(static_cast<int>(state.range(0)), state.range(1));
   const families::QpDemand& d0 = f.demands.front();
-  if (!f.solver.set_constraints(d0.A).ok()) state.SkipWithError("set_constraints failed");
+  ConstraintOptions options;
+  options.explicit_operators = state.range(3) != 0;
+  const ConstraintSummary cs = state.range(2) != 0 ? f.solver.set_constraints_in_design(d0.A_c, options)
+                                                   : f.solver.set_constraints(d0.A, options);
+  if (!cs.ok()) state.SkipWithError("set_constraints failed");
+  state.counters["factored"] = cs.factored ? 1.0 : 0.0;
   Vector<double> w(f.solver.p());
   int i = 0;
   for (auto _ : state) {
@@ -189,19 +204,30 @@ void families_and_sizes(benchmark::internal::Benchmark* b) {
     for (Index size : {10000, 100000}) b->Args({family, size});
 }
 
+// explicit:1 only without reconstruction (the A/B of the operator form).
 void demand_variants(benchmark::internal::Benchmark* b) {
-  b->ArgNames({"family", "size", "reconstruct", "design"});
+  b->ArgNames({"family", "size", "reconstruct", "design", "explicit"});
   for (int family = 0; family < 3; ++family)
     for (Index size : {10000, 100000})
       for (int r : {0, 1})
-        for (int design : {0, 1}) b->Args({family, size, r, design});
+        for (int design : {0, 1})
+          for (int ex : {0, 1})
+            if (r == 0 || ex == 0) b->Args({family, size, r, design, ex});
+}
+
+void solve_variants(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"family", "size", "design", "explicit"});
+  for (int family = 0; family < 3; ++family)
+    for (Index size : {10000, 100000})
+      for (int design : {0, 1})
+        for (int ex : {0, 1}) b->Args({family, size, design, ex});
 }
 
 }  // namespace
 
 BENCHMARK(BM_QpPrecompute)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(1);
 BENCHMARK(BM_QpDemand)->Apply(demand_variants)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_QpSolve)->Apply(families_and_sizes)->Unit(benchmark::kMicrosecond)->UseRealTime();
+BENCHMARK(BM_QpSolve)->Apply(solve_variants)->Unit(benchmark::kMicrosecond)->UseRealTime();
 BENCHMARK(BM_QpCachedSchur)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_QpFullKkt)->Apply(families_and_sizes)->Unit(benchmark::kMillisecond)->UseRealTime();
 

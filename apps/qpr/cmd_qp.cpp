@@ -12,7 +12,8 @@
 //
 // Demands. A directory holds A_<name>.mtx (n×m) or Ac_<name>.mtx (d×m, the
 // constraints in design coordinates: A = C·A_c, solved with
-// set_constraints_in_design), b_<name>.mtx (m×1) and optionally q_<name>.mtx
+// set_constraints_in_design, whose fast path keeps M_q factored when A_c is
+// sparse), b_<name>.mtx (m×1) and optionally q_<name>.mtx
 // (n×1; missing: q = 0) or Y_<name>.mtx (k×1: q = D·Y). A JSON manifest lists
 // them instead ("A_c" may replace "A"):
 //   {"demands": [{"name": "d0", "A": "A0.mtx", "b": "b0.mtx", "q": "q0.mtx"}, ...]}
@@ -338,6 +339,7 @@ int run_qp(const Options& opt) {
     r["solve_seconds"] = t_solve;
     r["reconstruct_seconds"] = t_recon;
     r["fast_path"] = cs.fast_path;
+    r["factored"] = cs.factored;  // A_c demands: M_q kept factored (subspace_solver.h)
     const Vec q = d.in_D ? Vec(D * d.Y) : d.q;
     r["constraint_residual"] = (d.A.transpose() * X - d.b).norm() / std::max(1.0, d.b.norm());
 

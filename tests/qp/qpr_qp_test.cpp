@@ -172,6 +172,7 @@ TEST_CASE("qpr qp: constraints in design coordinates (Ac_ files)", "[qp][cli]") 
   for (size_t i = 0; i < 3; ++i) {
     const nlohmann::json& d = doc["demands"][i];
     CHECK(d["design_coordinates"] == true);
+    CHECK(d["factored"] == true);  // a selection A_c: M_q kept factored
     CHECK(d["dH_rel_error"].get<double>() <= 1e-10);
     CHECK(d["constraint_residual"].get<double>() <= 1e-10);
   }
