@@ -93,7 +93,8 @@ void Deformer::State::set_topology(const DeformableModel& model) {
   // Vertices used by no element carry no energy: an internal Fixed patch
   // holds those that are not in a patch already at their rest positions.
   const ElementsRef E = tet ? ElementsRef(model.T) : ElementsRef(model.F);
-  unreferenced = connected_components(n, E).unreferenced;
+  components = connected_components(n, E);
+  unreferenced = components.unreferenced;
   std::vector<Index> loose;
   for (Index v : unreferenced)
     if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) loose.push_back(v);
@@ -387,7 +388,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   S.nx = 3 * S.m + 12 * S.s;
   // Every component needs a proxy or a patch.
   {
-    const MeshComponents comps = connected_components(n, E);
+    const MeshComponents& comps = S.components;
     std::vector<char> pinned(static_cast<size_t>(comps.count), 0);
     for (const auto& g : groups)
       for (Index v : g) pinned[static_cast<size_t>(comps.vertex_component[v])] = 1;
@@ -464,7 +465,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     for (const auto& g : groups) fill += 3.0 * static_cast<double>(g.size() * g.size());
     if (fill > sub.max_augmentation_fill * static_cast<double>(Hu.nonZeros()) && S.m > 0) {
       // One group per component suffices; the shortest ones of each component.
-      const MeshComponents comps = connected_components(n, E);
+      const MeshComponents& comps = S.components;
       std::vector<Index> best(static_cast<size_t>(comps.count), -1);
       for (Index j = 0; j < S.m; ++j) {
         const int c = comps.vertex_component[groups[j].front()];

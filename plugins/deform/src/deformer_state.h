@@ -57,6 +57,7 @@ struct Deformer::State {
   // used by no element, when there are any outside the model's patches.
   std::vector<int> patch_of_vertex;
   std::vector<PatchType> patch_types;
+  MeshComponents components;        // of the elements (set_topology), reused by precompute
   std::vector<Index> unreferenced;  // vertices used by no element, ascending
   Index n = 0, d = 0, m = 0, s = 0;
   Index nu = 0;                        // control-layer size

@@ -157,9 +157,6 @@ class ArapFamilyModel final : public DeformationModel {
   ArapFamilyModel(const EnergyParameters& energy, double psi_max) : energy_(energy), psi_max_(psi_max) {
     std::string why;
     if (!energy_.is_valid(&why)) throw std::invalid_argument("EnergyParameters: " + why);
-    if (!(psi_max_ >= 1.0) || !std::isfinite(psi_max_)) {
-      throw std::invalid_argument(fmt::format("conformal model: psi_max must be finite and > 1, got {}", psi_max_));
-    }
   }
   std::string name() const override { return psi_max_ > 1.0 ? "conformal" : "arap"; }
   std::vector<std::pair<std::string, double>> parameters() const override {
