@@ -10,8 +10,9 @@
 //                       set_constraints_in_design, without the nnz(A)·p
 //                       product AᵀB; explicit:1 forms the p×p operators
 //                       (ConstraintOptions::explicit_operators) where
-//                       explicit:0 may keep them factored (only A_c
-//                       demands are sparse enough), the A/B of one run;
+//                       explicit:0 may keep them factored (in-design
+//                       demands, as A_c or as A once drop_tolerance has
+//                       zeroed AᵀB's round-off), the A/B of one run;
 //   BM_QpSolve          solve_in_D alone (same constraint set, new b and Y;
 //                       design and explicit as above);
 //   BM_QpCachedSchur    the strongest simple competitor: a Cholesky of

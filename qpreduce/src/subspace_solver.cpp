@@ -30,6 +30,7 @@ bool ConstraintOptions::is_valid(std::string* why) const {
   if (soft && !(delta > 0.0 && std::isfinite(delta))) return fail("delta must be positive and finite");
   if (!(rank_tolerance > 0.0 && rank_tolerance < 1.0)) return fail("rank_tolerance must lie in (0, 1)");
   if (threads < 0) return fail("threads must be non-negative");
+  if (!(drop_tolerance >= 0.0 && drop_tolerance < 1.0)) return fail("drop_tolerance must lie in [0, 1)");
   if (!(factored_cost_ratio > 0.0 && std::isfinite(factored_cost_ratio)))
     return fail("factored_cost_ratio must be positive and finite");
   return true;
@@ -45,6 +46,39 @@ using MatD = Matrix<double>;
 constexpr Index kParallelEntries = Index(1) << 24;
 // Rows per block of reconstruct: X's block and one panel of N stay in L2.
 constexpr Index kReconstructRows = 2048;
+
+// Sets to zero the entries of A_r = AᵀB (m × p) with |A_r(i,j)| ≤
+// tau·‖a_i‖·‖B_j‖ (subspace_solver.h, "Round-off in A_r"); basis_norms holds
+// ‖B_j‖. Returns the number of entries zeroed; *emptied counts the rows that
+// had a nonzero entry and have none left.
+template <typename Scalar>
+Index drop_roundoff(const SparseMatrix<Scalar>& A, const Vector<double>& basis_norms, double tau, MatD* Ar,
+                    Index* emptied) {
+  const Index m = Ar->rows(), p = Ar->cols();
+  Vector<double> cut(m);  // tau·‖a_i‖, O(nnz(A))
+  for (Index i = 0; i < m; ++i) {
+    double sq = 0.0;
+    for (typename SparseMatrix<Scalar>::InnerIterator it(A, i); it; ++it) sq += double(it.value()) * double(it.value());
+    cut(i) = tau * std::sqrt(sq);
+  }
+  std::vector<char> had(static_cast<size_t>(m), 0), kept(static_cast<size_t>(m), 0);
+  Index dropped = 0;
+  for (Index j = 0; j < p; ++j)
+    for (Index i = 0; i < m; ++i) {
+      double& v = (*Ar)(i, j);
+      if (v == 0.0) continue;
+      had[static_cast<size_t>(i)] = 1;
+      if (std::abs(v) <= cut(i) * basis_norms(j)) {
+        v = 0.0;
+        ++dropped;
+      } else {
+        kept[static_cast<size_t>(i)] = 1;
+      }
+    }
+  *emptied = 0;
+  for (size_t i = 0; i < had.size(); ++i) *emptied += had[i] && !kept[i];
+  return dropped;
+}
 
 }  // namespace
 
@@ -115,6 +149,10 @@ void SubspaceSolver<Scalar>::prepare_fast_path(double lift_tolerance) {
   static std::atomic<std::uint64_t> generations{0};
   generation_ = ++generations;
   lift_tolerance_ = lift_tolerance;
+  const Index d = this->d(), k = this->k();
+  basis_norms_.resize(d + k);
+  for (Index j = 0; j < d; ++j) basis_norms_(j) = subspace_.N.col(j).template cast<double>().norm();
+  for (Index j = 0; j < k; ++j) basis_norms_(d + j) = subspace_.UD.col(j).template cast<double>().norm();
   // T₂, T₃ for the factored fast path, which only the double solver takes.
   constexpr bool factored_terms = std::is_same_v<Scalar, double>;
   auto range =
@@ -157,7 +195,17 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Sca
   MatD Ar(m, p);
   Ar.leftCols(d) = (A.transpose() * subspace_.N).template cast<double>();
   Ar.rightCols(k) = (A.transpose() * subspace_.UD).template cast<double>();
+  // Round-off entries (CᵀN = I, CᵀUD = 0 hold only to round-off) to exact zeros.
+  Index dropped = 0, emptied = 0;
+  if (options.drop_tolerance > 0.0) dropped = drop_roundoff(A, basis_norms_, options.drop_tolerance, &Ar, &emptied);
   ConstraintSummary summary = apply_constraints(std::move(Ar), options);
+  summary.dropped = dropped;
+  if (emptied > 0) {
+    summary.message += fmt::format(
+        " ({} of them with every entry of A_r = AᵀB at most drop_tolerance = {:.1e} × ‖a_i‖‖B_j‖: no component in "
+        "the subspace, the row is zero)",
+        emptied, options.drop_tolerance);
+  }
   summary.seconds = timer.seconds();
   return summary;
 }

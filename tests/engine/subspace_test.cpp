@@ -301,6 +301,62 @@ TEST_CASE("over-determined hard constraints fall back to least squares with a st
   CHECK(Ab(1) == Approx(0.5 * (b(1) + b(13))).margin(1e-8));
 }
 
+TEST_CASE("a constraint orthogonal to the subspace is dropped honestly", "[solver][drop]") {
+  // a ⊥ Span(B) up to round-off: its row of A_r = AᵀB is round-off, all of it
+  // below drop_tolerance, so it becomes zero and the set is rank deficient.
+  const Problem p = in_span_problem(12, 12, 0.0, 9);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(p.H, p.C, p.D).ok());
+  const Index n = p.H.rows();
+  Matrix<double> B(n, solver.p());
+  B << solver.subspace().N, solver.subspace().UD;
+  const Eigen::HouseholderQR<Matrix<double>> qr(B);
+  const Matrix<double> Q = qr.householderQ() * Matrix<double>::Identity(n, solver.p());
+  Vector<double> a = gen::gaussian_vector(n, 81);
+  for (int pass = 0; pass < 2; ++pass) a -= Q * (Q.transpose() * a);
+  a /= a.norm();
+  const std::vector<Index> rows = gen::random_subset(n, 3, 82);
+  Matrix<double> Ad = Matrix<double>(gen::selection(n, rows));
+  Ad.conservativeResize(n, 4);
+  Ad.col(3) = a;
+  const SparseMatrix<double> A = Ad.sparseView();
+  const Vector<double> b = gen::gaussian_vector(4, 83);
+  for (const double tau : {ConstraintOptions{}.drop_tolerance, 0.0}) {
+    for (const bool soft : {false, true}) {
+      CAPTURE(tau, soft);
+      ConstraintOptions o;
+      o.drop_tolerance = tau;
+      o.soft = soft;
+      const ConstraintSummary cs = solver.set_constraints(A, o);
+      INFO(cs.message);
+      // (Soft constraints report the rank at ε, which a round-off row may pass.)
+      if (tau > 0.0 || !soft) CHECK(cs.rank == 3);
+      if (tau > 0.0) {
+        CHECK(solver.reduced_constraints().row(3).isZero(0.0));
+        CHECK(cs.dropped >= solver.p());
+        CHECK_THAT(cs.message, Catch::Contains("no component in the subspace"));
+      } else {
+        CHECK(cs.dropped == 0);
+      }
+      if (!soft) {
+        CHECK(cs.status == Status::ConstraintsLeastSquares);
+        CHECK_THAT(cs.message, Catch::Contains("least-squares"));
+      }
+      Vector<double> w(solver.p());
+      solver.solve_in_D(b, p.Y, w);
+      REQUIRE(w.allFinite());
+      // The other three constraints still hold (exactly for hard ones).
+      const Vector<double> Aw = solver.reduced_constraints().topRows(3) * w;
+      if (!soft) CHECK((Aw - b.head(3)).norm() <= 1e-10 * (1.0 + b.norm()));
+    }
+  }
+  ConstraintOptions bad;
+  bad.drop_tolerance = -1e-3;
+  CHECK_THROWS_AS(solver.set_constraints(A, bad), std::invalid_argument);
+  bad.drop_tolerance = 1.0;
+  CHECK_THROWS_AS(solver.set_constraints(A, bad), std::invalid_argument);
+}
+
 TEST_CASE("soft constraints approach the hard ones as delta grows", "[solver]") {
   const Problem p = in_span_problem(12, 12, 0.0, 21);
   SubspaceSolver<double> solver;

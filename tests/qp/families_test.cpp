@@ -39,6 +39,15 @@ families::QpFamily small_family(Family f, std::uint64_t seed) {
   throw std::logic_error("family");
 }
 
+// A solver precomputed on the family with its recommended options.
+SubspaceSolver<double> precomputed_solver(const families::QpFamily& fam) {
+  SubspaceSolver<double> solver;
+  const SubspaceSummary s = solver.precompute(fam.H, fam.C, fam.D, families::recommended_options(fam));
+  INFO(s.report());
+  REQUIRE(s.ok());
+  return solver;
+}
+
 Vector<double> reduced_answer(SubspaceSolver<double>& solver, const families::QpDemand& dem, bool in_D) {
   const ConstraintSummary cs = solver.set_constraints(dem.A);
   REQUIRE(cs.status == Status::Success);
@@ -94,8 +103,7 @@ TEST_CASE("QP families: factored and explicit operators agree on every generated
   const bool soft = GENERATE(false, true);
   INFO(families::to_string(f) << (soft ? " soft" : " hard"));
   const families::QpFamily fam = families::make_family(f, 3000, 3);
-  SubspaceSolver<double> solver;
-  REQUIRE(solver.precompute(fam.H, fam.C, fam.D, families::recommended_options(fam)).ok());
+  SubspaceSolver<double> solver = precomputed_solver(fam);
   const Index p = solver.p();
   for (std::uint64_t i = 0; i < 6; ++i) {
     const families::QpDemand dem = families::make_demand(fam, i);
@@ -118,6 +126,63 @@ TEST_CASE("QP families: factored and explicit operators agree on every generated
     }
     CHECK((w[0] - w[1]).norm() <= 1e-10 * w[1].norm());
     CHECK((wY[0] - wY[1]).norm() <= 1e-10 * wY[1].norm());
+  }
+}
+
+TEST_CASE("QP families: in-design demands passed as a sparse A take the factored path", "[qp][families][drop]") {
+  // A_r = AᵀB equals [A_cᵀ 0] only to round-off (CᵀN = I, CᵀUD = 0 hold to the
+  // build's residual); drop_tolerance zeroes that round-off (subspace_solver.h).
+  const Family f = GENERATE(Family::Gmrf, Family::Trajectory, Family::Portfolio);
+  const bool soft = GENERATE(false, true);
+  INFO(families::to_string(f) << (soft ? " soft" : " hard"));
+  const families::QpFamily fam = families::make_family(f, 3000, 3);
+  SubspaceSolver<double> solver = precomputed_solver(fam);
+  const Index p = solver.p(), d = solver.d();
+  for (std::uint64_t i = 0; i < 4; ++i) {
+    const families::QpDemand dem = families::make_demand(fam, i);
+    Vector<double> q_r(p);
+    solver.reduce_linear_term(dem.q + 0.1 * Vector<double>::Ones(fam.n()), q_r);  // q ∉ Span(D) too
+    ConstraintOptions o;
+    o.soft = soft;
+    // Reference: the same constraints in design coordinates.
+    const ConstraintSummary ref = solver.set_constraints_in_design(dem.A_c, o);
+    REQUIRE(ref.status == Status::Success);
+    REQUIRE(ref.factored);
+    CHECK(ref.dropped == 0);
+    Vector<double> w_ref(p), wY_ref(p);
+    solver.solve(dem.b, q_r, w_ref);
+    solver.solve_in_D(dem.b, dem.Y, wY_ref);
+    Index nnz_kept = 0;  // nonzeros of A_r with every entry kept
+    for (const double tau : {0.0, ConstraintOptions{}.drop_tolerance}) {
+      INFO("drop_tolerance " << tau);
+      o.drop_tolerance = tau;
+      const ConstraintSummary cs = solver.set_constraints(dem.A, o);
+      INFO(cs.message);
+      REQUIRE(cs.status == Status::Success);
+      CHECK(cs.fast_path);
+      CHECK(cs.rank == ref.rank);
+      const Matrix<double>& Ar = solver.reduced_constraints();
+      const Index nnz = (Ar.array() != 0.0).count(), nnz_design = (dem.A_c.array() != 0.0).count();
+      if (tau > 0.0) {
+        // Exactly the pattern of [A_cᵀ 0], and the factored path as for A_c.
+        CHECK(cs.factored);
+        CHECK(nnz == nnz_design);
+        CHECK(cs.dropped == nnz_kept - nnz_design);
+        CHECK(((Ar.leftCols(d).array() != 0.0) == (dem.A_c.transpose().array() != 0.0)).all());
+        CHECK(Ar.rightCols(p - d).isZero(0.0));
+      } else {
+        // The old behaviour: every entry kept, A_r dense to round-off.
+        CHECK(cs.dropped == 0);
+        CHECK_FALSE(cs.factored);
+        CHECK(nnz > nnz_design);
+        nnz_kept = nnz;
+      }
+      Vector<double> w(p), wY(p);
+      solver.solve(dem.b, q_r, w);
+      solver.solve_in_D(dem.b, dem.Y, wY);
+      CHECK((w - w_ref).norm() <= 1e-10 * w_ref.norm());
+      CHECK((wY - wY_ref).norm() <= 1e-10 * wY_ref.norm());
+    }
   }
 }
 
@@ -185,6 +250,44 @@ TEST_CASE("QP families: the Theorem 4.10 bound holds on every generated demand",
   // The bound is not vacuous: it applies to the in-design and mildly perturbed demands at least.
   CHECK(applies >= 3);
   CHECK(trials == 27);
+}
+
+TEST_CASE("QP families: off-design demands stay within the Theorem 4.10 bound with and without dropping",
+          "[qp][families][theorem][drop]") {
+  const Family f = GENERATE(Family::Gmrf, Family::Trajectory, Family::Portfolio);
+  INFO(families::to_string(f));
+  const families::QpFamily fam = small_family(f, 5);
+  // The engine's answer X* with the default drop_tolerance and with none.
+  TheoremChecker checker[2];
+  QuotientOptions keep_all;
+  keep_all.constraints.drop_tolerance = 0.0;
+  REQUIRE(checker[0].precompute(fam.H, fam.C, fam.D).ok());
+  REQUIRE(checker[1].precompute(fam.H, fam.C, fam.D, keep_all).ok());
+  int applies = 0;
+  for (Index outside : {1, 3})
+    for (std::uint64_t i = 0; i < 3; ++i) {
+      const families::QpDemand dem = families::make_demand(fam, 200 + i, {outside, 1e-3});
+      REQUIRE_FALSE(dem.in_design);
+      TheoremSolutions sol[2];
+      TheoremCheck c[2];
+      for (int j = 0; j < 2; ++j) {
+        c[j] = checker[j].check(dem.A, dem.b, dem.q, &sol[j]);
+        INFO("outside " << outside << " demand " << i << " drop " << (j == 0) << ": " << c[j].message);
+        REQUIRE((c[j].status == TheoremStatus::Applies || c[j].status == TheoremStatus::DoesNotApply));
+        CHECK_FALSE(c[j].practical_violation());
+        if (c[j].bound.applies()) CHECK(c[j].practical_error <= c[j].bound.bound + c[j].slack);
+      }
+      applies += c[0].bound.applies();
+      // Something was dropped: the in-design rows' round-off at least.
+      const auto zeros = [](const TheoremChecker& tc) {
+        return (tc.solver().reduced_constraints().array() == 0.0).count();
+      };
+      CHECK(zeros(checker[0]) > zeros(checker[1]));
+      // Only entries with cosine ≤ drop_tolerance go: the answers agree to within the change of A_r.
+      CHECK(c[0].bound.applies() == c[1].bound.applies());
+      CHECK((sol[0].X_star - sol[1].X_star).norm() <= 1e-8 * sol[1].X_star.norm());
+    }
+  CHECK(applies >= 1);
 }
 
 TEST_CASE("Cached Cholesky + Schur baseline equals the full solve", "[qp][baseline]") {

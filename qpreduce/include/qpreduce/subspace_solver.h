@@ -72,6 +72,40 @@
 // float the factored form would carry ε_float·‖M0‖ where the explicit M_q
 // (formed in double, then rounded) has ε_float·‖M_q‖, so the float solver
 // always keeps explicit operators.
+//
+// Round-off in A_r = AᵀB (set_constraints only). For an in-design demand,
+// A = C·A_c, A_r = [A_cᵀ 0] has as few nonzeros as A_c, but the computed
+// B satisfies CᵀN = I, CᵀUD = 0 only to round-off, so AᵀB comes out dense
+// (gmrf, n ≈ 10⁵: 17,830 of 18,360 entries nonzero for m nonzeros) and the
+// factored path is never taken. With a_i the i-th column of A and B_j the
+// j-th of B, measure an entry by its cosine
+//     γ_ij = |A_r(i,j)| / (‖a_i‖₂‖B_j‖₂) ≤ 1   (A_r(i,j) = a_iᵀB_j);
+// for a_i = C·c_i and an entry that is zero in [A_cᵀ 0] (A_c = [c_1 … c_m]),
+//     γ_ij = |c_iᵀ(CᵀB_j − [I 0]_j)| / (‖C·c_i‖‖B_j‖)
+//          ≤ (‖CᵀB_j − [I 0]_j‖/‖B_j‖)·(‖c_i‖/‖C·c_i‖),
+// the column-wise relative KKT residual of the build (not the Frobenius-
+// normalised SubspaceSummary::kkt_residual, which is smaller by the ratio of
+// the global norms to the column's: 6·10⁻¹⁹ for gmrf at n ≈ 10⁵, whose
+// round-off cosines reach 4·10⁻¹⁷). Entries with
+//     |A_r(i,j)| ≤ τ·‖a_i‖₂·‖B_j‖₂,   τ = ConstraintOptions::drop_tolerance,
+// are therefore set to exactly zero (ConstraintSummary::dropped counts them);
+// ‖B_j‖ is kept per precompute/restore (p numbers), ‖a_i‖ costs nnz(A).
+// For any A, in the design or not, this changes row i of A_r by at most
+// τ·‖a_i‖·‖B‖_F, and a genuinely dense A_r loses only entries that small.
+// Measured on the three families (families.h at the bench sizes n ≈ 10⁴ and
+// 10⁵, 16 in-design demands each): round-off cosines ≤ 1.0·10⁻¹⁴
+// (portfolio; gmrf ≤ 10⁻¹⁶, trajectory ≤ 10⁻¹⁵; the column bound above
+// ≤ 2.3·10⁻¹², portfolio), genuine ones ≥ 0.06. The default τ = 10⁻¹⁰ (the
+// default rank_tolerance too) sits 4 decades above the first and 8 below
+// the second. The in-design A_r then has exactly the nonzeros of [A_cᵀ 0],
+// and the factored path and its selection shortcut apply as with
+// set_constraints_in_design. Off-design rows keep their large entries
+// (largest cosine per row ≥ 4.6·10⁻³ on the families' off-design demands)
+// and lose only the tails of decaying columns. A row
+// that is dropped entirely (a constraint with no component in Span(B) above
+// τ) makes the constraint set rank deficient: hard constraints then hold in
+// the least-squares sense (Status::ConstraintsLeastSquares) and the message
+// says how many rows were dropped; soft ones report the lower rank.
 #pragma once
 
 #include "qpreduce/common.h"
@@ -99,6 +133,13 @@ struct ConstraintOptions {
   // Singular values of Ā (and eigenvalues of the reduced Hessian on the
   // constraint set) below rank_tolerance × the largest count as zero.
   double rank_tolerance = 1e-10;
+  // set_constraints(A) only: entries of A_r = AᵀB with |A_r(i,j)| ≤
+  // drop_tolerance·‖a_i‖₂·‖B_j‖₂ (a_i: column i of A, B_j: column j of B)
+  // are round-off and set to exactly zero (see "Round-off in A_r"): in-design
+  // demands given as a sparse A then get the sparse A_r = [A_cᵀ 0] and the
+  // factored path. Round-off measured ≤ 10⁻¹⁴, genuine entries of in-design
+  // demands ≥ 0.06 on the three families; 0 keeps every entry. In [0, 1).
+  double drop_tolerance = 1e-10;
   // Use the precomputed range-space fast path when it applies (see above;
   // likewise FixedCoordinateSolver and FusedAlternation, alternating.h);
   // false forces the O(p³) null-space method (for comparison and tests).
@@ -135,6 +176,7 @@ struct ConstraintSummary {
   double condition = 0.0; // σ_max/σ_min(Ā) over its rank
   bool fast_path = false; // the answer came from the precomputed fast path
   bool factored = false;  // ... with M_q kept factored (no p×p operator formed)
+  Index dropped = 0;      // entries of A_r zeroed by drop_tolerance (set_constraints)
   double seconds = 0.0;
 
   bool ok() const { return usable(status); }
@@ -161,7 +203,8 @@ class SubspaceSolver {
   // Restores a precomputed solver from its parts (e.g. read back from a cache
   // file): the subspace B = [N UD] (n×p), H_r = BᵀHB (p×p, symmetric) and
   // BᵀD (p×k), as `precompute` would have made them from the same options.
-  // Redoes only the p×p fast-path preparation (O(p³), no factorization).
+  // Redoes only the p×p fast-path preparation (O(p³), no factorization)
+  // and the column norms ‖B_j‖ (O(n·p)).
   // Throws std::invalid_argument on inconsistent sizes, NaN/Inf, or an
   // asymmetric H_r.
   void restore(VariationalSubspace<Scalar> subspace, Matrix<double> Hr, Matrix<double> BtD,
@@ -210,7 +253,7 @@ class SubspaceSolver {
   using MatD = Matrix<double>;
   void require_ready(const char* what) const;
   void require_constrained(const char* what) const;
-  // The fast path's p×p preparation and a new generation (precompute, restore).
+  // The fast path's p×p preparation, ‖B_j‖ and a new generation (precompute, restore).
   void prepare_fast_path(double lift_tolerance);
   // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
@@ -224,6 +267,7 @@ class SubspaceSolver {
   MatrixS Hr_;   // p × p
   MatrixS BtD_;  // p × k
   MatrixS Ar_;   // m × p
+  Vector<double> basis_norms_;  // ‖B_j‖₂ (p), for ConstraintOptions::drop_tolerance
   MatrixS Mb_;   // p × m
   MatrixS Mq_;   // p × p, symmetric: only its lower triangle is kept current (solve reads that)
   MatrixS MY_;   // p × k
