@@ -14,6 +14,8 @@
 //                       (Phase 1's null-space method), for an A/B
 //   Iteration/<M>       one Phase 1 + Phase 2 round (a frame's alternation
 //                       divided by its rounds; manual time)
+//   IterationParallel/<M> the same with the rounds on all threads
+//                       (DeformerOptions::round_threads = 0)
 //   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices (manual time)
 //   StreamRead/<M>      a plain parallel streaming read (vectorised sum) of
 //                       the reconstruction basis itself, with the same
@@ -216,8 +218,10 @@ void BM_OP(benchmark::State& state, const ModelSpec* spec, bool fast_path) {
 // Runs frames; reports the chosen part of each as the iteration's time.
 enum class Part { Iteration, Reconstruction, Frame };
 
-void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part) {
+// threads: DeformerOptions::round_threads for these frames (0: all).
+void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int threads) {
   Session& s = session(*spec);
+  s.deformer.set_round_threads(threads);
   std::vector<double> samples;
   for (auto _ : state) {
     const HandleTargets t = next_targets(s);
@@ -231,6 +235,7 @@ void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part) {
     state.SetIterationTime(seconds);
     samples.push_back(seconds);
   }
+  s.deformer.set_round_threads(1);
   set_median(state, std::move(samples), part == Part::Iteration ? 1e-6 : 1e-3);
   set_sizes(state, s);
 }
@@ -283,16 +288,19 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("OPNullSpace/" + n).c_str(), BM_OP, &spec, false)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
-    benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration)
+    benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 1)
         ->Unit(benchmark::kMicrosecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction)
+    benchmark::RegisterBenchmark(("IterationParallel/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 0)
+        ->Unit(benchmark::kMicrosecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction, 1)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
     benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
-    benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame)
+    benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
   }

@@ -9,6 +9,8 @@
 
 #include <fmt/format.h>
 
+#include <omp.h>
+
 #include <cstring>
 #include <memory>
 #include <optional>
@@ -23,6 +25,14 @@ bool AlternatingOptions::is_valid(std::string* why) const {
   }
   if (!(tolerance >= 0.0)) {
     if (why) *why = "tolerance must be non-negative";
+    return false;
+  }
+  if (threads < 0) {
+    if (why) *why = fmt::format("threads must be ≥ 0 (0: all), got {}", threads);
+    return false;
+  }
+  if (parallel_min_entries < 0) {
+    if (why) *why = fmt::format("parallel_min_entries must be ≥ 0, got {}", parallel_min_entries);
     return false;
   }
   return true;
@@ -45,19 +55,40 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
                                                                  const SparseMatrix<Scalar>& A,
                                                                  const ConstraintOptions& options) {
   using MatD = Matrix<double>;
-  std::string why;
-  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  // (set_reduced_constraints checks the options and the rest.)
   if (!solver.ready()) {
     throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
   }
   detail::check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
   detail::check_finite("FixedCoordinateSolver::set_constraints: A", A);
   const detail::Timer timer;
-  ready_ = false;
-  fast_ = false;
-  const Index d = solver.d(), k = solver.k(), m = A.cols();
   const MatD Az = (A.transpose() * solver.subspace().N).template cast<double>();
   const MatD Ay = (A.transpose() * solver.subspace().UD).template cast<double>();
+  ConstraintSummary summary = set_reduced_constraints(solver, Az, Ay, options);
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const SubspaceSolver<Scalar>& solver,
+                                                                         const Matrix<double>& Az,
+                                                                         const Matrix<double>& Ay,
+                                                                         const ConstraintOptions& options) {
+  using MatD = Matrix<double>;
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  if (!solver.ready()) {
+    throw std::invalid_argument("FixedCoordinateSolver::set_reduced_constraints: the subspace solver is not ready");
+  }
+  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_z columns (d)", solver.d(), Az.cols());
+  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_y columns (k)", solver.k(), Ay.cols());
+  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_y rows (as A_z)", Az.rows(), Ay.rows());
+  detail::check_finite("FixedCoordinateSolver::set_reduced_constraints: A_z", Az);
+  detail::check_finite("FixedCoordinateSolver::set_reduced_constraints: A_y", Ay);
+  const detail::Timer timer;
+  ready_ = false;
+  fast_ = false;
+  const Index d = solver.d(), k = solver.k(), m = Az.rows();
 
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (options.threads > 0) blas.emplace(options.threads);
@@ -76,23 +107,26 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
     detail::RangeSpaceOperators rso;
     if (detail::range_space_operators(prep_->range, Az, options, &summary, &rso)) {
       // M_b = T·U_mᵀ, R = WᵀG + U_mᵀ·A_y, M_Y = P0 − T·R.
+      // In double M_Y stays factored (solve applies P0 − T·R): forming it is
+      // d·μ·k multiply-adds and two passes over d × k per constraint set.
       const Index mu = rso.T.cols();
-      MatD Mb(d, m), MY = prep_->P0;
+      MatD Mb(d, m);
       detail::blas_gemm(false, true, 1.0, rso.T, rso.Um, 0.0, Mb);
       R_.resize(mu, k);
       detail::blas_gemm(true, false, 1.0, rso.W, prep_->G, 0.0, R_);
       detail::blas_gemm(true, false, 1.0, rso.Um, Ay, 1.0, R_);
-      detail::blas_gemm(false, false, -1.0, rso.T, R_, 1.0, MY);
-      if (Mb.allFinite() && MY.allFinite()) {
+      MatD MY;
+      if constexpr (!std::is_same_v<Scalar, double>) {
+        MY = prep_->P0;
+        detail::blas_gemm(false, false, -1.0, rso.T, R_, 1.0, MY);
+      }
+      if (Mb.allFinite() && R_.allFinite() && rso.T.allFinite() && MY.allFinite()) {
         fast_ = true;
         T_ = std::move(rso.T);
         Um_ = std::move(rso.Um);
         Mb_ = Mb.template cast<Scalar>();
-        if constexpr (std::is_same_v<Scalar, double>) {
-          MY_ = std::move(MY);
-        } else {
-          MY_ = MY.template cast<Scalar>();
-        }
+        MY_ = MY.template cast<Scalar>();  // empty in double
+        ry_.resize(mu);
       }
     }
   }
@@ -112,6 +146,7 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
       MY_ = MY.template cast<Scalar>();
     }
   }
+  k_ = k;
   summary.fast_path = fast_;
   ready_ = true;
   summary.seconds = timer.seconds();
@@ -119,9 +154,27 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
 }
 
 template <typename Scalar>
+Matrix<Scalar> FixedCoordinateSolver<Scalar>::MY() const {
+  if (!(fast_ && std::is_same_v<Scalar, double>)) return MY_;
+  Matrix<double> MY = prep_->P0;
+  detail::blas_gemm(false, false, -1.0, T_, R_, 1.0, MY);
+  return MY.template cast<Scalar>();
+}
+
+template <typename Scalar>
 void FixedCoordinateSolver<Scalar>::solve(const ConstRef& b, const ConstRef& Y, Ref z) const {
   assert(ready_ && b.size() == m() && Y.size() == k() && z.size() == d());
   detail::gemv(Mb_, b.data(), z.data(), false);
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (fast_) {
+      // z += P0·Y − T·(R·Y); ry_ is μ scratch.
+      detail::gemv(prep_->P0, Y.data(), z.data(), true);
+      detail::gemv(R_, Y.data(), ry_.data(), false);
+      ry_ = -ry_;
+      detail::gemv(T_, ry_.data(), z.data(), true);
+      return;
+    }
+  }
   detail::gemv(MY_, Y.data(), z.data(), true);
 }
 
@@ -162,7 +215,7 @@ bool same_matrix(const Matrix<T>& a, const Matrix<T>& b) {
 
 template <typename Scalar>
 void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
-                                   const Matrix<Scalar>& Gy, int threads) {
+                                   const Matrix<Scalar>& Gy, int threads, FusedForm form) {
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (threads > 0) blas.emplace(threads);
   if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
@@ -170,39 +223,64 @@ void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, 
   detail::check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), Gy.cols());
   detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
   ready_ = false;
-  const Index q = Gz.rows();
+  factored_ = false;
+  const Index q = Gz.rows(), k = Gy.cols();
   bool fast = false;
   if constexpr (std::is_same_v<Scalar, double>) {
     if (phase1.fast_) {
       if (prep_ != phase1.prep_ || !same_matrix(Gz_, Gz)) {
         // C0 = G_z·P0, once per (Phase 1 preparation, G_z).
         prep_.reset();
+        base_ready_ = false;
         detail::check_finite("FusedAlternation::set: G_z", Gz);
-        C0_.resize(q, phase1.k());
+        C0_.resize(q, k);
         detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
         Gz_ = Gz;
         prep_ = phase1.prep_;
       }
-      // G_z·T (q × μ), F_b = (G_z·T)·U_mᵀ, F_y = C0 + G_y − (G_z·T)·R, the
-      // last in column blocks that are still in cache for the float copy.
+      // G_z·T (q × μ) and F_b = (G_z·T)·U_mᵀ.
       Matrix<double> GzT(q, phase1.T_.cols());
       detail::blas_gemm(false, false, 1.0, Gz, phase1.T_, 0.0, GzT);
       Fb_.resize(q, phase1.m());
       detail::blas_gemm(false, true, 1.0, GzT, phase1.Um_, 0.0, Fb_);
-      const Index k = Gy.cols();
-      Fy_.resize(q, k);
-      Fy_f_.resize(q, k);
-      for (Index c0 = 0; c0 < k; c0 += kColumnBlock) {
-        const Index w = std::min(kColumnBlock, k - c0);
-        if (!Gy.middleCols(c0, w).allFinite()) detail::check_finite("FusedAlternation::set: G_y", Gy);  // throws
-        Fy_.middleCols(c0, w) = C0_.middleCols(c0, w) + Gy.middleCols(c0, w);
-        detail::blas_gemm(false, false, -1.0, GzT, phase1.R_.middleCols(c0, w), 1.0, Fy_.middleCols(c0, w));
-        Fy_f_.middleCols(c0, w) = Fy_.middleCols(c0, w).template cast<float>();
+      const bool factored =
+          form == FusedForm::Factored || (form == FusedForm::Automatic && q * k > kExplicitMaxEntries);
+      if (factored) {
+        // F₀ = C0 + G_y, once per (C0, G_y); the rank-μ part stays factored.
+        if (!base_ready_ || !same_matrix(Gy_, Gy)) {
+          base_ready_ = false;
+          detail::check_finite("FusedAlternation::set: G_y", Gy);
+          Fy_ = C0_ + Gy;
+          Fy_f_ = Fy_.template cast<float>();
+          Gy_ = Gy;
+          base_ready_ = true;
+        }
+        GzT_ = std::move(GzT);
+        R_ = phase1.R_;
+        GzT_f_ = GzT_.cast<float>();
+        R_f_ = R_.cast<float>();
+        ry_.resize(R_.rows());
+        ryf_.resize(R_.rows());
+        factored_ = true;
+      } else {
+        // F_y = C0 + G_y − (G_z·T)·R, in column blocks that are still in
+        // cache for the float copy.
+        base_ready_ = false;  // Fy_ holds this constraint set's F_y
+        Fy_.resize(q, k);
+        Fy_f_.resize(q, k);
+        for (Index c0 = 0; c0 < k; c0 += kColumnBlock) {
+          const Index w = std::min(kColumnBlock, k - c0);
+          if (!Gy.middleCols(c0, w).allFinite()) detail::check_finite("FusedAlternation::set: G_y", Gy);  // throws
+          Fy_.middleCols(c0, w) = C0_.middleCols(c0, w) + Gy.middleCols(c0, w);
+          detail::blas_gemm(false, false, -1.0, GzT, phase1.R_.middleCols(c0, w), 1.0, Fy_.middleCols(c0, w));
+          Fy_f_.middleCols(c0, w) = Fy_.middleCols(c0, w).template cast<float>();
+        }
       }
       fast = true;
     }
   }
   if (!fast) {
+    base_ready_ = false;
     detail::check_finite("FusedAlternation::set: G_z", Gz);
     detail::check_finite("FusedAlternation::set: G_y", Gy);
     Fy_ = Gy;
@@ -219,8 +297,40 @@ void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, 
   gb_.resize(q);
   g_.resize(q);
   gf_.resize(q);
-  yf_.resize(Fy_.cols());
+  yf_.resize(k);
   ready_ = true;
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry,
+                                             float* ryf) {
+  const Index rows = r1 - r0, mu = R_.rows();
+  if (yf != nullptr) {
+    // Mixed precision: the q×k product in float (twice the SIMD width of
+    // double), accumulated onto g in double; the factored form's correction
+    // −(G_z·T)·(R·y) in float too (its error is of the same order).
+    std::fill(gf_.data() + r0, gf_.data() + r1, 0.0f);
+    detail::gemv_add(Fy_f_.data() + r0, rows, Fy_f_.cols(), Fy_f_.outerStride(), yf, gf_.data() + r0);
+    if (factored_) {
+      std::fill(ryf, ryf + mu, 0.0f);
+      detail::gemv_add(R_f_.data(), mu, R_f_.cols(), R_f_.outerStride(), yf, ryf);
+      for (Index i = 0; i < mu; ++i) ryf[i] = -ryf[i];
+      detail::gemv_add(GzT_f_.data() + r0, rows, mu, GzT_f_.outerStride(), ryf, gf_.data() + r0);
+    }
+    g_.segment(r0, rows) = gb_.segment(r0, rows) + gf_.segment(r0, rows).template cast<Scalar>();
+    return;
+  }
+  g_.segment(r0, rows) = gb_.segment(r0, rows);
+  detail::gemv_add(Fy_.data() + r0, rows, Fy_.cols(), Fy_.outerStride(), y, g_.data() + r0);
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (factored_) {
+      // g −= (G_z·T)·(R·y), in double.
+      std::fill(ry, ry + mu, 0.0);
+      detail::gemv_add(R_.data(), mu, R_.cols(), R_.outerStride(), y, ry);
+      for (Index i = 0; i < mu; ++i) ry[i] = -ry[i];
+      detail::gemv_add(GzT_.data() + r0, rows, mu, GzT_.outerStride(), ry, g_.data() + r0);
+    }
+  }
 }
 
 template <typename Scalar>
@@ -234,17 +344,17 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   // The products go through the run-time dispatched AVX2/FMA kernels
   // (simd_kernels.h) when the CPU has them.
   detail::gemv(Fb_, b.data(), gb_.data(), false);
+  const Index block = projection.block_size();
+  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  if (threads > 1 && block > 0 && !omp_in_parallel() && Fy_.rows() == Fy_.cols() && Fy_.rows() % block == 0 &&
+      Fy_.size() >= options.parallel_min_entries && Fy_.rows() / block >= 2) {
+    summary = run_parallel(projection, options, std::min<Index>(threads, Fy_.rows() / block), block, y);
+    phase1.solve(b, y, z);
+    return summary;
+  }
   for (int it = 0; it < options.iterations; ++it) {
-    if (options.float_products) {
-      // Mixed precision: the q×k product in float (twice the SIMD width of
-      // double), accumulated onto g in double.
-      yf_ = y.template cast<float>();
-      detail::gemv(Fy_f_, yf_.data(), gf_.data(), false);
-      g_ = gb_ + gf_.template cast<Scalar>();
-    } else {
-      g_ = gb_;
-      detail::gemv(Fy_, y.data(), g_.data(), true);
-    }
+    if (options.float_products) yf_ = y.template cast<float>();
+    round_product(y.data(), options.float_products ? yf_.data() : nullptr, 0, Fy_.rows(), ry_.data(), ryf_.data());
     summary.last_change = projection.project(g_, y);
     summary.iterations = it + 1;
     if (options.tolerance > 0 &&
@@ -252,6 +362,65 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
       break;
   }
   phase1.solve(b, y, z);
+  return summary;
+}
+
+template <typename Scalar>
+AlternatingSummary FusedAlternation<Scalar>::run_parallel(InputProjection<Scalar>& projection,
+                                                          const AlternatingOptions& options, Index threads,
+                                                          Index block, Eigen::Ref<Vector<Scalar>> y) {
+  const Index q = Fy_.rows(), blocks = q / block;
+  const bool use_float = options.float_products;
+  // The y the products read, double-buffered by round parity (round r reads
+  // column r mod 2, its Phase 2 writes the other).
+  y2_.resize(q, 2);
+  y2_.col(0) = y;
+  if (use_float) {
+    yf2_.resize(q, 2);
+    yf2_.col(0) = y.template cast<float>();
+  }
+  // Per-thread Σ‖Δy_j‖² and ‖y_j‖², by round parity: read after the round's
+  // barrier, next written two rounds later (after the next barrier).
+  constexpr int kMaxThreads = 64;
+  threads = std::min<Index>(threads, kMaxThreads);
+  double change2[2][kMaxThreads] = {}, norm2[2][kMaxThreads] = {};
+  ry_threads_.resize(R_.rows(), threads);  // these allocate on the first call only
+  ryf_threads_.resize(R_.rows(), threads);
+  int rounds = 0;
+  double last = 0.0;
+#pragma omp parallel num_threads(static_cast<int>(threads))
+  {
+    const Index t = omp_get_thread_num(), nt = omp_get_num_threads();
+    const Index r0 = block * (blocks * t / nt), r1 = block * (blocks * (t + 1) / nt), rows = r1 - r0;
+    double* ry = ry_threads_.col(t).data();  // factored form: this thread's R·y
+    float* ryf = ryf_threads_.col(t).data();
+    for (int it = 0; it < options.iterations; ++it) {
+      const int cur = it % 2, next = 1 - cur;
+      round_product(y2_.col(cur).data(), use_float ? yf2_.col(cur).data() : nullptr, r0, r1, ry, ryf);
+      change2[cur][t] = projection.project_blocks(g_, y, r0 / block, r1 / block);
+      norm2[cur][t] = static_cast<double>(y.segment(r0, rows).squaredNorm());
+      y2_.col(next).segment(r0, rows) = y.segment(r0, rows);
+      if (use_float) yf2_.col(next).segment(r0, rows) = y.segment(r0, rows).template cast<float>();
+#pragma omp barrier
+      // Only this round's sums are read here: y itself may already be
+      // changing in another thread's next round.
+      double total = 0.0, ynorm2 = 0.0;
+      for (Index s = 0; s < nt; ++s) {
+        total += change2[cur][s];
+        ynorm2 += norm2[cur][s];
+      }
+      const double change = std::sqrt(total);
+      if (t == 0) {
+        rounds = it + 1;
+        last = change;
+      }
+      // Every thread takes the same decision from the same sums.
+      if (options.tolerance > 0 && change <= options.tolerance * std::max(1.0, std::sqrt(ynorm2))) break;
+    }
+  }
+  AlternatingSummary summary;
+  summary.iterations = rounds;
+  summary.last_change = last;
   return summary;
 }
 

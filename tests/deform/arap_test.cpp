@@ -372,6 +372,41 @@ TEST_CASE("deformer: tet meshes deform and keep handles", "[deformer]") {
   CHECK(out.allFinite());
 }
 
+TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]") {
+  // 30 clusters: 9d = 270, so F_y is large enough for the factored form and
+  // the parallel rounds (alternating.h).
+  const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 12, 10);
+  DeformableModel model;
+  model.V = m.V;
+  model.F = m.F;
+  const Index n = m.V.rows();
+  model.clusters = round_robin_clusters(n, 30);
+  model.linear = linear_proxies_fps(m.V, m.F, 12);
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model).ok());
+  Handles h;
+  for (Index v : {Index(0), Index(5), n - 1}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  HandleTargets targets = rigid_targets(m.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  targets.points.row(2) += Eigen::RowVector3d(0.8, 0.0, -0.3);
+  auto frames = [&](int threads) {
+    deformer.reset_pose();
+    deformer.set_round_threads(threads);
+    Vertices out;
+    for (int f = 0; f < 3; ++f) deformer.frame(targets, &out);
+    return out;
+  };
+  const Vertices serial = frames(1), parallel = frames(2);
+  CHECK((parallel - serial).cwiseAbs().maxCoeff() <= 1e-5);
+  CHECK((serial.row(n - 1) - targets.points.row(2)).norm() < 1e-5);
+  CHECK_THROWS_WITH(deformer.set_round_threads(-1), Catch::Contains("threads"));
+  DeformerOptions o;
+  o.round_threads = -2;
+  std::string why;
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("round_threads"));
+}
+
 TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
   DeformableModel model = cylinder_model(4, 6);
   Deformer deformer;

@@ -159,6 +159,108 @@ TEST_CASE("fused alternation gives the iterates of the plain one", "[alternating
   CHECK((z3 - z_expected).norm() <= 1e-13 * (1 + z3.norm()));
 }
 
+namespace {
+// Phase 2 acting block by block (blocks of 3): y_j ← the nearest point of
+// the unit ball to g_j, so the rounds may split the blocks between threads
+// (and with ‖F_y‖ < 1 the rounds contract).
+struct BallBlocks : InputProjection<double> {
+  static constexpr Index kBlock = 3;
+  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y) override {
+    return std::sqrt(project_blocks(g, y, 0, g.size() / kBlock));
+  }
+  Index block_size() const override { return kBlock; }
+  double project_blocks(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y, Index first,
+                        Index last) override {
+    double change2 = 0.0;
+    for (Index j = first; j < last; ++j) {
+      const Vector<double> next = g.segment(kBlock * j, kBlock) / std::max(1.0, g.segment(kBlock * j, kBlock).norm());
+      change2 += (next - y.segment(kBlock * j, kBlock)).squaredNorm();
+      y.segment(kBlock * j, kBlock) = next;
+    }
+    return change2;
+  }
+};
+}  // namespace
+
+TEST_CASE("fused alternation: the factored form and parallel rounds give the explicit serial iterates",
+          "[alternating][fast]") {
+  // q = k = 12 (four blocks of 3), so that the rounds can be split.
+  const Index n = 14 * 11, d = 9, k = 12, m = 5;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(14, 11);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(H, gen::selection(n, gen::random_subset(n, d, 5)), gen::gaussian_sparse(n, k, 6)).ok());
+  const SparseMatrix<double> A = gen::selection(n, gen::random_subset(n, m, 71));
+  FixedCoordinateSolver<double> phase1;
+  REQUIRE(phase1.set_constraints(solver, A).fast_path);
+  const Matrix<double> Gz = 0.3 * gen::gaussian_matrix(k, d, 72), Gy = gen::gaussian_matrix(k, k, 73);
+  const Vector<double> b = gen::gaussian_vector(m, 74), y0 = gen::gaussian_vector(k, 75);
+  BallBlocks proj;
+
+  struct Run {
+    Vector<double> z, y;
+    AlternatingSummary s;
+  };
+  // scale < 1 makes the rounds a contraction (g is dominated by F_b·b).
+  auto run = [&](FusedForm form, bool float_products, int threads, double tolerance, int iterations = 6,
+                 double scale = 1.0) {
+    FusedAlternation<double> fused;
+    fused.set(phase1, scale * Gz, scale * Gy, 1, form);
+    CHECK(fused.factored() == (form == FusedForm::Factored));
+    AlternatingOptions o;
+    o.iterations = iterations;
+    o.float_products = float_products;
+    o.threads = threads;
+    o.parallel_min_entries = 0;
+    o.tolerance = tolerance;
+    Run r{Vector<double>(d), y0, {}};
+    r.s = fused.run(phase1, proj, b, o, r.z, r.y);
+    return r;
+  };
+  const Run ref = run(FusedForm::Explicit, false, 1, 0.0);
+  REQUIRE(ref.s.iterations == 6);
+  auto close = [](const Run& a, const Run& r, double tol) {
+    CHECK(a.s.iterations == r.s.iterations);
+    CHECK((a.y - r.y).norm() <= tol * (1 + r.y.norm()));
+    CHECK((a.z - r.z).norm() <= tol * (1 + r.z.norm()));
+  };
+  for (int threads : {1, 2}) {
+    INFO("threads " << threads);
+    close(run(FusedForm::Explicit, false, threads, 0.0), ref, 1e-12);
+    close(run(FusedForm::Factored, false, threads, 0.0), ref, 1e-12);
+    // Float products: float round-off only; z from Phase 1 in double.
+    const Run f = run(FusedForm::Factored, true, threads, 0.0);
+    close(f, ref, 1e-5);
+    Vector<double> z(d);
+    phase1.solve(b, f.y, z);
+    CHECK((f.z - z).norm() <= 1e-13 * (1 + z.norm()));
+    // Early exit: the same round on every thread count.
+    const Run e1 = run(FusedForm::Factored, false, 1, 1e-9, 200, 0.05);
+    const Run e2 = run(FusedForm::Factored, false, threads, 1e-9, 200, 0.05);
+    INFO("last change " << e1.s.last_change);
+    CHECK(e1.s.iterations < 200);
+    close(e2, e1, 1e-12);
+  }
+
+  // A_r given directly: the operators of set_constraints.
+  FixedCoordinateSolver<double> reduced;
+  const Matrix<double> Az = A.transpose() * solver.subspace().N, Ay = A.transpose() * solver.subspace().UD;
+  REQUIRE(reduced.set_reduced_constraints(solver, Az, Ay).ok());
+  CHECK((reduced.Mb() - phase1.Mb()).norm() <= 1e-14 * phase1.Mb().norm());
+  CHECK((reduced.MY() - phase1.MY()).norm() <= 1e-14 * phase1.MY().norm());
+  CHECK_THROWS_WITH(reduced.set_reduced_constraints(solver, Az, Matrix<double>(m, k + 1)),
+                    Catch::Contains("A_y columns"));
+  CHECK_THROWS_WITH(reduced.set_reduced_constraints(solver, Az, Matrix<double>(m + 1, k)),
+                    Catch::Contains("A_y rows"));
+  Matrix<double> bad = Az;
+  bad(0, 0) = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(reduced.set_reduced_constraints(solver, bad, Ay), Catch::Contains("A_z"));
+  AlternatingOptions o;
+  o.threads = -1;
+  std::string why;
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("threads"));
+}
+
 TEST_CASE("alternating scheme rejects bad input", "[alternating][errors]") {
   Fixture f;
   FixedCoordinateSolver<double> phase1;

@@ -30,6 +30,7 @@ bool DeformerOptions::is_valid(std::string* why) const {
   if (rotational_proxies < 1) return fail(fmt::format("rotational_proxies must be ≥ 1, got {}", rotational_proxies));
   if (linear_proxies < 0) return fail(fmt::format("linear_proxies must be ≥ 0, got {}", linear_proxies));
   if (iterations < 1) return fail(fmt::format("iterations must be ≥ 1, got {}", iterations));
+  if (round_threads < 0) return fail(fmt::format("round_threads must be ≥ 0 (0: all), got {}", round_threads));
   if (!clustering.is_valid(&sub)) return fail("clustering: " + sub);
   if (!subspace.is_valid(&sub)) return fail("subspace: " + sub);
   if (!custom_model && model == ModelKind::Conformal && (!(conformal_bound > 1.0) || !std::isfinite(conformal_bound))) {
@@ -252,6 +253,13 @@ void Deformer::State::finish(const DeformerOptions& options) {
   for (Index c : rigid_cluster_of_patch)
     if (c >= 0) rigid[static_cast<size_t>(c)] = 1;
   projection = model->projection(cluster_geometry(rest, elements, clusters, d, std::move(rigid)));
+  const Matrix<double>& N = solver.subspace().N;
+  const Matrix<double>& U = solver.subspace().UD;
+  patch_rows.resize(12 * s, nx + 9 * d);
+  for (Index i = 0; i < 12 * s; ++i) patch_rows.row(i) << N.row(patch_base + i), U.row(patch_base + i);
+  free_vertices.assign(static_cast<size_t>(patch_base / 3), -1);
+  for (Index v = 0; v < n; ++v)
+    if (control_of_free[v] >= 0) free_vertices[static_cast<size_t>(control_of_free[v] / 3)] = v;
   S.resize(9 * d);
   x = Eigen::VectorXd::Zero(nx);
   s_local.resize(9 * d);
@@ -260,6 +268,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   vf.resize(3 * n);
   alternating.iterations = options.iterations;
   alternating.float_products = options.float_rounds;
+  alternating.threads = options.round_threads;
   global_rotation = options.global_rotation;
   ready = true;
 }
@@ -525,6 +534,13 @@ void Deformer::reset_pose() {
   S.x.setZero();
 }
 
+void Deformer::set_round_threads(int threads) {
+  if (threads < 0) {
+    throw std::invalid_argument(fmt::format("Deformer::set_round_threads: threads must be ≥ 0, got {}", threads));
+  }
+  state_->alternating.threads = threads;
+}
+
 ConstraintSummary Deformer::set_handles(const Handles& handles, const ConstraintOptions& options) {
   State& S = *state_;
   if (!S.ready) throw std::invalid_argument("Deformer::set_handles: call precompute first");
@@ -576,27 +592,24 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     for (int c = 0; c < 9; ++c) ta.emplace_back(S.patch_base + 12 * p + c, col + c, 1.0);
     col += 9;
   }
-  // A (n_u × col) straight from the column-sorted entries: setFromTriplets
-  // would pass through an n_u-long row index, a cost growing with the mesh.
-  std::sort(ta.begin(), ta.end(), [](const Eigen::Triplet<double>& x, const Eigen::Triplet<double>& y) {
-    return x.col() != y.col() ? x.col() < y.col() : x.row() < y.row();
-  });
-  SparseMatrix<double> A(S.nu, col);
-  {
-    Eigen::VectorXi per_column = Eigen::VectorXi::Zero(col);
-    for (size_t e = 0; e < ta.size(); ++e)
-      if (e == 0 || ta[e].col() != ta[e - 1].col() || ta[e].row() != ta[e - 1].row()) ++per_column(ta[e].col());
-    A.reserve(per_column);
-    for (size_t e = 0; e < ta.size(); ++e) {
-      if (e > 0 && ta[e].col() == ta[e - 1].col() && ta[e].row() == ta[e - 1].row()) {
-        A.coeffRef(ta[e].row(), ta[e].col()) += ta[e].value();  // a repeated entry (two vertices of one patch)
-      } else {
-        A.insert(ta[e].row(), ta[e].col()) = ta[e].value();
-      }
+  // A_r = AᵀB (col × p) row by row from rows of B kept row-major: a free
+  // vertex's control row r = 3i + a is row 3·free_vertices[i] + a of the
+  // float reconstruction basis P·B, a patch unknown's is in patch_rows.
+  // (AᵀB on the column-major subspace touches col·p scattered cache lines:
+  // about a millisecond at p ≈ 700; repeated entries simply add up.)
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Ar =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Zero(col, S.nx + 9 * S.d);
+  for (const auto& e : ta) {
+    const Index r = e.row();
+    if (r < S.patch_base) {
+      const Index v = S.free_vertices[static_cast<size_t>(r / 3)];
+      Ar.row(e.col()) += e.value() * S.basis.row(3 * v + r % 3).cast<double>();
+    } else {
+      Ar.row(e.col()) += e.value() * S.patch_rows.row(r - S.patch_base);
     }
-    A.makeCompressed();
   }
-  const ConstraintSummary cs = S.phase1.set_constraints(S.solver, A, options);
+  const ConstraintSummary cs =
+      S.phase1.set_reduced_constraints(S.solver, Ar.leftCols(S.nx), Ar.rightCols(9 * S.d), options);
   S.tie_map.setZero(S.nx, 9 * S.d);
   for (size_t i = 0; i < tied.size(); ++i) {
     const Index k = S.rigid_cluster_of_patch[tied[i]];

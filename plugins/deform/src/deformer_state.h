@@ -80,6 +80,12 @@ struct Deformer::State {
   FusedAlternation<double> fused;
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
   Index nx = 0;           // 3m + 12s
+  // For the on-site step's A_r = AᵀB from contiguous rows: the control rows
+  // of the patch unknowns, [N UD](patch_base + i, :) (12s × (nx + 9d),
+  // double), and the vertex of each free control triple (control row 3i + a
+  // is basis row 3·free_vertices[i] + a).
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> patch_rows;
+  std::vector<Index> free_vertices;
   // On-site.
   FixedCoordinateSolver<double> phase1;
   Handles handles;
@@ -130,8 +136,9 @@ struct Deformer::State {
   // basis = P·[N UD] in float (3n × (nx + 9d)), once the solver holds the
   // subspace; through 3n × 32 double blocks, never the whole double product.
   void make_basis(const SparseMatrix<double>& P);
-  // After the solver, basis, MN and MU are set: the model's projection, the
-  // frame workspaces and the runtime options; ready = true.
+  // After the solver, basis, MN and MU are set: the model's projection,
+  // patch_rows and free_vertices, the frame workspaces and the runtime
+  // options; ready = true.
   void finish(const DeformerOptions& options);
 };
 

@@ -82,22 +82,14 @@ class ScaledRotationProjection final : public ClusterProjection {
   }
 
   double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y) override {
-    double change2 = 0.0;
-    for (Index a = 0; a < g_.d; ++a) {
-      Eigen::Matrix3d G = Eigen::Map<const Eigen::Matrix3d>(g.data() + 9 * a);
-      if (gamma_ > 0.0)
-        for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
-          G += 2.0 * gamma_ * it.value() * Eigen::Map<const Eigen::Matrix3d>(y.data() + 9 * it.row());
-      const Eigen::Matrix3d t = fit_rotation(G);
-      double psi = 1.0;
-      if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)]) {
-        psi = std::clamp(t.cwiseProduct(G).sum() / denominator_(a), 1.0 / psi_max_, psi_max_);
-      }
-      Eigen::Map<Eigen::Matrix3d> s(y.data() + 9 * a);
-      change2 += (psi * t - s).squaredNorm();
-      s = psi * t;
-    }
-    return std::sqrt(change2);
+    return std::sqrt(update(g, y, 0, g_.d));
+  }
+
+  // Without γ the clusters are independent: parallel rounds may split them.
+  Index block_size() const override { return gamma_ > 0.0 ? 0 : 9; }
+  double project_blocks(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y, Index first,
+                        Index last) override {
+    return update(g, y, first, last);
   }
 
   void retract(Eigen::Ref<Eigen::VectorXd> y) const override {
@@ -146,6 +138,27 @@ class ScaledRotationProjection final : public ClusterProjection {
   }
 
  private:
+  // Clusters [first, last) in order (Gauss–Seidel when γ > 0); returns Σ‖Δs_a‖².
+  double update(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y, Index first,
+                Index last) const {
+    double change2 = 0.0;
+    for (Index a = first; a < last; ++a) {
+      Eigen::Matrix3d G = Eigen::Map<const Eigen::Matrix3d>(g.data() + 9 * a);
+      if (gamma_ > 0.0)
+        for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
+          G += 2.0 * gamma_ * it.value() * Eigen::Map<const Eigen::Matrix3d>(y.data() + 9 * it.row());
+      const Eigen::Matrix3d t = fit_rotation(G);
+      double psi = 1.0;
+      if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)]) {
+        psi = std::clamp(t.cwiseProduct(G).sum() / denominator_(a), 1.0 / psi_max_, psi_max_);
+      }
+      Eigen::Map<Eigen::Matrix3d> s(y.data() + 9 * a);
+      change2 += (psi * t - s).squaredNorm();
+      s = psi * t;
+    }
+    return change2;
+  }
+
   ClusterGeometry g_;
   double gamma_;
   double psi_max_;

@@ -30,7 +30,10 @@
 //
 //     M_b = T·U_mᵀ,   M_Y = P0 − T·R,   R = WᵀG + U_mᵀ·A_y   (μ×k),
 //
-// O(d·μ·(d + k)) instead of the null-space method's O(d³ + d²k). It is taken
+// O(d·μ·(d + k)) instead of the null-space method's O(d³ + d²k). In double
+// M_Y is kept as (P0, T, R): `solve` applies P0·Y − T·(R·Y), μ·(d + k)
+// multiply-adds more than one d×k GEMV, and the d×μ×k product is never
+// formed (MY() forms it on request). It is taken
 // for full-rank hard and for soft constraints when the problem is well
 // conditioned (the test of subspace_solver.h); anything else (rank-deficient
 // or least-squares constraint sets, an energy that is not convex on the
@@ -41,6 +44,7 @@
 #include "qpreduce/common.h"
 #include "qpreduce/subspace_solver.h"
 
+#include <limits>
 #include <memory>
 
 namespace qpreduce {
@@ -65,21 +69,31 @@ class FixedCoordinateSolver {
   // std::invalid_argument on bad sizes/NaN.
   ConstraintSummary set_constraints(const SubspaceSolver<Scalar>& solver, const SparseMatrix<Scalar>& A,
                                     const ConstraintOptions& options = {});
+  // The same from the reduced constraints A_z = AᵀN (m×d) and A_y = AᵀUD
+  // (m×k), for a caller that keeps rows of B = [N UD] at hand (a row-major
+  // copy gathers m rows at O(m·p) contiguous reads; AᵀB on the column-major
+  // subspace touches m·p scattered cache lines, a millisecond at p ≈ 700).
+  ConstraintSummary set_reduced_constraints(const SubspaceSolver<Scalar>& solver, const Matrix<double>& Az,
+                                            const Matrix<double>& Ay, const ConstraintOptions& options = {});
 
-  // z = M_b·b + M_Y·Y. b: m, Y: k, z: d. No heap allocation.
+  // z = M_b·b + M_Y·Y. b: m, Y: k, z: d. No heap allocation. Not for
+  // concurrent calls on one object (the factored M_Y uses a scratch vector).
   void solve(const ConstRef& b, const ConstRef& Y, Ref z) const;
 
   bool ready() const { return ready_; }
   const Matrix<Scalar>& Mb() const { return Mb_; }  // d × m
-  const Matrix<Scalar>& MY() const { return MY_; }  // d × k
+  // d × k. Formed on each call when the fast path keeps it factored (double).
+  Matrix<Scalar> MY() const;
   Index d() const { return Mb_.rows(); }
-  Index k() const { return MY_.cols(); }
+  Index k() const { return k_; }
   Index m() const { return Mb_.cols(); }
 
  private:
   friend class FusedAlternation<Scalar>;
   Matrix<Scalar> Mb_;  // d × m
-  Matrix<Scalar> MY_;  // d × k
+  Matrix<Scalar> MY_;  // d × k; empty when factored (fast path, double)
+  Index k_ = 0;
+  mutable Vector<double> ry_;  // μ: R·Y in the factored solve
   // Fast path (see above), in double: the per-solver part, and M_Y = P0 − T·R.
   std::shared_ptr<const detail::FixedCoordinatePrep> prep_;
   Matrix<double> T_;   // d × μ
@@ -113,6 +127,18 @@ struct AlternatingOptions {
   // Phase 1's final z = M_b·b + M_Y·y stays in double, so hard constraints
   // hold to double precision either way.
   bool float_products = false;
+  // FusedAlternation: OpenMP threads for the rounds when the projection is
+  // block-separable (InputProjection::block_size() > 0) and F_y has at least
+  // parallel_min_entries entries (0 means omp_get_max_threads()). Each thread
+  // owns a contiguous range of blocks: its rows of F_y·y, then Phase 2 on its
+  // own blocks, then one barrier per round. The rows of F_y a thread reads
+  // stay in its core's cache from round to round: at q = k = 468 (52
+  // clusters) the float F_y is 876 KiB, more than one core's L2, half of it
+  // less. The rounds are those of the serial ones; an entry of g can differ
+  // in its last bits where the row split moves it between the SIMD kernel's
+  // vector body and its scalar tail.
+  int threads = 1;
+  Index parallel_min_entries = 256 * 256;
 
   bool is_valid(std::string* why) const;
 };
@@ -146,24 +172,56 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
 // the contents of G_z stay the same (compared bitwise on each `set`; G_y may
 // change freely), so a new constraint set costs O(q·μ·(d + k)) instead of
 // O(q·d·k).
+//
+// Factored form (FusedForm; automatic for q·k > kExplicitMaxEntries). The
+// rank-μ update of the q×k F_y is still q·μ·k multiply-adds and three passes
+// over q×k arrays per constraint set: 1.4 ms at q = k = 540. The factored
+// form keeps F₀ = C0 + G_y (formed once per (Phase 1 preparation, G_z,
+// G_y), both compared bitwise) and applies the correction in each round:
+//     g = g_b + F₀·y − (G_z·T)·(R·y),
+// so a constraint set costs O(q·μ·d) (G_z·T) and a round μ·(q + k) more
+// multiply-adds (10–20% of the q·k product at μ = 27; in float with
+// float_products, like the product itself). For F_y within
+// kExplicitMaxEntries (256² entries: 256 KiB in float, in L2) the explicit
+// form's rounds are cheaper and its set-up is small, so it is kept there.
 template <typename Scalar>
 class InputProjection {
  public:
   virtual ~InputProjection() = default;
   // y ← Π(g); returns ‖y_new − y_old‖. Should not allocate.
   virtual double project(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y) = 0;
+
+  // Optional block structure, for parallel rounds (AlternatingOptions::
+  // threads). block_size() = s > 0 promises that Π acts block by block on
+  // g and y of equal length (q = k): block j of y (entries [s·j, s·(j + 1)))
+  // depends only on block j of g and of the old y. project_blocks then
+  // updates blocks [first, last) of y only, reads no other entry of y, and
+  // returns Σ‖Δy_j‖² over them; it is called concurrently on disjoint ranges.
+  // Override both or neither; 0 (the default) keeps the rounds serial.
+  virtual Index block_size() const { return 0; }
+  virtual double project_blocks(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y,
+                                Index first, Index last) {
+    (void)g, (void)y, (void)first, (void)last;
+    return std::numeric_limits<double>::quiet_NaN();  // never called when block_size() == 0
+  }
 };
+
+enum class FusedForm { Automatic, Explicit, Factored };
 
 template <typename Scalar>
 class FusedAlternation {
  public:
+  static constexpr Index kExplicitMaxEntries = 256 * 256;
+
   // Forms F_b = G_z·M_b (q×m) and F_y = G_z·M_Y + G_y (q×k) for the current
   // constraint set of `phase1` (call again after each set_constraints).
   // Throws std::invalid_argument on mismatched sizes or an unready phase1.
   // `threads`: BLAS threads for these products (as ConstraintOptions::threads;
   // 0 leaves the BLAS's own setting).
+  // `form`: see "Factored form" above (Factored applies only when Phase 1
+  // came from its fast path and Scalar is double; otherwise explicit).
   void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
-           int threads = 1);
+           int threads = 1, FusedForm form = FusedForm::Automatic);
 
   // `options.iterations` rounds from the given y (warm start), then
   // z = M_b·b + M_Y·y. No heap allocation.
@@ -172,8 +230,17 @@ class FusedAlternation {
                          Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
 
   bool ready() const { return ready_; }
+  bool factored() const { return factored_; }
 
  private:
+  // g = g_b + F_y·y into g_, from y (double) or its float copy.
+  // Rows [r0, r1); yf null: in Scalar. ry, ryf: μ scratch (factored form).
+  void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
+  // The rounds of `run` on `threads` threads over block ranges (see
+  // AlternatingOptions::threads); leaves z to the caller.
+  AlternatingSummary run_parallel(InputProjection<Scalar>& projection, const AlternatingOptions& options,
+                                  Index threads, Index block, Eigen::Ref<Vector<Scalar>> y);
+
   Matrix<Scalar> Fb_, Fy_;
   // Fast path: C0 = G_z·P0 (q×k, double), with the Phase 1 preparation and
   // a copy of the G_z it was formed from.
@@ -181,8 +248,22 @@ class FusedAlternation {
   Matrix<Scalar> Gz_;
   Matrix<double> C0_;
   Matrix<float> Fy_f_;  // F_y in float (AlternatingOptions::float_products)
+  // Factored form: F₀ = C0 + G_y in Fy_ / Fy_f_, with the G_y it was made
+  // from, G_z·T (q×μ) and R (μ×k); ry_ = R·y per round.
+  Matrix<Scalar> Gy_;
+  Matrix<double> GzT_, R_;
+  Matrix<float> GzT_f_, R_f_;  // (AlternatingOptions::float_products)
+  Vector<double> ry_;
+  Vector<float> ryf_;
+  Matrix<double> ry_threads_;  // μ × threads, for run_parallel
+  Matrix<float> ryf_threads_;
+  bool base_ready_ = false, factored_ = false;
   Vector<Scalar> gb_, g_;
   Vector<float> gf_, yf_;
+  // Parallel rounds: y as read by the next round's product, double-buffered
+  // (round r reads buffer r mod 2 and its Phase 2 writes the other).
+  Matrix<float> yf2_;
+  Matrix<Scalar> y2_;
   bool ready_ = false;
 };
 

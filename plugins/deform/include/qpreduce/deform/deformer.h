@@ -99,6 +99,13 @@ struct DeformerOptions {
   // (AlternatingOptions::float_products); the handles still hold to double
   // precision. false: every round in double.
   bool float_rounds = true;
+  // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
+  // split the clusters when the model's Phase 2 is cluster-separable (γ = 0)
+  // and 9d ≥ 256; 0: omp_get_max_threads(). Serial by default: a round is
+  // ~10–40 µs, and each has a barrier, which costs a scheduler quantum (ms)
+  // whenever another process holds a core (docs/performance.md, "Parallel
+  // rounds"). The reconstruction always uses all threads.
+  int round_threads = 1;
   SubspaceOptions subspace;
 
   bool is_valid(std::string* why) const;
@@ -194,6 +201,8 @@ class Deformer {
 
   // Back to the rest rotations (S = identity, r₀ = identity).
   void reset_pose();
+  // Changes DeformerOptions::round_threads for the following frames (≥ 0).
+  void set_round_threads(int threads);
 
   bool ready() const;
   Index vertex_count() const;
