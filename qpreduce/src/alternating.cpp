@@ -216,6 +216,18 @@ bool same_matrix(const Matrix<T>& a, const Matrix<T>& b) {
 template <typename Scalar>
 void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
                                    const Matrix<Scalar>& Gy, int threads, FusedForm form) {
+  set_impl(phase1, Gz, Gy, threads, form, false);
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, int threads, FusedForm form) {
+  if (!inputs_ready_) throw std::invalid_argument("FusedAlternation::set: no G_z, G_y given yet");
+  set_impl(phase1, Gz_, Gy_, threads, form, true);
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
+                                        const Matrix<Scalar>& Gy, int threads, FusedForm form, bool same_inputs) {
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (threads > 0) blas.emplace(threads);
   if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
@@ -224,18 +236,31 @@ void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, 
   detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
   ready_ = false;
   factored_ = false;
+  // Keep copies of the inputs (for set(phase1, ...) and the bitwise tests);
+  // a changed input invalidates what was formed from it.
+  if (!same_inputs) {
+    inputs_ready_ = false;
+    if (!same_matrix(Gz_, Gz)) {
+      prep_.reset();
+      Gz_ = Gz;
+    }
+    if (!same_matrix(Gy_, Gy)) {
+      base_ready_ = false;
+      Gy_ = Gy;
+    }
+    inputs_ready_ = true;
+  }
   const Index q = Gz.rows(), k = Gy.cols();
   bool fast = false;
   if constexpr (std::is_same_v<Scalar, double>) {
     if (phase1.fast_) {
-      if (prep_ != phase1.prep_ || !same_matrix(Gz_, Gz)) {
+      if (prep_ != phase1.prep_) {
         // C0 = G_z·P0, once per (Phase 1 preparation, G_z).
         prep_.reset();
         base_ready_ = false;
         detail::check_finite("FusedAlternation::set: G_z", Gz);
         C0_.resize(q, k);
         detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
-        Gz_ = Gz;
         prep_ = phase1.prep_;
       }
       // G_z·T (q × μ) and F_b = (G_z·T)·U_mᵀ.
@@ -247,12 +272,10 @@ void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, 
           form == FusedForm::Factored || (form == FusedForm::Automatic && q * k > kExplicitMaxEntries);
       if (factored) {
         // F₀ = C0 + G_y, once per (C0, G_y); the rank-μ part stays factored.
-        if (!base_ready_ || !same_matrix(Gy_, Gy)) {
-          base_ready_ = false;
+        if (!base_ready_) {
           detail::check_finite("FusedAlternation::set: G_y", Gy);
           Fy_ = C0_ + Gy;
           Fy_f_ = Fy_.template cast<float>();
-          Gy_ = Gy;
           base_ready_ = true;
         }
         GzT_ = std::move(GzT);

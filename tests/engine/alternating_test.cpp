@@ -241,6 +241,23 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     close(e2, e1, 1e-12);
   }
 
+  // set(phase1) reuses the last G_z, G_y: the same rounds for a new set.
+  {
+    FusedAlternation<double> reuse, fresh;
+    CHECK_THROWS_WITH(reuse.set(phase1), Catch::Contains("no G_z"));
+    reuse.set(phase1, Gz, Gy, 1, FusedForm::Factored);
+    FixedCoordinateSolver<double> other;
+    REQUIRE(other.set_constraints(solver, gen::selection(n, gen::random_subset(n, m, 76))).fast_path);
+    reuse.set(other, 1, FusedForm::Factored);
+    fresh.set(other, Gz, Gy, 1, FusedForm::Explicit);
+    AlternatingOptions o;
+    Vector<double> z1(d), z2(d), y1 = y0, y2 = y0;
+    reuse.run(other, proj, b, o, z1, y1);
+    fresh.run(other, proj, b, o, z2, y2);
+    CHECK((y1 - y2).norm() <= 1e-12 * (1 + y2.norm()));
+    CHECK((z1 - z2).norm() <= 1e-12 * (1 + z2.norm()));
+  }
+
   // A_r given directly: the operators of set_constraints.
   FixedCoordinateSolver<double> reduced;
   const Matrix<double> Az = A.transpose() * solver.subspace().N, Ay = A.transpose() * solver.subspace().UD;

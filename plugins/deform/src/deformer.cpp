@@ -617,11 +617,15 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       for (int c = 0; c < 3; ++c)
         S.tie_map.col(9 * k + 3 * c + a) += S.phase1.Mb().col(tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
   }
-  if (tied.empty()) {
+  if (tied.empty() && S.fused_inputs_plain) {
+    S.fused.set(S.phase1, options.threads);  // G_z = M_N, G_y = M_U as last time: not compared again
+  } else if (tied.empty()) {
     S.fused.set(S.phase1, S.MN, S.MU, options.threads);
+    S.fused_inputs_plain = true;
   } else {
     S.MU_tied = S.MU + S.MN * S.tie_map;
     S.fused.set(S.phase1, S.MN, S.MU_tied, options.threads);
+    S.fused_inputs_plain = false;
   }
   S.tied_patches = std::move(tied);
   S.tie_row0 = tie_row0;

@@ -78,6 +78,7 @@ struct Deformer::State {
   std::unique_ptr<ClusterProjection> projection;  // the model's Phase 2
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   FusedAlternation<double> fused;
+  bool fused_inputs_plain = false;  // fused was last set with G_z = MN, G_y = MU (MN, MU never change after precompute)
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
   Index nx = 0;           // 3m + 12s
   // For the on-site step's A_r = AᵀB from contiguous rows: the control rows

@@ -222,6 +222,10 @@ class FusedAlternation {
   // came from its fast path and Scalar is double; otherwise explicit).
   void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
            int threads = 1, FusedForm form = FusedForm::Automatic);
+  // The same with the G_z, G_y of the last call above, without comparing them
+  // (2 passes over q × (d + k) saved; the caller knows they did not change).
+  // Throws std::invalid_argument before any G_z, G_y were given.
+  void set(const FixedCoordinateSolver<Scalar>& phase1, int threads = 1, FusedForm form = FusedForm::Automatic);
 
   // `options.iterations` rounds from the given y (warm start), then
   // z = M_b·b + M_Y·y. No heap allocation.
@@ -234,6 +238,8 @@ class FusedAlternation {
 
  private:
   // g = g_b + F_y·y into g_, from y (double) or its float copy.
+  void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
+                int threads, FusedForm form, bool same_inputs);
   // Rows [r0, r1); yf null: in Scalar. ry, ryf: μ scratch (factored form).
   void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
   // The rounds of `run` on `threads` threads over block ranges (see
@@ -248,8 +254,8 @@ class FusedAlternation {
   Matrix<Scalar> Gz_;
   Matrix<double> C0_;
   Matrix<float> Fy_f_;  // F_y in float (AlternatingOptions::float_products)
-  // Factored form: F₀ = C0 + G_y in Fy_ / Fy_f_, with the G_y it was made
-  // from, G_z·T (q×μ) and R (μ×k); ry_ = R·y per round.
+  // Factored form: F₀ = C0 + G_y in Fy_ / Fy_f_ (base_ready_), G_z·T (q×μ)
+  // and R (μ×k); ry_ = R·y per round. Gz_ and Gy_ are the last inputs.
   Matrix<Scalar> Gy_;
   Matrix<double> GzT_, R_;
   Matrix<float> GzT_f_, R_f_;  // (AlternatingOptions::float_products)
@@ -257,7 +263,7 @@ class FusedAlternation {
   Vector<float> ryf_;
   Matrix<double> ry_threads_;  // μ × threads, for run_parallel
   Matrix<float> ryf_threads_;
-  bool base_ready_ = false, factored_ = false;
+  bool base_ready_ = false, factored_ = false, inputs_ready_ = false;
   Vector<Scalar> gb_, g_;
   Vector<float> gf_, yf_;
   // Parallel rounds: y as read by the next round's product, double-buffered
