@@ -235,7 +235,6 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
   const Index m = Ar.rows(), p = Ar.cols();
   summary.m = m;
   factored_ = false;
-  const MatD Abar = Ar * range_->scale.asDiagonal();
   // The operator form: multiply-adds of the factored form's sparse products
   // against the explicit form's GEMMs (ConstraintOptions::explicit_operators).
   const Index q = m + range_->lift_cols.cols();
@@ -268,7 +267,9 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
       if (detail::range_space_rank(*range_, Ar, options, &summary)) {
         const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
         factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
-                                               options.rank_tolerance, Abar.squaredNorm(), &factored_ops_);
+                                               options.rank_tolerance,
+                                               (Ar * range_->scale.asDiagonal()).squaredNorm(),  // ‖Ā‖_F²
+                                               &factored_ops_);
       }
       fast = factored_;
     } else if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
@@ -288,13 +289,18 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
   if (!fast) {
     summary = ConstraintSummary{};
     summary.m = m;
+    const MatD Abar = Ar * range_->scale.asDiagonal();
     reference_operators(Abar, options, &summary, &Mb, &Mq, &MY);
     if (options.soft) summary.rank = detail::default_rank(Abar);
   }
   summary.fast_path = fast;
   summary.factored = factored_;
 
-  Ar_ = Ar.template cast<Scalar>();
+  if constexpr (std::is_same_v<Scalar, double>) {
+    Ar_ = std::move(Ar);  // (passed by value: no copy)
+  } else {
+    Ar_ = Ar.template cast<Scalar>();
+  }
   if constexpr (!std::is_same_v<Scalar, double>) {
     Mb_ = Mb.template cast<Scalar>();
     Mq_ = Mq.template cast<Scalar>();
