@@ -297,11 +297,9 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
   summary.factored = factored_;
 
   if constexpr (std::is_same_v<Scalar, double>) {
-    Ar_ = std::move(Ar);  // (passed by value: no copy)
+    Ar_ = std::move(Ar);  // (passed by value: no copy; the operators were formed in place)
   } else {
     Ar_ = Ar.template cast<Scalar>();
-  }
-  if constexpr (!std::is_same_v<Scalar, double>) {
     Mb_ = Mb.template cast<Scalar>();
     Mq_ = Mq.template cast<Scalar>();
     MY_ = MY.template cast<Scalar>();

@@ -237,10 +237,11 @@ class FusedAlternation {
   bool factored() const { return factored_; }
 
  private:
-  // g = g_b + F_y·y into g_, from y (double) or its float copy.
+  // Both `set`s; same_inputs: Gz, Gy are Gz_, Gy_ (no comparison, no copy).
   void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
                 int threads, FusedForm form, bool same_inputs);
-  // Rows [r0, r1); yf null: in Scalar. ry, ryf: μ scratch (factored form).
+  // Rows [r0, r1) of g = g_b + F_y·y into g_, from y, or from its float copy
+  // yf when not null. ry, ryf: μ scratch for R·y (factored form).
   void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
   // The rounds of `run` on `threads` threads over block ranges (see
   // AlternatingOptions::threads); leaves z to the caller.

@@ -102,9 +102,11 @@ struct DeformerOptions {
   // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
   // split the clusters when the model's Phase 2 is cluster-separable (γ = 0)
   // and 9d ≥ 256; 0: omp_get_max_threads(). Serial by default: a round is
-  // ~10–40 µs, and each has a barrier, which costs a scheduler quantum (ms)
-  // whenever another process holds a core (docs/performance.md, "Parallel
-  // rounds"). The reconstruction always uses all threads.
+  // ~10–40 µs with a barrier, and while another process held one of two
+  // cores a round took ~5 ms (a scheduler quantum); on an otherwise idle
+  // machine it still did not pay on most models (docs/performance.md, "OP
+  // after the factored Phase 1 operators …"). The reconstruction always uses
+  // all threads.
   int round_threads = 1;
   SubspaceOptions subspace;
 
