@@ -16,6 +16,7 @@
 #include <cmath>
 #include <new>
 #include <optional>
+#include <stdexcept>
 
 namespace qpreduce {
 
@@ -103,8 +104,17 @@ class CholmodFactorization final : public SparseFactorization {
   Eigen::ComputationInfo info() const override { return info_; }
   const std::string& message() const override { return message_; }
 
+  // With P·A·Pᵀ = L·Lᵀ (P = factor_->Perm), A⁻¹B = Pᵀ·L⁻ᵀ·L⁻¹·P·B. Each
+  // column block is permuted, solved and permuted back in B's own storage
+  // (cholmod_super_lsolve/ltsolve work in place), so a solve needs only an
+  // n-vector and CHOLMOD's w × maxesize workspace per thread. cholmod_solve2
+  // would hold two n × w copies per thread (Y = P·B and X), which at n ≈ 10⁵
+  // and 300 columns was 200 MB on top of the factor and the solution.
   void solveInPlace(Matrix<double>& B, Index block_size) const override {
     assert(factor_ && info_ == Eigen::Success && B.rows() == static_cast<Index>(factor_->n));
+    if (!factor_->is_super || !factor_->is_ll) {
+      throw std::logic_error("CHOLMOD: the factor is not a supernodal LLᵀ (the in-place solve needs one)");
+    }
     const Index n = B.rows();
     int threads = omp_in_parallel() ? 1 : omp_get_max_threads();
     const ColumnBlocks blocks = column_blocks(B.cols(), block_size, threads);
@@ -113,39 +123,52 @@ class CholmodFactorization final : public SparseFactorization {
     // One BLAS thread per concurrent solve; a single solve keeps the BLAS's own threads.
     std::optional<detail::ScopedBlasThreads> blas;
     if (threads > 1) blas.emplace(1);
-    bool failed = false;
-#pragma omp parallel num_threads(threads) reduction(|| : failed)
+    const int* perm = static_cast<const int*>(factor_->Perm);
+    int failed = 0;  // 1: no workspace, 2: CHOLMOD refused the solve
+#pragma omp parallel num_threads(threads) reduction(max : failed)
     {
       cholmod_common c;
       cholmod_start(&c);
       c.print = 0;
       c.error_handler = nullptr;
-      cholmod_dense *X = nullptr, *Y = nullptr, *E = nullptr;
+      const size_t esize = std::max<size_t>(factor_->maxesize, 1);
+      cholmod_dense* E = cholmod_allocate_dense(esize, static_cast<size_t>(blocks.width), esize, CHOLMOD_REAL, &c);
+      Eigen::VectorXd scratch(n);
 #pragma omp for schedule(dynamic, 1)
       for (Index b = 0; b < blocks.count; ++b) {
         const Index j = b * blocks.width, w = std::min(blocks.width, B.cols() - j);
-        cholmod_dense rhs{};
-        rhs.nrow = static_cast<size_t>(n);
-        rhs.ncol = static_cast<size_t>(w);
-        rhs.nzmax = static_cast<size_t>(n * w);
-        rhs.d = static_cast<size_t>(n);
-        rhs.x = B.col(j).data();
-        rhs.xtype = CHOLMOD_REAL;
-        rhs.dtype = CHOLMOD_DOUBLE;
-        if (!cholmod_solve2(CHOLMOD_A, factor_, &rhs, nullptr, &X, nullptr, &Y, &E, &c) || !X) {
-          failed = true;
+        if (E == nullptr) {
+          failed = 1;
           continue;
         }
-        const Eigen::Map<const Matrix<double>, 0, Eigen::OuterStride<>> x(
-            static_cast<const double*>(X->x), n, w, Eigen::OuterStride<>(static_cast<Index>(X->d)));
-        B.middleCols(j, w) = x;
+        for (Index col = j; col < j + w; ++col) {  // B(:, col) ← P·B(:, col)
+          double* x = B.col(col).data();
+          scratch = B.col(col);
+          for (Index k = 0; k < n; ++k) x[k] = scratch[perm[k]];
+        }
+        cholmod_dense X{};
+        X.nrow = static_cast<size_t>(n);
+        X.ncol = static_cast<size_t>(w);
+        X.d = static_cast<size_t>(B.outerStride());
+        X.nzmax = X.d * X.ncol;
+        X.x = B.col(j).data();
+        X.xtype = CHOLMOD_REAL;
+        X.dtype = CHOLMOD_DOUBLE;
+        if (!cholmod_super_lsolve(factor_, &X, E, &c) || !cholmod_super_ltsolve(factor_, &X, E, &c)) {
+          failed = std::max(failed, 2);
+          continue;
+        }
+        for (Index col = j; col < j + w; ++col) {  // B(:, col) ← Pᵀ·B(:, col)
+          double* x = B.col(col).data();
+          scratch = B.col(col);
+          for (Index k = 0; k < n; ++k) x[perm[k]] = scratch[k];
+        }
       }
-      cholmod_free_dense(&X, &c);
-      cholmod_free_dense(&Y, &c);
       cholmod_free_dense(&E, &c);
       cholmod_finish(&c);
     }
-    if (failed) throw std::bad_alloc();  // cholmod_solve2 fails only when it cannot allocate
+    if (failed == 1) throw std::bad_alloc();
+    if (failed == 2) throw std::runtime_error("CHOLMOD: the supernodal solve failed (problem too large for the BLAS)");
   }
   Backend backend() const override { return Backend::Cholmod; }
   Index factorNonZeros() const override {

@@ -1,6 +1,7 @@
 #include "qpreduce/subspace.h"
 
 #include "blas.h"
+#include "simd_kernels.h"
 #include "subspace_internal.h"
 
 #include "qpreduce/detail/dense.h"
@@ -15,6 +16,7 @@
 #include <cassert>
 #include <cmath>
 #include <optional>
+#include <vector>
 
 namespace qpreduce {
 
@@ -83,11 +85,15 @@ void blocked_pass(const SpD& H, const SpD& C, const SpD& D, const MatD& N, const
   const Index nb_k = (k + kResidualColumns - 1) / kResidualColumns;
   if (gram) gram->setZero(p, p);
   const detail::ScopedBlasThreads one_blas_thread(1);  // the OpenMP loop below calls the BLAS from each thread
+  // H by rows (a copy, so that H need not be exactly symmetric) for the
+  // row-major panel product of detail::sparse_times_block.
+  const Eigen::SparseMatrix<double, Eigen::RowMajor, int> Hrows = H;
   double r1sq = 0.0, r2sq = 0.0;
   // Later blocks have taller Gram panels: hand them out first.
 #pragma omp parallel reduction(+ : r1sq, r2sq)
   {
     MatD HBbuf(H.rows(), kResidualColumns);  // reused: fresh n-sized buffers cost page faults
+    std::vector<double> panel(static_cast<size_t>(H.cols() * kResidualColumns));
 #pragma omp for schedule(dynamic, 1)
     for (Index bb = 0; bb < nb_d + nb_k; ++bb) {
       const Index b = nb_d + nb_k - 1 - bb;
@@ -97,7 +103,7 @@ void blocked_pass(const SpD& H, const SpD& C, const SpD& D, const MatD& N, const
       const Index col = in_n ? j : d + j;  // first column of the block in B
       const auto Bj = in_n ? N.middleCols(j, w) : UD.middleCols(j, w);
       auto HB = HBbuf.leftCols(w);
-      HB.noalias() = H * Bj;
+      detail::sparse_times_block(Hrows, Bj.data(), Bj.outerStride(), w, panel.data(), HB.data(), HB.outerStride());
       if (gram) {
         const Index end = col + w, rows_n = std::min(d, end), rows_u = std::max<Index>(0, end - d);
         detail::blas_gemm(true, false, 1.0, N.leftCols(rows_n), HB, 0.0, gram->block(0, col, rows_n, w));
@@ -350,7 +356,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
         for (SpD::InnerIterator it(C, aug[c]); it; ++it) t.emplace_back(it.row(), c, it.value());
       Cp.setFromTriplets(t.begin(), t.end());
     }
-    const SpD Hrho = SpD(H + summary.rho * (Cp * Cp.transpose())).pruned();
+    SpD Hrho = SpD(H + summary.rho * (Cp * Cp.transpose())).pruned();
 
     detail::Timer t;
     auto factor = make_factorization(spd_backend);
@@ -368,6 +374,12 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
                                   "back with relative error {:.2e}): H is not positive definite on ker(Cᵀ)",
                                   summary.probe_error));
     }
+    // H_ρ itself is needed no further than its Gershgorin bound (for the PSD
+    // certificate below): free it before the solves, where the factor and
+    // the n × p solution make the build's memory peak.
+    const double hrho_bound = gershgorin_bound(Hrho);
+    Hrho = SpD();
+    detail::release_free_heap();  // and the analysis's workspace (METIS graphs)
 
     // G = H_ρ⁻¹C and F = H_ρ⁻¹D, solved in place in the output storage.
     t.reset();
@@ -406,7 +418,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
       for (size_t a = 0; a < aug.size(); ++a)
         for (size_t b = 0; b < aug.size(); ++b) T(a, b) = summary.rho * S(aug[a], aug[b]);
       const double lambda_max = detail::symmetric_eigenvalues(T).maxCoeff();
-      const double eta_max = tau / std::max(gershgorin_bound(Hrho), 1e-300);
+      const double eta_max = tau / std::max(hrho_bound, 1e-300);
       summary.check_psd_seconds += tc.seconds();
       if (!(lambda_max - 1.0 <= eta_max) && !factor_psd_check()) return fail(Status::IndefiniteH, psd_message);
     }

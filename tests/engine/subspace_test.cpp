@@ -2,12 +2,15 @@
 // backend and both scalars, plus the error paths.
 #include <catch2/catch.hpp>
 
+#include "qpreduce/factorization.h"
 #include "qpreduce/full_solve.h"
 #include "qpreduce/generators.h"
 #include "qpreduce/subspace_solver.h"
 
 #include <Eigen/Dense>
+#include <omp.h>
 
+#include <cmath>
 #include <limits>
 #include <string>
 
@@ -202,6 +205,23 @@ TEST_CASE("bad input is rejected with a message naming the problem", "[subspace]
     SparseMatrix<double> H = p.H;
     H.coeffRef(0, 1) += 0.5;
     CHECK_THAT(message_of([&] { build_subspace(H, p.C, p.D, {}, &s); }), Catch::Contains("not symmetric"));
+  }
+  SECTION("asymmetry measured exactly, mirror entry absent, compressed or not") {
+    // H(0, 5) stored without H(5, 0): ‖H − Hᵀ‖_F = √2·e, so the rejection
+    // threshold on symmetry_tolerance is √2·e/‖H‖_F.
+    SparseMatrix<double> H = p.H;
+    REQUIRE(H.coeff(5, 0) == 0.0);
+    const double e = 1e-6;
+    H.coeffRef(0, 5) = e;
+    const double ratio = std::sqrt(2.0) * e / H.norm();
+    for (const bool compressed : {true, false}) {
+      if (compressed) H.makeCompressed(); else H.uncompress();
+      SubspaceOptions below, above;
+      below.symmetry_tolerance = 0.99 * ratio;
+      above.symmetry_tolerance = 1.01 * ratio;
+      CHECK_THAT(message_of([&] { build_subspace(H, p.C, p.D, below, &s); }), Catch::Contains("not symmetric"));
+      CHECK_THAT(message_of([&] { build_subspace(H, p.C, p.D, above, &s); }), !Catch::Contains("not symmetric"));
+    }
   }
   SECTION("no columns in C") {
     const SparseMatrix<double> C0(64, 0);
@@ -665,4 +685,24 @@ TEST_CASE("a solver restored from its parts solves like the original", "[solver]
     CHECK_THROWS_AS(bad.restore(nan, Hr, BtD), std::invalid_argument);
     CHECK_FALSE(bad.ready());
   }
+}
+
+TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorization][blocks]") {
+  // A fill-reducing permutation that is far from the identity (2D grid), and
+  // column blocks that do not divide the column count.
+  const SparseMatrix<double> A = gen::grid_laplacian_2d(17, 13, 0.3);
+  const Matrix<double> B = Matrix<double>::Random(A.rows(), 37);
+  const Matrix<double> expected = Matrix<double>(A).llt().solve(B);
+  auto factor = make_factorization(Backend::Cholmod);
+  factor->compute(A);
+  REQUIRE(factor->info() == Eigen::Success);
+  const int threads = GENERATE(1, 2);
+  const Index block = GENERATE(1, 8, 64);
+  CAPTURE(threads, block);
+  const int previous = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  Matrix<double> X = B;
+  factor->solveInPlace(X, block);
+  omp_set_num_threads(previous);
+  CHECK((X - expected).norm() <= 1e-12 * expected.norm());
 }

@@ -76,5 +76,11 @@ void check_finite(const char* what, const SparseMatrix<Scalar>& m) {
 template <typename Scalar>
 void check_symmetric(const char* what, const SparseMatrix<Scalar>& H, double tolerance);
 
+// Hands the heap's free memory back to the system (glibc's malloc_trim; a
+// no-op elsewhere). glibc keeps freed blocks that lie below live ones, so the
+// temporaries of one phase of a large precompute (assembly, symbolic
+// analysis) would otherwise stay resident under the next phase's peak.
+void release_free_heap();
+
 }  // namespace detail
 }  // namespace qpreduce
