@@ -1,5 +1,7 @@
 #include "qpreduce/deform/arap_energy.h"
 
+#include "sparse_products.h"
+
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
@@ -414,13 +416,13 @@ EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sy
   Binv.setFromTriplets(tb.begin(), tb.end());
   const SparseMatrix<double> DV = sys.D.topRows(nv);
   const SparseMatrix<double> DQ = sys.D.bottomRows(nq);
-  const SparseMatrix<double> LVQ_Binv = LVQ * Binv;
+  const SparseMatrix<double> LVQ_Binv = detail_deformer::parallel_product(LVQ, Binv);
   EliminatedArapSystem out;
-  SparseMatrix<double> H = LVV - SparseMatrix<double>(LVQ_Binv * LVQ.transpose());
+  SparseMatrix<double> H = LVV - detail_deformer::parallel_product(LVQ_Binv, SparseMatrix<double>(LVQ.transpose()));
   // Symmetrise exactly (the product is symmetric up to round-off).
   const SparseMatrix<double> Ht = H.transpose();
   out.H = (0.5 * (H + Ht)).pruned(1e-300);
-  out.Ds = (DV - SparseMatrix<double>(LVQ_Binv * DQ)).pruned(1e-300);
+  out.Ds = (DV - detail_deformer::parallel_product(LVQ_Binv, DQ)).pruned(1e-300);
   out.DV = DV;
   return out;
 }
