@@ -73,10 +73,28 @@ class CholmodFactorization final : public SparseFactorization {
   CholmodFactorization(const CholmodFactorization&) = delete;
   CholmodFactorization& operator=(const CholmodFactorization&) = delete;
 
+  void setOrderingGroups(std::vector<Index> group) override { group_ = std::move(group); }
+
   void analyzePattern(const SparseMatrix<double>& A) override {
     if (factor_) cholmod_free_factor(&factor_, &common_);
     cholmod_sparse view = lower_view(A);
-    factor_ = cholmod_analyze(&view, &common_);
+    if (!group_.empty()) {
+      const std::vector<int> perm = grouped_ordering(A);
+      if (perm.empty()) {
+        set_info(Eigen::NumericalIssue,
+                 fmt::format("CHOLMOD ordering of the grouped unknowns failed (status {})", common_.status));
+        return;
+      }
+      // Only the given permutation (CHOLMOD still postorders it).
+      const int nmethods = common_.nmethods, ordering = common_.method[0].ordering;
+      common_.nmethods = 1;
+      common_.method[0].ordering = CHOLMOD_GIVEN;
+      factor_ = cholmod_analyze_p(&view, const_cast<int*>(perm.data()), nullptr, 0, &common_);
+      common_.nmethods = nmethods;
+      common_.method[0].ordering = ordering;
+    } else {
+      factor_ = cholmod_analyze(&view, &common_);
+    }
     if (factor_ && common_.status >= CHOLMOD_OK) {
       set_info(Eigen::Success, "");
     } else {
@@ -200,6 +218,78 @@ class CholmodFactorization final : public SparseFactorization {
     message_ = std::move(message);
   }
 
+  // The quotient graph of A's pattern under group_ (g × g, both triangles),
+  // ordered by CHOLMOD's own choice (AMD, or METIS when AMD's fill is poor),
+  // expanded to the unknowns: each group's members in a row, in index
+  // order. Empty on failure.
+  std::vector<int> grouped_ordering(const SparseMatrix<double>& A) {
+    const Index n = A.rows();
+    if (static_cast<Index>(group_.size()) != n) {
+      throw std::invalid_argument(fmt::format("CHOLMOD ordering groups: {} entries for {} unknowns", group_.size(), n));
+    }
+    Index g = 0;
+    for (Index x : group_) {
+      if (x < 0) throw std::invalid_argument(fmt::format("CHOLMOD ordering groups: negative group {}", x));
+      g = std::max(g, x + 1);
+    }
+    // Members of each group (CSR).
+    std::vector<int> start(static_cast<size_t>(g) + 1, 0), member(static_cast<size_t>(n));
+    for (Index i = 0; i < n; ++i) ++start[static_cast<size_t>(group_[i]) + 1];
+    for (Index q = 0; q < g; ++q) start[q + 1] += start[q];
+    {
+      std::vector<int> next(start.begin(), start.end() - 1);
+      for (Index i = 0; i < n; ++i) member[next[group_[i]]++] = static_cast<int>(i);
+    }
+    // Quotient pattern, column by column with a marker (A is symmetric, so
+    // the columns of a group's members give its neighbours).
+    std::vector<int> qp(static_cast<size_t>(g) + 1, 0), qi, mark(static_cast<size_t>(g), -1);
+    for (Index q = 0; q < g; ++q) {
+      for (int t = start[q]; t < start[q + 1]; ++t)
+        for (SparseMatrix<double>::InnerIterator it(A, member[t]); it; ++it) {
+          const int r = static_cast<int>(group_[it.row()]);
+          if (mark[r] != q) {
+            mark[r] = static_cast<int>(q);
+            qi.push_back(r);
+          }
+        }
+      std::sort(qi.begin() + qp[q], qi.end());
+      qp[q + 1] = static_cast<int>(qi.size());
+    }
+    cholmod_sparse quotient{};
+    quotient.nrow = quotient.ncol = static_cast<size_t>(g);
+    quotient.nzmax = qi.size();
+    quotient.p = qp.data();
+    quotient.i = qi.data();
+    quotient.stype = -1;
+    quotient.itype = CHOLMOD_INT;
+    quotient.xtype = CHOLMOD_PATTERN;
+    quotient.dtype = CHOLMOD_DOUBLE;
+    quotient.sorted = 1;
+    quotient.packed = 1;
+    // Both AMD and METIS, the one with fewer flops kept: CHOLMOD's default
+    // rule (METIS only when AMD's fill is poor) judges the quotient graph's
+    // own fill, which understates the unknowns'.
+    const cholmod_common saved = common_;
+    common_.nmethods = 2;
+    common_.method[0].ordering = CHOLMOD_AMD;
+    common_.method[1].ordering = CHOLMOD_METIS;
+    cholmod_factor* symbolic = cholmod_analyze(&quotient, &common_);
+    common_.nmethods = saved.nmethods;
+    for (int m = 0; m < 2; ++m) common_.method[m] = saved.method[m];
+    if (symbolic == nullptr || common_.status < CHOLMOD_OK) {
+      if (symbolic) cholmod_free_factor(&symbolic, &common_);
+      return {};
+    }
+    const int* qperm = static_cast<const int*>(symbolic->Perm);
+    std::vector<int> perm;
+    perm.reserve(static_cast<size_t>(n));
+    for (Index k = 0; k < g; ++k)
+      for (int t = start[qperm[k]]; t < start[qperm[k] + 1]; ++t) perm.push_back(member[t]);
+    cholmod_free_factor(&symbolic, &common_);
+    return perm;
+  }
+
+  std::vector<Index> group_;
   mutable cholmod_common common_;
   cholmod_factor* factor_ = nullptr;
   Eigen::ComputationInfo info_ = Eigen::InvalidInput;

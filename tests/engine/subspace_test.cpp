@@ -13,6 +13,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 using namespace qpreduce;
 namespace gen = qpreduce::generators;
@@ -693,7 +694,15 @@ TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorizati
   const SparseMatrix<double> A = gen::grid_laplacian_2d(17, 13, 0.3);
   const Matrix<double> B = Matrix<double>::Random(A.rows(), 37);
   const Matrix<double> expected = Matrix<double>(A).llt().solve(B);
+  // Ordered as is, or with the unknowns grouped in pairs (a quotient graph).
+  const bool grouped = GENERATE(false, true);
+  CAPTURE(grouped);
   auto factor = make_factorization(Backend::Cholmod);
+  if (grouped) {
+    std::vector<Index> pairs(static_cast<size_t>(A.rows()));
+    for (Index i = 0; i < A.rows(); ++i) pairs[static_cast<size_t>(i)] = i / 2;
+    factor->setOrderingGroups(pairs);
+  }
   factor->compute(A);
   REQUIRE(factor->info() == Eigen::Success);
   const int threads = GENERATE(1, 2);
@@ -705,4 +714,47 @@ TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorizati
   factor->solveInPlace(X, block);
   omp_set_num_threads(previous);
   CHECK((X - expected).norm() <= 1e-12 * expected.norm());
+}
+
+TEST_CASE("ordering groups give the same subspace and reject bad groups", "[subspace][ordering]") {
+  // Two coupled unknowns per grid node: H = L_grid ⊗ [[2, 0.5], [0.5, 1]].
+  const SparseMatrix<double> L = gen::grid_laplacian_2d(21, 17, 0.0);
+  const Index nodes = L.rows(), n = 2 * nodes;
+  std::vector<Eigen::Triplet<double>> t;
+  const Eigen::Matrix2d block = (Eigen::Matrix2d() << 2.0, 0.5, 0.5, 1.0).finished();
+  for (Index j = 0; j < nodes; ++j)
+    for (SparseMatrix<double>::InnerIterator it(L, j); it; ++it)
+      for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b) t.emplace_back(2 * it.row() + a, 2 * j + b, it.value() * block(a, b));
+  SparseMatrix<double> H(n, n);
+  H.setFromTriplets(t.begin(), t.end());
+  const SparseMatrix<double> C = gen::selection(n, gen::random_subset(n, 10, 7));
+  const SparseMatrix<double> D = Matrix<double>::Random(n, 4).sparseView();
+  SubspaceOptions opts;
+  opts.backend = Backend::Cholmod;
+  VariationalSubspace<double> plain, grouped;
+  REQUIRE(build_subspace(H, C, D, opts, &plain).ok());
+  opts.ordering_groups.resize(static_cast<size_t>(n));
+  for (Index i = 0; i < n; ++i) opts.ordering_groups[static_cast<size_t>(i)] = i / 2;
+  const SubspaceSummary summary = build_subspace(H, C, D, opts, &grouped);
+  REQUIRE(summary.ok());
+  CHECK((grouped.N - plain.N).norm() <= 1e-10 * plain.N.norm());
+  CHECK((grouped.UD - plain.UD).norm() <= 1e-10 * plain.UD.norm());
+  CHECK(summary.kkt_residual < 1e-12);
+
+  auto message_of = [&](const SubspaceOptions& o) -> std::string {
+    VariationalSubspace<double> s;
+    try {
+      build_subspace(H, C, D, o, &s);
+    } catch (const std::invalid_argument& e) {
+      return e.what();
+    }
+    return "no exception";
+  };
+  SubspaceOptions short_groups = opts;
+  short_groups.ordering_groups.pop_back();
+  CHECK_THAT(message_of(short_groups), Catch::Contains("ordering_groups size"));
+  SubspaceOptions negative = opts;
+  negative.ordering_groups[5] = -1;
+  CHECK_THAT(message_of(negative), Catch::Contains("negative group -1"));
 }

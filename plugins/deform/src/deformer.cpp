@@ -494,6 +494,24 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     }
   }
 
+  // Order the factorization by vertex (its three coordinates together), by
+  // patch (its 12 transform entries) and by element (its 4 entries of Q,
+  // when kept): the quotient graph is 3–9× smaller than the unknowns' graph.
+  if (sub.ordering_groups.empty()) {
+    sub.ordering_groups.assign(static_cast<size_t>(S.nu), -1);
+    Index group = 0;
+    for (Index v = 0; v < n; ++v) {
+      const Index base = S.control_of_free[v];
+      if (base < 0) continue;
+      for (int a = 0; a < 3; ++a) sub.ordering_groups[static_cast<size_t>(base + a)] = group;
+      ++group;
+    }
+    for (Index p = 0; p < S.s; ++p, ++group)
+      for (int c = 0; c < 12; ++c) sub.ordering_groups[static_cast<size_t>(S.patch_base + 12 * p + c)] = group;
+    for (Index i = S.patch_base + 12 * S.s; i < S.nu; i += 4, ++group)
+      for (Index c = i; c < std::min(i + 4, S.nu); ++c) sub.ordering_groups[static_cast<size_t>(c)] = group;
+  }
+
   report("subspace", 0.2);
   // The assembly's freed temporaries (about 300 MB on the Bumpy Plane) would
   // otherwise stay resident under the build's peak (factor plus solution).

@@ -7,7 +7,8 @@
 // every digit of the small eigen-directions the subspace depends on.
 //
 //   Backend::Cholmod        CHOLMOD supernodal LLᵀ (symmetric positive definite;
-//                           BLAS-3 solves over whole right-hand-side blocks).
+//                           BLAS-3 solves over whole right-hand-side blocks,
+//                           in place; optional ordering of grouped unknowns).
 //   Backend::SimplicialLDLT Eigen SimplicialLDLT with AMD ordering
 //                           (symmetric positive definite; OpenMP over column
 //                           blocks); reports the inertia of its pivots.
@@ -19,6 +20,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace qpreduce {
 
@@ -42,6 +44,15 @@ class SparseFactorization {
   virtual Backend backend() const = 0;
   // Number of structurally nonzero entries in the factor(s), for reports.
   virtual Index factorNonZeros() const = 0;
+
+  // Optional, before analyzePattern: group[i] ∈ [0, g) for each of the n
+  // unknowns. The fill-reducing ordering is then computed on the g-node
+  // quotient graph (groups i ~ j when some A_ab ≠ 0 with a in i, b in j) and
+  // each group's unknowns are eliminated together. For mesh problems (the
+  // coordinates of a vertex) it makes the ordering 5–10× cheaper at about the
+  // same fill. Backends without a separate ordering step ignore it (the
+  // default); an empty vector restores ordering the unknowns themselves.
+  virtual void setOrderingGroups(std::vector<Index> group) { (void)group; }
 
   void compute(const SparseMatrix<double>& A) {
     analyzePattern(A);
