@@ -155,6 +155,24 @@ TEST_CASE("eliminating Q gives the minimum of E′ over Q", "[arap][energy]") {
   CHECK((e.H * tx).norm() <= 1e-10 * H.norm());
 }
 
+TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range", "[arap][phase2]") {
+  // G = R·S, S symmetric positive definite with cond S from 1 to 99 (the
+  // closed-form path takes cond G < 100): the polar factor is R exactly.
+  double worst = 0.0;
+  for (unsigned seed = 0; seed < 200; ++seed) {
+    const Eigen::VectorXd a = random_vector(10, 1000 + seed);
+    const Eigen::Matrix3d R = rotation(3.0 * a(0), a.segment<3>(1));
+    const Eigen::Matrix3d Q = rotation(3.0 * a(4), a.segment<3>(5));
+    const double cond = 1.0 + 98.0 * std::abs(a(8)) / (1.0 + std::abs(a(8)));
+    const Eigen::Vector3d sigma(1.0, std::sqrt(cond), cond);
+    const Eigen::Matrix3d S = Q * sigma.asDiagonal() * Q.transpose();
+    const Eigen::Matrix3d F = fit_rotation((1.0 + std::abs(a(9))) * R * S);
+    worst = std::max(worst, (F - R).norm());
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-13);
+  }
+  CHECK(worst < 1e-12);
+}
+
 TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
   for (unsigned seed = 0; seed < 50; ++seed) {
     const Eigen::VectorXd a = random_vector(4, seed);
