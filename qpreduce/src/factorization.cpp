@@ -219,9 +219,9 @@ class CholmodFactorization final : public SparseFactorization {
   }
 
   // The quotient graph of A's pattern under group_ (g × g, both triangles),
-  // ordered by CHOLMOD's own choice (AMD, or METIS when AMD's fill is poor),
-  // expanded to the unknowns: each group's members in a row, in index
-  // order. Empty on failure.
+  // ordered by AMD and by METIS (CHOLMOD keeps the better by its flop
+  // count), expanded to the unknowns: each group's members in a row, in
+  // index order. Empty on failure.
   std::vector<int> grouped_ordering(const SparseMatrix<double>& A) {
     const Index n = A.rows();
     if (static_cast<Index>(group_.size()) != n) {
@@ -266,9 +266,10 @@ class CholmodFactorization final : public SparseFactorization {
     quotient.dtype = CHOLMOD_DOUBLE;
     quotient.sorted = 1;
     quotient.packed = 1;
-    // Both AMD and METIS, the one with fewer flops kept: CHOLMOD's default
-    // rule (METIS only when AMD's fill is poor) judges the quotient graph's
-    // own fill, which understates the unknowns'.
+    // Both AMD and METIS: CHOLMOD's default rule (METIS only when AMD's fill
+    // is poor) would judge the quotient graph's own fill, which understates
+    // the unknowns' (on the Bumpy Plane the default rule's choice gave 50.7M
+    // factor entries, trying both 45.7M).
     const cholmod_common saved = common_;
     common_.nmethods = 2;
     common_.method[0].ordering = CHOLMOD_AMD;
