@@ -195,23 +195,27 @@ class CholmodFactorization final : public SparseFactorization {
   }
 
  private:
-  // A cholmod_sparse view of A's lower triangle (stype = −1) without copying.
-  static cholmod_sparse lower_view(const SparseMatrix<double>& A) {
-    if (!A.isCompressed()) throw std::invalid_argument("CHOLMOD backend: matrix must be compressed");
+  // A cholmod_sparse view (no copy) of the lower triangle (stype = −1) of a
+  // compressed, sorted n × n matrix given by its column pointers and row
+  // indices; values x, or a pattern when x is null.
+  static cholmod_sparse lower_view(Index n, const int* p, const int* i, const double* x) {
     cholmod_sparse v{};
-    v.nrow = static_cast<size_t>(A.rows());
-    v.ncol = static_cast<size_t>(A.cols());
-    v.nzmax = static_cast<size_t>(A.nonZeros());
-    v.p = const_cast<int*>(A.outerIndexPtr());
-    v.i = const_cast<int*>(A.innerIndexPtr());
-    v.x = const_cast<double*>(A.valuePtr());
+    v.nrow = v.ncol = static_cast<size_t>(n);
+    v.nzmax = static_cast<size_t>(p[n]);
+    v.p = const_cast<int*>(p);
+    v.i = const_cast<int*>(i);
+    v.x = const_cast<double*>(x);
     v.stype = -1;
     v.itype = CHOLMOD_INT;
-    v.xtype = CHOLMOD_REAL;
+    v.xtype = x ? CHOLMOD_REAL : CHOLMOD_PATTERN;
     v.dtype = CHOLMOD_DOUBLE;
     v.sorted = 1;
     v.packed = 1;
     return v;
+  }
+  static cholmod_sparse lower_view(const SparseMatrix<double>& A) {
+    if (!A.isCompressed()) throw std::invalid_argument("CHOLMOD backend: matrix must be compressed");
+    return lower_view(A.rows(), A.outerIndexPtr(), A.innerIndexPtr(), A.valuePtr());
   }
   void set_info(Eigen::ComputationInfo info, std::string message) {
     info_ = info;
@@ -255,28 +259,19 @@ class CholmodFactorization final : public SparseFactorization {
       std::sort(qi.begin() + qp[q], qi.end());
       qp[q + 1] = static_cast<int>(qi.size());
     }
-    cholmod_sparse quotient{};
-    quotient.nrow = quotient.ncol = static_cast<size_t>(g);
-    quotient.nzmax = qi.size();
-    quotient.p = qp.data();
-    quotient.i = qi.data();
-    quotient.stype = -1;
-    quotient.itype = CHOLMOD_INT;
-    quotient.xtype = CHOLMOD_PATTERN;
-    quotient.dtype = CHOLMOD_DOUBLE;
-    quotient.sorted = 1;
-    quotient.packed = 1;
+    cholmod_sparse quotient = lower_view(g, qp.data(), qi.data(), nullptr);
     // Both AMD and METIS: CHOLMOD's default rule (METIS only when AMD's fill
     // is poor) would judge the quotient graph's own fill, which understates
     // the unknowns' (on the Bumpy Plane the default rule's choice gave 50.7M
     // factor entries, trying both 45.7M).
-    const cholmod_common saved = common_;
+    const int nmethods = common_.nmethods, first = common_.method[0].ordering, second = common_.method[1].ordering;
     common_.nmethods = 2;
     common_.method[0].ordering = CHOLMOD_AMD;
     common_.method[1].ordering = CHOLMOD_METIS;
     cholmod_factor* symbolic = cholmod_analyze(&quotient, &common_);
-    common_.nmethods = saved.nmethods;
-    for (int m = 0; m < 2; ++m) common_.method[m] = saved.method[m];
+    common_.nmethods = nmethods;
+    common_.method[0].ordering = first;
+    common_.method[1].ordering = second;
     if (symbolic == nullptr || common_.status < CHOLMOD_OK) {
       if (symbolic) cholmod_free_factor(&symbolic, &common_);
       return {};
