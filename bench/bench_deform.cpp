@@ -16,10 +16,24 @@
 //                       divided by its rounds; manual time)
 //   IterationParallel/<M> the same with the rounds on all threads
 //                       (DeformerOptions::round_threads = 0)
-//   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices (manual time)
-//   StreamRead/<M>      a plain parallel streaming read (vectorised sum) of
-//                       the reconstruction basis itself, with the same
-//                       threads: the memory-bandwidth floor of reconstruction
+//   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices, as a frame
+//                       runs it: after the frame's rounds (manual time)
+//   StreamRead/<M>      a plain parallel streaming read (Eigen's vectorised
+//                       sum) of the reconstruction basis itself, with the
+//                       same threads, at the same point of a frame (after
+//                       its rounds, untimed): the memory-bandwidth floor of
+//                       reconstruction. After single-threaded rounds the
+//                       second thread's vCPU has to be woken, which on a
+//                       shared 2-vCPU machine costs tens of µs either way.
+//   StreamReadAvx2/<M>  the same read by an AVX2 loop, four accumulators
+//                       (a stricter floor: this build is baseline x86-64)
+//   ReconstructionVsRead/<M>
+//                       the three above sampled alternately in one loop
+//                       (counters recon_ms, read_ms, read_avx2_ms, ratio,
+//                       ratio_avx2): the ratios that the targets are judged by
+//   ReconstructionBackToBack/<M>, StreamReadBackToBack/<M>
+//                       reconstruct_points and the plain read one call after
+//                       the other, outside any frame (the team kept busy)
 //   Frame/<M>           a whole frame (8 rounds + reconstruction)
 // Every per-iteration benchmark also reports the median of its samples as
 // the counter `median` (µs for Iteration, ms otherwise).
@@ -39,6 +53,7 @@
 #include <qpreduce/deform/mesh_io.h>
 #include <qpreduce/deform/proxies.h>
 #include <qpreduce/deform/tet_io.h>
+#include <qpreduce/point_reconstruction.h>
 
 #include <qpreduce/detail/timer.h>
 
@@ -46,6 +61,10 @@
 #include <fmt/format.h>
 
 #include <omp.h>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -240,30 +259,133 @@ void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int
   set_sizes(state, s);
 }
 
-void BM_StreamRead(benchmark::State& state, const ModelSpec* spec) {
+// The reconstruction basis B itself, read once: each thread sums its share
+// of the rows (the same threads and the same bytes as reconstruction, without
+// the products), with Eigen's vectorised reduction — SSE2 in this build,
+// compiled for baseline x86-64 like the library — or, for a stricter floor,
+// an AVX2 loop with four accumulators.
+float sum_eigen(const float* x, Index n) { return Eigen::Map<const Eigen::VectorXf>(x, n).sum(); }
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define BENCH_HAVE_AVX2 1
+__attribute__((target("avx2"))) float sum_avx2(const float* x, Index n) {
+  __m256 a0 = _mm256_setzero_ps(), a1 = a0, a2 = a0, a3 = a0;
+  Index i = 0;
+  for (; i + 32 <= n; i += 32) {
+    a0 = _mm256_add_ps(a0, _mm256_loadu_ps(x + i));
+    a1 = _mm256_add_ps(a1, _mm256_loadu_ps(x + i + 8));
+    a2 = _mm256_add_ps(a2, _mm256_loadu_ps(x + i + 16));
+    a3 = _mm256_add_ps(a3, _mm256_loadu_ps(x + i + 24));
+  }
+  alignas(32) float lanes[8];
+  _mm256_store_ps(lanes, _mm256_add_ps(_mm256_add_ps(a0, a1), _mm256_add_ps(a2, a3)));
+  float total = 0.0f;
+  for (float l : lanes) total += l;
+  for (; i < n; ++i) total += x[i];
+  return total;
+}
+#endif
+
+using SumFn = float (*)(const float*, Index);
+
+float stream_read(const RowMatrixXf& basis, SumFn sum) {
+  const Index rows = basis.rows(), cols = basis.cols();
+  float total = 0.0f;
+#pragma omp parallel reduction(+ : total)
+  {
+    const int threads = omp_get_num_threads(), me = omp_get_thread_num();
+    const Index r0 = rows * me / threads, r1 = rows * (me + 1) / threads;
+    total += sum(basis.data() + r0 * cols, (r1 - r0) * cols);
+  }
+  return total;
+}
+
+// Where each sample of a streaming read or of a bare reconstruction is taken.
+enum class When {
+  BackToBack,  // one after the other: the OpenMP team is busy throughout
+  InFrame,     // after a frame's rounds (frame(targets, nullptr), untimed):
+               // the point of a frame where its reconstruction runs
+};
+
+void BM_StreamRead(benchmark::State& state, const ModelSpec* spec, When when, SumFn sum) {
   Session& s = session(*spec);
-  // The reconstruction basis itself, read once per iteration: each thread sums
-  // its share of the rows with Eigen's vectorised reduction (the same threads
-  // and the same bytes as reconstruction, without the products).
   const auto& basis = s.deformer.reconstruction_basis();
-  const Index rows = basis.rows();
   std::vector<double> samples;
   for (auto _ : state) {
-    const qpreduce::detail::Timer t;
-    float total = 0.0f;
-#pragma omp parallel reduction(+ : total)
-    {
-      const int threads = omp_get_num_threads(), me = omp_get_thread_num();
-      const Index r0 = rows * me / threads, r1 = rows * (me + 1) / threads;
-      total += basis.middleRows(r0, r1 - r0).sum();
+    if (when == When::InFrame) {
+      state.PauseTiming();
+      s.deformer.frame(next_targets(s), nullptr);
+      state.ResumeTiming();
     }
-    benchmark::DoNotOptimize(total);
-    samples.push_back(t.seconds());
+    const qpreduce::detail::Timer t;
+    benchmark::DoNotOptimize(stream_read(basis, sum));
+    const double seconds = t.seconds();
+    state.SetIterationTime(seconds);
+    samples.push_back(seconds);
   }
   const double bytes = static_cast<double>(basis.size()) * sizeof(float);
   state.SetBytesProcessed(static_cast<int64_t>(static_cast<double>(state.iterations()) * bytes));
   state.counters["MiB"] = bytes / (1024.0 * 1024.0);
   set_median(state, std::move(samples), 1e-3);
+  set_sizes(state, s);
+}
+
+// reconstruct_points on the last frame's coordinates, back to back: the
+// reconstruction without the frame around it.
+void BM_ReconstructionBackToBack(benchmark::State& state, const ModelSpec* spec) {
+  Session& s = session(*spec);
+  s.deformer.frame(next_targets(s), nullptr);
+  const Eigen::Matrix3f r0 = s.deformer.global_rotation().cast<float>();
+  std::vector<double> samples;
+  for (auto _ : state) {
+    const qpreduce::detail::Timer t;
+    reconstruct_points(s.deformer.reconstruction_basis(), s.deformer.reduced_coordinates(), r0, &s.out);
+    const double seconds = t.seconds();
+    state.SetIterationTime(seconds);
+    samples.push_back(seconds);
+  }
+  set_median(state, std::move(samples), 1e-3);
+  set_sizes(state, s);
+}
+
+// Reconstruction and the streaming reads sampled alternately, each after a
+// frame's rounds: every iteration runs three frames, times the first one's
+// reconstruction, then the plain read after the second's rounds and the AVX2
+// read after the third's. A burst of load from another tenant of the machine
+// then falls on all three series alike. Counters: the medians (ms) and the
+// ratios of the medians; the benchmark's own time is the reconstruction.
+void BM_ReconstructionVsRead(benchmark::State& state, const ModelSpec* spec) {
+  Session& s = session(*spec);
+  const auto& basis = s.deformer.reconstruction_basis();
+  std::vector<double> recon, plain, avx2;
+  for (auto _ : state) {
+    const FrameSummary f = s.deformer.frame(next_targets(s), &s.out);
+    state.SetIterationTime(f.reconstruct_seconds);
+    recon.push_back(f.reconstruct_seconds);
+    s.deformer.frame(next_targets(s), nullptr);
+    qpreduce::detail::Timer t;
+    benchmark::DoNotOptimize(stream_read(basis, sum_eigen));
+    plain.push_back(t.seconds());
+#ifdef BENCH_HAVE_AVX2
+    if (__builtin_cpu_supports("avx2")) {
+      s.deformer.frame(next_targets(s), nullptr);
+      t.reset();
+      benchmark::DoNotOptimize(stream_read(basis, sum_avx2));
+      avx2.push_back(t.seconds());
+    }
+#endif
+  }
+  auto median_ms = [](std::vector<double> v) {
+    if (v.empty()) return std::nan("");
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return 1e3 * v[v.size() / 2];
+  };
+  const double r = median_ms(recon), p = median_ms(plain), a = median_ms(avx2);
+  state.counters["recon_ms"] = r;
+  state.counters["read_ms"] = p;
+  state.counters["read_avx2_ms"] = a;
+  state.counters["ratio"] = r / p;
+  state.counters["ratio_avx2"] = r / a;
   set_sizes(state, s);
 }
 
@@ -297,9 +419,25 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction, 1)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec)
+    benchmark::RegisterBenchmark(("ReconstructionVsRead/" + n).c_str(), BM_ReconstructionVsRead, &spec)
         ->Unit(benchmark::kMillisecond)
-        ->UseRealTime();
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec, When::InFrame, sum_eigen)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+#ifdef BENCH_HAVE_AVX2
+    if (__builtin_cpu_supports("avx2"))
+      benchmark::RegisterBenchmark(("StreamReadAvx2/" + n).c_str(), BM_StreamRead, &spec, When::InFrame, sum_avx2)
+          ->Unit(benchmark::kMillisecond)
+          ->UseManualTime();
+#endif
+    benchmark::RegisterBenchmark(("StreamReadBackToBack/" + n).c_str(), BM_StreamRead, &spec, When::BackToBack,
+                                 sum_eigen)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("ReconstructionBackToBack/" + n).c_str(), BM_ReconstructionBackToBack, &spec)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
     benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();

@@ -21,6 +21,9 @@
 
 namespace qpreduce::detail {
 
+// The order in which rows3_dot reads a point's three rows (below).
+enum class RowOrder { Sequential, Interleaved };
+
 #if defined(__x86_64__) && defined(__GNUC__)
 #define QPREDUCE_HAVE_AVX2_KERNELS 1
 
@@ -175,6 +178,94 @@ __attribute__((target("avx2,fma"))) void csr_times_panel_avx2(const int* outer, 
   }
 }
 
+// The last 1–7 columns of a row by masked loads: kTailMask + 8 − r has its
+// first r lanes set.
+alignas(32) inline constexpr int kTailMask[16] = {-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0};
+
+__attribute__((target("avx2,fma"))) inline __m256i tail_mask(Index r) {
+  return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(kTailMask + 8 - r));
+}
+
+// r·w for one row of p floats: two 8-wide accumulators, then the last p mod 8
+// columns by a masked load (no scalar tail).
+__attribute__((target("avx2,fma"))) inline float row_dot_avx2(const float* r, Index p, const float* w) {
+  __m256 a = _mm256_setzero_ps(), b = a;
+  Index j = 0;
+  for (; j + 16 <= p; j += 16) {
+    a = _mm256_fmadd_ps(_mm256_loadu_ps(r + j), _mm256_loadu_ps(w + j), a);
+    b = _mm256_fmadd_ps(_mm256_loadu_ps(r + j + 8), _mm256_loadu_ps(w + j + 8), b);
+  }
+  if (j + 8 <= p) {
+    a = _mm256_fmadd_ps(_mm256_loadu_ps(r + j), _mm256_loadu_ps(w + j), a);
+    j += 8;
+  }
+  if (j < p) {
+    const __m256i m = tail_mask(p - j);
+    b = _mm256_fmadd_ps(_mm256_maskload_ps(r + j, m), _mm256_maskload_ps(w + j, m), b);
+  }
+  return hsum(_mm256_add_ps(a, b));
+}
+
+// out[a] = B_a·w (a = 0, 1, 2) for three consecutive rows B_a = B + a·p of a
+// row-major float matrix: one point of reconstruct_points. Two orders:
+//
+// * Sequential: the rows one after the other (row_dot_avx2), so that the
+//   point's 3p floats are read in address order. For DRAM-resident bases.
+// * Interleaved: the three rows in one loop, six accumulators, each w load
+//   shared by three rows, and each row's cache line `prefetch` bytes ahead
+//   requested as it goes. For cache-resident bases, where the sequential
+//   order's shorter dependency chains and unshared w loads cost 20–30%;
+//   on DRAM-resident ones the three interleaved streams ran 15–25% slower
+//   than the sequential order, with or without the prefetch
+//   (docs/performance.md, "Reconstruction kernels").
+__attribute__((target("avx2,fma"))) inline void rows3_dot_avx2(const float* B, Index p, const float* w, float* out,
+                                                               RowOrder order, Index prefetch) {
+  const float* r0 = B;
+  const float* r1 = B + p;
+  const float* r2 = B + 2 * p;
+  if (order == RowOrder::Sequential) {
+    out[0] = row_dot_avx2(r0, p, w);
+    out[1] = row_dot_avx2(r1, p, w);
+    out[2] = row_dot_avx2(r2, p, w);
+    return;
+  }
+  auto ahead = [prefetch](const float* x) { return reinterpret_cast<const char*>(x) + prefetch; };
+  __m256 a0 = _mm256_setzero_ps(), a1 = a0, a2 = a0, b0 = a0, b1 = a0, b2 = a0;
+  Index j = 0;
+  for (; j + 16 <= p; j += 16) {  // 64 bytes of each row: one prefetch each
+    _mm_prefetch(ahead(r0 + j), _MM_HINT_T0);
+    _mm_prefetch(ahead(r1 + j), _MM_HINT_T0);
+    _mm_prefetch(ahead(r2 + j), _MM_HINT_T0);
+    const __m256 w0 = _mm256_loadu_ps(w + j), w1 = _mm256_loadu_ps(w + j + 8);
+    a0 = _mm256_fmadd_ps(_mm256_loadu_ps(r0 + j), w0, a0);
+    a1 = _mm256_fmadd_ps(_mm256_loadu_ps(r1 + j), w0, a1);
+    a2 = _mm256_fmadd_ps(_mm256_loadu_ps(r2 + j), w0, a2);
+    b0 = _mm256_fmadd_ps(_mm256_loadu_ps(r0 + j + 8), w1, b0);
+    b1 = _mm256_fmadd_ps(_mm256_loadu_ps(r1 + j + 8), w1, b1);
+    b2 = _mm256_fmadd_ps(_mm256_loadu_ps(r2 + j + 8), w1, b2);
+  }
+  _mm_prefetch(ahead(r0 + j), _MM_HINT_T0);
+  _mm_prefetch(ahead(r1 + j), _MM_HINT_T0);
+  _mm_prefetch(ahead(r2 + j), _MM_HINT_T0);
+  if (j + 8 <= p) {
+    const __m256 w0 = _mm256_loadu_ps(w + j);
+    a0 = _mm256_fmadd_ps(_mm256_loadu_ps(r0 + j), w0, a0);
+    a1 = _mm256_fmadd_ps(_mm256_loadu_ps(r1 + j), w0, a1);
+    a2 = _mm256_fmadd_ps(_mm256_loadu_ps(r2 + j), w0, a2);
+    j += 8;
+  }
+  if (j < p) {
+    const __m256i m = tail_mask(p - j);
+    const __m256 w0 = _mm256_maskload_ps(w + j, m);
+    b0 = _mm256_fmadd_ps(_mm256_maskload_ps(r0 + j, m), w0, b0);
+    b1 = _mm256_fmadd_ps(_mm256_maskload_ps(r1 + j, m), w0, b1);
+    b2 = _mm256_fmadd_ps(_mm256_maskload_ps(r2 + j, m), w0, b2);
+  }
+  out[0] = hsum(_mm256_add_ps(a0, b0));
+  out[1] = hsum(_mm256_add_ps(a1, b1));
+  out[2] = hsum(_mm256_add_ps(a2, b2));
+}
+
 // True when the CPU has AVX2 and FMA and the environment variable
 // QPREDUCE_DISABLE_AVX2 is unset or "0" (set it to compare against Eigen's
 // baseline kernels in the same build). Read once.
@@ -222,6 +313,22 @@ void symv_lower_add(const Matrix<T>& M, const T* x, T* y) {
   yv.noalias() += M.template selfadjointView<Eigen::Lower>() * xv;
 }
 
+
+// out[a] = B_a·w for three consecutive rows of a row-major float matrix
+// (rows3_dot_avx2 above; Eigen's product without AVX2 + FMA).
+// `order` and `prefetch` apply to the AVX2 kernel only.
+inline void rows3_dot(const float* B, Index p, const float* w, float* out, RowOrder order, Index prefetch) {
+#ifdef QPREDUCE_HAVE_AVX2_KERNELS
+  if (cpu_has_avx2_fma()) {
+    rows3_dot_avx2(B, p, w, out, order, prefetch);
+    return;
+  }
+#endif
+  (void)order;
+  (void)prefetch;
+  using Rows = Eigen::Matrix<float, 3, Eigen::Dynamic, Eigen::RowMajor>;
+  Eigen::Map<Eigen::Vector3f>(out).noalias() = Eigen::Map<const Rows>(B, 3, p) * Eigen::Map<const Vector<float>>(w, p);
+}
 
 // out = S·B for a sparse matrix S stored by rows (n × m) and a column-major
 // block B (m × w, w ≤ 32, leading dimension ldb), written to a column-major

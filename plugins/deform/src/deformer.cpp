@@ -4,6 +4,7 @@
 #include "sparse_products.h"
 #include "qpreduce/deform/geometry.h"
 
+#include <qpreduce/point_reconstruction.h>
 #include <qpreduce/detail/timer.h>
 
 #include <Eigen/LU>
@@ -737,14 +738,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
     summary.total_seconds = total.seconds();
     return summary;
   }
-  if (out->rows() != S.n) out->resize(S.n, 3);
-  const Eigen::Matrix3f r0f = S.r0.cast<float>();
-  const Index n = S.n;
-#pragma omp parallel for schedule(static)
-  for (Index v = 0; v < n; ++v) {
-    const Eigen::Vector3f p = S.basis.middleRows<3>(3 * v) * S.wf;
-    out->row(v) = (r0f * p).cast<double>().transpose();
-  }
+  reconstruct_points(S.basis, S.wf, S.r0.cast<float>(), out);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds = total.seconds();
   return summary;

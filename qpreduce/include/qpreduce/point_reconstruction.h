@@ -1,0 +1,35 @@
+// qpreduce — reconstruction of points from a float subspace basis (the
+// per-frame step 5 of the paper's Fig. 5: X = N·z + UD·y, read as n points).
+//
+// For a subspace X = B·w whose unknowns come in groups of three (the x, y, z
+// coordinates of point v are X's entries 3v, 3v + 1, 3v + 2) and a global
+// rotation R applied after it (Appendix, global rotation adaptation):
+//
+//   X_out.row(v) = (R · B.middleRows<3>(3v) · w)ᵀ        v = 0 … n − 1
+//
+//   B      3n × p   float, row-major (each point's three rows contiguous)
+//   w      p        float, the reduced coordinates [z; y]
+//   R      3 × 3    float
+//   X_out  n × 3    double, row-major (resized when its row count differs)
+//
+// Cost O(n·p), memory-bound for large n: B is read once, in order, by the
+// OpenMP threads (static split over points); on CPUs with AVX2 + FMA each
+// point is one pass over its three rows (simd_kernels.h), otherwise Eigen's
+// product. Float sums of p products: each coordinate carries a round-off of
+// order p·2⁻²⁴·Σ|B_aj·w_j|.
+//
+// Preconditions (std::invalid_argument otherwise, naming the argument):
+// B.rows() divisible by 3; w.size() == B.cols(); w and R finite. B's entries
+// are not scanned (O(n·p) per call); a non-finite B gives non-finite points.
+#pragma once
+
+#include "qpreduce/common.h"
+
+namespace qpreduce {
+
+using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using Points3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out);
+
+}  // namespace qpreduce

@@ -1,0 +1,51 @@
+#include "qpreduce/point_reconstruction.h"
+
+#include "simd_kernels.h"
+
+#include <fmt/format.h>
+
+#include <stdexcept>
+
+namespace qpreduce {
+
+namespace {
+
+// Below this many entries of B (256 KiB of floats) one thread finishes
+// before a team would be woken.
+constexpr Index kParallelEntries = Index(1) << 16;
+// Bases up to this size are read in the interleaved order, larger ones in
+// the sequential order (simd_kernels.h, rows3_dot_avx2): the L3 cache of the
+// machine we measured on (lscpu; glibc's sysconf reported the host's 256 MiB
+// there, so it is not asked). Between 30 and 40 MiB the two orders measured
+// the same.
+constexpr Index kInterleavedMaxBytes = Index(32) << 20;
+// How far ahead (bytes) the interleaved order prefetches each row.
+constexpr Index kPrefetchBytes = 4096;
+
+}  // namespace
+
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out) {
+  if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
+  if (B.rows() % 3 != 0)
+    throw std::invalid_argument(
+        fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
+  detail::check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
+  detail::check_finite("reconstruct_points: w", w);
+  detail::check_finite("reconstruct_points: R", R);
+  const Index n = B.rows() / 3, p = B.cols();
+  if (X_out->rows() != n) X_out->resize(n, 3);
+  const float* base = B.data();
+  const float* wp = w.data();
+  double* out = X_out->data();
+  const detail::RowOrder order = B.size() * Index(sizeof(float)) <= kInterleavedMaxBytes
+                                     ? detail::RowOrder::Interleaved
+                                     : detail::RowOrder::Sequential;
+#pragma omp parallel for schedule(static) if (B.size() > kParallelEntries)
+  for (Index v = 0; v < n; ++v) {
+    Eigen::Vector3f q;
+    detail::rows3_dot(base + 3 * v * p, p, wp, q.data(), order, kPrefetchBytes);
+    Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (R * q).cast<double>().transpose();
+  }
+}
+
+}  // namespace qpreduce
