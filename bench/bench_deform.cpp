@@ -18,21 +18,20 @@
 //                       (DeformerOptions::round_threads = 0)
 //   Reconstruction/<M>  V′ = r₀·(P·[N UD])·w over all vertices, as a frame
 //                       runs it: after the frame's rounds (manual time)
-//   StreamRead/<M>      a plain parallel streaming read (Eigen's vectorised
-//                       sum) of the reconstruction basis itself, with the
-//                       same threads, at the same point of a frame (after
-//                       its rounds, untimed): the memory-bandwidth floor of
-//                       reconstruction. After single-threaded rounds the
-//                       second thread's vCPU has to be woken, which on a
-//                       shared 2-vCPU machine costs tens of µs either way.
-//   StreamReadAvx2/<M>  the same read by an AVX2 loop, four accumulators
-//                       (a stricter floor: this build is baseline x86-64)
 //   ReconstructionVsRead/<M>
-//                       the three above sampled alternately in one loop
-//                       (counters recon_ms, read_ms, read_avx2_ms, ratio,
-//                       ratio_avx2): the ratios that the targets are judged by
-//   ReconstructionBackToBack/<M>, StreamReadBackToBack/<M>
-//                       reconstruct_points and the plain read one call after
+//                       the reconstruction, a plain parallel streaming read
+//                       (Eigen's vectorised sum) of the reconstruction basis
+//                       itself with the same threads, and the same read by
+//                       an AVX2 loop (a stricter floor: this build is
+//                       baseline x86-64), sampled alternately in one loop,
+//                       each after a frame's rounds (counters recon_ms,
+//                       read_ms, read_avx2_ms, ratio, ratio_avx2): the
+//                       ratios the reconstruction target is judged by. After
+//                       single-threaded rounds the second thread's vCPU has
+//                       to be woken, which on a shared 2-vCPU machine costs
+//                       tens of µs either way.
+//   StreamRead/<M>, ReconstructionBackToBack/<M>
+//                       the plain read and reconstruct_points one call after
 //                       the other, outside any frame (the team kept busy)
 //   Frame/<M>           a whole frame (8 rounds + reconstruction)
 // Every per-iteration benchmark also reports the median of its samples as
@@ -300,25 +299,13 @@ float stream_read(const RowMatrixXf& basis, SumFn sum) {
   return total;
 }
 
-// Where each sample of a streaming read or of a bare reconstruction is taken.
-enum class When {
-  BackToBack,  // one after the other: the OpenMP team is busy throughout
-  InFrame,     // after a frame's rounds (frame(targets, nullptr), untimed):
-               // the point of a frame where its reconstruction runs
-};
-
-void BM_StreamRead(benchmark::State& state, const ModelSpec* spec, When when, SumFn sum) {
+void BM_StreamRead(benchmark::State& state, const ModelSpec* spec) {
   Session& s = session(*spec);
   const auto& basis = s.deformer.reconstruction_basis();
   std::vector<double> samples;
   for (auto _ : state) {
-    if (when == When::InFrame) {
-      state.PauseTiming();
-      s.deformer.frame(next_targets(s), nullptr);
-      state.ResumeTiming();
-    }
     const qpreduce::detail::Timer t;
-    benchmark::DoNotOptimize(stream_read(basis, sum));
+    benchmark::DoNotOptimize(stream_read(basis, sum_eigen));
     const double seconds = t.seconds();
     state.SetIterationTime(seconds);
     samples.push_back(seconds);
@@ -422,17 +409,7 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("ReconstructionVsRead/" + n).c_str(), BM_ReconstructionVsRead, &spec)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec, When::InFrame, sum_eigen)
-        ->Unit(benchmark::kMillisecond)
-        ->UseManualTime();
-#ifdef BENCH_HAVE_AVX2
-    if (__builtin_cpu_supports("avx2"))
-      benchmark::RegisterBenchmark(("StreamReadAvx2/" + n).c_str(), BM_StreamRead, &spec, When::InFrame, sum_avx2)
-          ->Unit(benchmark::kMillisecond)
-          ->UseManualTime();
-#endif
-    benchmark::RegisterBenchmark(("StreamReadBackToBack/" + n).c_str(), BM_StreamRead, &spec, When::BackToBack,
-                                 sum_eigen)
+    benchmark::RegisterBenchmark(("StreamRead/" + n).c_str(), BM_StreamRead, &spec)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
     benchmark::RegisterBenchmark(("ReconstructionBackToBack/" + n).c_str(), BM_ReconstructionBackToBack, &spec)

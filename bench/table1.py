@@ -11,12 +11,12 @@ precompute (s) and peak resident memory (GB), OP (ms), and in parentheses the
 paper's figure for the same column (Table 1, i7-2670QM, serial). The read and
 the ratio come from ReconstructionVsRead (the two sampled alternately, each
 after a frame's rounds; ratio of the medians) when the run has it, otherwise
-from StreamRead. Then a table of the reconstruction against the stricter
+from Reconstruction and StreamRead (a back-to-back read: older runs). Then a table of the reconstruction against the stricter
 floors (an AVX2 streaming read; the reconstruction and the plain read each
 back to back), and the issue-3 targets, each marked met / missed.
 With RECON.json (a second run, e.g.
 --benchmark_filter='^(Reconstruction|StreamRead)'), the reconstruction and
-streaming-read figures come from it.
+streaming-read figures come from it (ReconstructionVsRead included).
 """
 import json
 import sys
@@ -86,7 +86,7 @@ def main(path, recon_path=None):
             continue
         pair = row["ReconstructionVsRead"]
         med = lambda k: row[k]["median"] if k in row else float("nan")
-        rec_b, read_b = med("ReconstructionBackToBack"), med("StreamReadBackToBack")
+        rec_b, read_b = med("ReconstructionBackToBack"), med("StreamRead")
         print(f"| {model} | {pair['recon_ms']:.3f} | {pair['read_ms']:.3f} | {pair['read_avx2_ms']:.3f} "
               f"| {pair['ratio_avx2']:.2f} | {rec_b:.3f} | {read_b:.3f} | {rec_b / read_b:.2f} |")
     print()

@@ -37,15 +37,25 @@ void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Ei
   const float* base = B.data();
   const float* wp = w.data();
   double* out = X_out->data();
-  const detail::RowOrder order = B.size() * Index(sizeof(float)) <= kInterleavedMaxBytes
+  [[maybe_unused]] const detail::RowOrder order = B.size() * Index(sizeof(float)) <= kInterleavedMaxBytes
                                      ? detail::RowOrder::Interleaved
                                      : detail::RowOrder::Sequential;
+  // The kernel is chosen once per call, not per point.
+  auto run = [&](auto&& rows3_dot) {
 #pragma omp parallel for schedule(static) if (B.size() > kParallelEntries)
-  for (Index v = 0; v < n; ++v) {
-    Eigen::Vector3f q;
-    detail::rows3_dot(base + 3 * v * p, p, wp, q.data(), order, kPrefetchBytes);
-    Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (R * q).cast<double>().transpose();
+    for (Index v = 0; v < n; ++v) {
+      Eigen::Vector3f q;
+      rows3_dot(base + 3 * v * p, q.data());
+      Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (R * q).cast<double>().transpose();
+    }
+  };
+#ifdef QPREDUCE_HAVE_AVX2_KERNELS
+  if (detail::cpu_has_avx2_fma()) {
+    run([&](const float* rows, float* q) { detail::rows3_dot_avx2(rows, p, wp, q, order, kPrefetchBytes); });
+    return;
   }
+#endif
+  run([&](const float* rows, float* q) { detail::rows3_dot_eigen(rows, p, wp, q); });
 }
 
 }  // namespace qpreduce

@@ -21,7 +21,7 @@
 
 namespace qpreduce::detail {
 
-// The order in which rows3_dot reads a point's three rows (below).
+// The order in which rows3_dot_avx2 reads a point's three rows (below).
 enum class RowOrder { Sequential, Interleaved };
 
 #if defined(__x86_64__) && defined(__GNUC__)
@@ -314,18 +314,10 @@ void symv_lower_add(const Matrix<T>& M, const T* x, T* y) {
 }
 
 
-// out[a] = B_a·w for three consecutive rows of a row-major float matrix
-// (rows3_dot_avx2 above; Eigen's product without AVX2 + FMA).
-// `order` and `prefetch` apply to the AVX2 kernel only.
-inline void rows3_dot(const float* B, Index p, const float* w, float* out, RowOrder order, Index prefetch) {
-#ifdef QPREDUCE_HAVE_AVX2_KERNELS
-  if (cpu_has_avx2_fma()) {
-    rows3_dot_avx2(B, p, w, out, order, prefetch);
-    return;
-  }
-#endif
-  (void)order;
-  (void)prefetch;
+// out[a] = B_a·w for three consecutive rows of a row-major float matrix by
+// Eigen's product: rows3_dot_avx2's fallback without AVX2 + FMA (the caller
+// dispatches once, cpu_has_avx2_fma()).
+inline void rows3_dot_eigen(const float* B, Index p, const float* w, float* out) {
   using Rows = Eigen::Matrix<float, 3, Eigen::Dynamic, Eigen::RowMajor>;
   Eigen::Map<Eigen::Vector3f>(out).noalias() = Eigen::Map<const Rows>(B, 3, p) * Eigen::Map<const Vector<float>>(w, p);
 }
