@@ -46,6 +46,7 @@ struct FixedCoordinatePrep {
   RangeSpace range;              // of H_zz (d × d)
   Matrix<double> G;              // NᵀD − H_zy (d × k)
   Matrix<double> P0;             // M0·G (d × k): the unconstrained z-response to Y
+  Matrix<double> LtG;            // LᵀG (ν × k), L = D_sV_L/σ the lifted directions
 };
 
 }  // namespace detail
@@ -102,29 +103,30 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
       prep->G = solver.BtD_d_.topRows(d) - solver.Hr_d_.topRightCorner(d, k);
       prep->P0.resize(d, k);
       detail::blas_gemm(false, false, 1.0, prep->range.Minv0, prep->G, 0.0, prep->P0);
+      prep->LtG.resize(prep->range.lift_cols.cols(), k);
+      detail::blas_gemm(true, false, 1.0, prep->range.lift_cols, prep->G, 0.0, prep->LtG);
       prep_ = std::move(prep);
     }
     detail::RangeSpaceOperators rso;
     if (detail::range_space_operators(prep_->range, Az, options, &summary, &rso)) {
-      // M_b = T·U_mᵀ, R = WᵀG + U_mᵀ·A_y, M_Y = P0 − T·R.
+      // M_b = T's first m columns, M_Y = P0 − T·R with
+      // R = Y'ᵀG + [A_y; 0] = [A_z·P0 + A_y; LᵀG] (M0 symmetric).
       // In double M_Y stays factored (solve applies P0 − T·R): forming it is
       // d·μ·k multiply-adds and two passes over d × k per constraint set.
       const Index mu = rso.T.cols();
-      MatD Mb(d, m);
-      detail::blas_gemm(false, true, 1.0, rso.T, rso.Um, 0.0, Mb);
       R_.resize(mu, k);
-      detail::blas_gemm(true, false, 1.0, rso.W, prep_->G, 0.0, R_);
-      detail::blas_gemm(true, false, 1.0, rso.Um, Ay, 1.0, R_);
+      R_.topRows(m) = Ay;
+      detail::blas_gemm(false, false, 1.0, Az, prep_->P0, 1.0, R_.topRows(m));
+      R_.bottomRows(mu - m) = prep_->LtG;
       MatD MY;
       if constexpr (!std::is_same_v<Scalar, double>) {
         MY = prep_->P0;
         detail::blas_gemm(false, false, -1.0, rso.T, R_, 1.0, MY);
       }
-      if (Mb.allFinite() && R_.allFinite() && rso.T.allFinite() && MY.allFinite()) {
+      if (R_.allFinite() && rso.T.allFinite() && MY.allFinite()) {
         fast_ = true;
+        Mb_ = rso.T.leftCols(m).template cast<Scalar>();
         T_ = std::move(rso.T);
-        Um_ = std::move(rso.Um);
-        Mb_ = Mb.template cast<Scalar>();
         MY_ = MY.template cast<Scalar>();  // empty in double
         ry_.resize(mu);
       }
@@ -215,19 +217,22 @@ bool same_matrix(const Matrix<T>& a, const Matrix<T>& b) {
 
 template <typename Scalar>
 void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
-                                   const Matrix<Scalar>& Gy, int threads, FusedForm form) {
-  set_impl(phase1, Gz, Gy, threads, form, false);
+                                   const Matrix<Scalar>& Gy, int threads, FusedForm form, FusedPrecision precision) {
+  set_impl(phase1, Gz, Gy, threads, form, precision, false);
 }
 
 template <typename Scalar>
-void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, int threads, FusedForm form) {
+void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, int threads, FusedForm form,
+                                   FusedPrecision precision) {
   if (!inputs_ready_) throw std::invalid_argument("FusedAlternation::set: no G_z, G_y given yet");
-  set_impl(phase1, Gz_, Gy_, threads, form, true);
+  set_impl(phase1, Gz_, Gy_, threads, form, precision, true);
 }
 
 template <typename Scalar>
 void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
-                                        const Matrix<Scalar>& Gy, int threads, FusedForm form, bool same_inputs) {
+                                        const Matrix<Scalar>& Gy, int threads, FusedForm form,
+                                        FusedPrecision precision, bool same_inputs) {
+  (void)precision;  // (double only)
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (threads > 0) blas.emplace(threads);
   if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
@@ -236,6 +241,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
   ready_ = false;
   factored_ = false;
+  float_set_ = false;
   // Keep copies of the inputs (for set(phase1, ...) and the bitwise tests);
   // a changed input invalidates what was formed from it.
   if (!same_inputs) {
@@ -261,15 +267,25 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
         detail::check_finite("FusedAlternation::set: G_z", Gz);
         C0_.resize(q, k);
         detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
+        Gz_f_.resize(0, 0);
         prep_ = phase1.prep_;
       }
-      // G_z·T (q × μ) and F_b = (G_z·T)·U_mᵀ.
-      Matrix<double> GzT(q, phase1.T_.cols());
-      detail::blas_gemm(false, false, 1.0, Gz, phase1.T_, 0.0, GzT);
-      Fb_.resize(q, phase1.m());
-      detail::blas_gemm(false, true, 1.0, GzT, phase1.Um_, 0.0, Fb_);
       const bool factored =
           form == FusedForm::Factored || (form == FusedForm::Automatic && q * k > kExplicitMaxEntries);
+      // G_z·T (q × μ) and F_b = G_z·M_b, its first m columns.
+      const Index m = phase1.m(), mu = phase1.T_.cols();
+      Matrix<double> GzT;
+      if (factored && precision == FusedPrecision::Float) {
+        if (Gz_f_.rows() != q || Gz_f_.cols() != Gz.cols()) Gz_f_ = Gz.template cast<float>();
+        const Matrix<float> Tf = phase1.T_.template cast<float>();
+        GzT_f_.resize(q, mu);
+        detail::blas_gemm(false, false, 1.0, Gz_f_, Tf, 0.0, GzT_f_);
+        Fb_ = GzT_f_.leftCols(m).template cast<double>();
+      } else {
+        GzT.resize(q, mu);
+        detail::blas_gemm(false, false, 1.0, Gz, phase1.T_, 0.0, GzT);
+        Fb_ = GzT.leftCols(m);
+      }
       if (factored) {
         // F₀ = C0 + G_y, once per (C0, G_y); the rank-μ part stays factored.
         if (!base_ready_) {
@@ -278,9 +294,10 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
           Fy_f_ = Fy_.template cast<float>();
           base_ready_ = true;
         }
-        GzT_ = std::move(GzT);
+        GzT_ = std::move(GzT);  // empty after a Float set
+        if (precision == FusedPrecision::Double) GzT_f_ = GzT_.cast<float>();
+        float_set_ = precision == FusedPrecision::Float;
         R_ = phase1.R_;
-        GzT_f_ = GzT_.cast<float>();
         R_f_ = R_.cast<float>();
         ry_.resize(R_.rows());
         ryf_.resize(R_.rows());
@@ -363,6 +380,11 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
                                                  const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
                                                  Eigen::Ref<Vector<Scalar>> y) {
   assert(ready_ && options.is_valid(nullptr) && b.size() == Fb_.cols() && y.size() == Fy_.cols());
+  if (float_set_ && !options.float_products) {
+    throw std::invalid_argument(
+        "FusedAlternation::run: set with FusedPrecision::Float needs float rounds "
+        "(AlternatingOptions::float_products)");
+  }
   AlternatingSummary summary;
   // The products go through the run-time dispatched AVX2/FMA kernels
   // (simd_kernels.h) when the CPU has them.

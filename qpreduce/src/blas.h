@@ -8,17 +8,22 @@
 #include "qpreduce/common.h"
 
 #include <cassert>
+#include <type_traits>
 
 extern "C" void dgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
                        const double* alpha, const double* a, const int* lda, const double* b, const int* ldb,
                        const double* beta, double* c, const int* ldc);
+extern "C" void sgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
+                       const float* alpha, const float* a, const int* lda, const float* b, const int* ldb,
+                       const float* beta, float* c, const int* ldc);
 extern "C" void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha,
                        const double* a, const int* lda, const double* beta, double* c, const int* ldc);
 
 namespace qpreduce::detail {
 
-// C = alpha·op(A)·op(B) + beta·C for column-major double blocks with unit
-// inner stride (whole matrices, middleRows/middleCols/block of them).
+// C = alpha·op(A)·op(B) + beta·C for column-major double (dgemm) or float
+// (sgemm) blocks with unit inner stride (whole matrices, middleRows/
+// middleCols/block of them).
 template <typename MA, typename MB, typename MC>
 void blas_gemm(bool transpose_a, bool transpose_b, double alpha, const MA& A, const MB& B, double beta, MC&& C) {
   const int m = static_cast<int>(C.rows()), n = static_cast<int>(C.cols());
@@ -35,7 +40,16 @@ void blas_gemm(bool transpose_a, bool transpose_b, double alpha, const MA& A, co
   const char ta = transpose_a ? 'T' : 'N', tb = transpose_b ? 'T' : 'N';
   const int lda = static_cast<int>(A.outerStride()), ldb = static_cast<int>(B.outerStride());
   const int ldc = static_cast<int>(C.outerStride());
-  dgemm_(&ta, &tb, &m, &n, &k, &alpha, A.data(), &lda, B.data(), &ldb, &beta, C.data(), &ldc);
+  using Scalar = typename std::decay_t<MC>::Scalar;
+  static_assert(std::is_same_v<Scalar, double> || std::is_same_v<Scalar, float>, "blas_gemm: double or float");
+  static_assert(std::is_same_v<typename MA::Scalar, Scalar> && std::is_same_v<typename MB::Scalar, Scalar>,
+                "blas_gemm: A, B and C of one scalar type");
+  if constexpr (std::is_same_v<Scalar, double>) {
+    dgemm_(&ta, &tb, &m, &n, &k, &alpha, A.data(), &lda, B.data(), &ldb, &beta, C.data(), &ldc);
+  } else {
+    const float a = static_cast<float>(alpha), b = static_cast<float>(beta);
+    sgemm_(&ta, &tb, &m, &n, &k, &a, A.data(), &lda, B.data(), &ldb, &b, C.data(), &ldc);
+  }
 }
 
 // Lower triangle of C = alpha·A·Aᵀ + beta·C (A: n × k, C: n × n); the strict

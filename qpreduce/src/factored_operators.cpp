@@ -55,37 +55,12 @@ bool factored_operators(const RangeSpace& rs, const MatD& P0, const MatD& lift_b
 
   // Σ's blocks: Σ₁₁ = A_r·M0·A_rᵀ + c·I (m × m; positive definite for hard
   // constraints of full row rank and for soft ones), Σ₁₂ = A_r·L (m × ν),
-  // Σ₂₂ = diag(β) (β ≤ 0). Σ⁻¹ by block elimination of Σ₁₁ = L₁L₁ᵀ, then
-  // N = Σ₁₂ᵀΣ₁₁⁻¹Σ₁₂ − diag(β) (the negated Schur complement, positive
-  // definite exactly when the constraints pin the lifted directions) = L₂L₂ᵀ:
-  //     Σ⁻¹ = [[Σ₁₁⁻¹ − E·N⁻¹·Eᵀ, E·N⁻¹], [N⁻¹·Eᵀ, −N⁻¹]],  E = Σ₁₁⁻¹Σ₁₂.
+  // Σ₂₂ = diag(β) (β ≤ 0); Σ⁻¹ by block elimination (bordered_inverse).
   MatD S11 = sandwich(rs.Minv0, At);
   if (soft) S11.diagonal().array() += 1.0 / (2.0 * delta);
   const MatD S12 = At.transpose() * rs.lift_cols;
-  if (!S11.allFinite() || !S12.allFinite()) return false;
   MatD& Sinv = out->Sinv;
-  Sinv.resize(q, q);
-  Eigen::LLT<MatD> llt11;
-  if (m > 0) {
-    llt11.compute(S11);
-    if (llt11.info() != Eigen::Success) return false;
-    Sinv.topLeftCorner(m, m) = llt11.solve(MatD::Identity(m, m));
-  }
-  if (nu > 0) {
-    const MatD E = m > 0 ? MatD(llt11.solve(S12)) : MatD(0, nu);
-    MatD N = S12.transpose() * E;
-    N.diagonal() -= rs.lift_block;
-    const Eigen::LLT<MatD> llt2(symmetric_part(N));
-    if (llt2.info() != Eigen::Success) return false;
-    const MatD Ninv = llt2.solve(MatD::Identity(nu, nu));
-    const MatD EN = E * Ninv;
-    Sinv.topLeftCorner(m, m).noalias() -= EN * E.transpose();
-    Sinv.topRightCorner(m, nu) = EN;
-    Sinv.bottomLeftCorner(nu, m) = EN.transpose();
-    Sinv.bottomRightCorner(nu, nu) = -Ninv;
-  }
-  Sinv = symmetric_part(Sinv);
-  if (!Sinv.allFinite()) return false;
+  if (!bordered_inverse(S11, S12, rs.lift_block, &Sinv)) return false;
 
   // The acceptance test of the explicit path on ‖M̄_q‖_F, from
   //     ‖M̄_q‖_F² = ‖H̃⁻¹‖_F² − 2·tr(Σ⁻¹K₃) + tr(Σ⁻¹K₂Σ⁻¹K₂),

@@ -2,6 +2,7 @@
 
 #include "blas.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -116,6 +117,35 @@ Index default_rank(const MatD& Abar, const NonzeroPattern& pat) {
 
 Index default_rank(const MatD& Abar) { return default_rank(Abar, nonzero_pattern(Abar)); }
 
+bool bordered_inverse(const MatD& S11, const MatD& S12, const Eigen::VectorXd& lift_block, MatD* Sinv) {
+  const Index m = S11.rows(), nu = S12.cols(), q = m + nu;
+  auto symmetric_part = [](const MatD& S) -> MatD { return 0.5 * (S + S.transpose()); };
+  if (!S11.allFinite() || !S12.allFinite()) return false;
+  MatD& Si = *Sinv;
+  Si.resize(q, q);
+  Eigen::LLT<MatD> llt11;
+  if (m > 0) {
+    llt11.compute(symmetric_part(S11));
+    if (llt11.info() != Eigen::Success) return false;
+    Si.topLeftCorner(m, m) = llt11.solve(MatD::Identity(m, m));
+  }
+  if (nu > 0) {
+    const MatD E = m > 0 ? MatD(llt11.solve(S12)) : MatD(0, nu);
+    MatD N = S12.transpose() * E;
+    N.diagonal() -= lift_block;
+    const Eigen::LLT<MatD> llt2(symmetric_part(N));
+    if (llt2.info() != Eigen::Success) return false;
+    const MatD Ninv = llt2.solve(MatD::Identity(nu, nu));
+    const MatD EN = E * Ninv;
+    Si.topLeftCorner(m, m).noalias() -= EN * E.transpose();
+    Si.topRightCorner(m, nu) = EN;
+    Si.bottomLeftCorner(nu, m) = EN.transpose();
+    Si.bottomRightCorner(nu, nu) = -Ninv;
+  }
+  Si = symmetric_part(Si);
+  return Si.allFinite();
+}
+
 bool range_space_rank(const RangeSpace& rs, const MatD& A, const ConstraintOptions& options,
                       ConstraintSummary* summary) {
   const Index m = A.rows();
@@ -168,40 +198,27 @@ bool range_space_rank(const RangeSpace& rs, const MatD& A, const ConstraintOptio
 
 namespace {
 
-// Σ, its eigendecomposition, W, T and the lower triangle of M_g; false when
-// Σ is singular or the condition bound fails (see the header).
+// Y', Σ⁻¹ (bordered_inverse), T and M_g; false when Σ is singular or the
+// condition bound fails (see the header).
 bool bordered_operators(const RangeSpace& rs, const MatD& A, bool soft, double delta, double rank_tolerance,
                         RangeSpaceOperators* out) {
   const Index p = A.cols(), m = A.rows(), nu = rs.lift_cols.cols(), q = m + nu;
-  MatD Y(p, q);
+  MatD& Y = out->Y;  // Y' = [M0·Aᵀ, L]
+  Y.resize(p, q);
   blas_gemm(false, true, 1.0, rs.Minv0, A, 0.0, Y.leftCols(m));
   Y.rightCols(nu) = rs.lift_cols;
-  MatD Sigma(q, q);
-  blas_gemm(false, false, 1.0, A, Y.leftCols(m), 0.0, Sigma.topLeftCorner(m, m));
-  if (soft) Sigma.topLeftCorner(m, m).diagonal().array() += 1.0 / (2.0 * delta);
-  Sigma.topRightCorner(m, nu).noalias() = A * rs.lift_cols;
-  Sigma.bottomLeftCorner(nu, m) = Sigma.topRightCorner(m, nu).transpose();
-  Sigma.bottomRightCorner(nu, nu) = rs.lift_block.asDiagonal();
-  Sigma = 0.5 * (Sigma + Sigma.transpose()).eval();
-  if (!Sigma.allFinite()) return false;
-  // Σ = U·diag(s)·Uᵀ (Eigen's eigensolver does not take a 0 × 0 matrix).
-  Eigen::SelfAdjointEigenSolver<MatD> es;
-  if (q > 0) es.compute(Sigma);
-  const Eigen::VectorXd s = q > 0 ? es.eigenvalues() : Eigen::VectorXd();  // ascending: negative ones first
-  const MatD U = q > 0 ? es.eigenvectors() : MatD();
-  if (q > 0 && !(s.cwiseAbs().minCoeff() > 0.0)) return false;
-  out->W.resize(p, q);
-  blas_gemm(false, false, 1.0, Y, U, 0.0, out->W);
-  const MatD& W = out->W;
-  // Lower triangle of M_g = M0 − Σ_i w_i w_iᵀ / s_i: two symmetric rank
-  // updates, one per sign of s.
-  Index negative = 0;
-  while (negative < q && s(negative) < 0.0) ++negative;
-  const MatD Wscaled = W * s.cwiseAbs().cwiseSqrt().cwiseInverse().asDiagonal();
+  MatD S11(m, m);
+  blas_gemm(false, false, 1.0, A, Y.leftCols(m), 0.0, S11);
+  if (soft) S11.diagonal().array() += 1.0 / (2.0 * delta);
+  MatD Sinv;
+  if (!bordered_inverse(S11, A * rs.lift_cols, rs.lift_block, &Sinv)) return false;
+  MatD& T = out->T;
+  T.resize(p, q);
+  blas_gemm(false, false, 1.0, Y, Sinv, 0.0, T);
+  // M_g = M0 − T·Y'ᵀ (symmetric; its lower triangle is read).
   MatD& Mg = out->Mg;
   Mg = rs.Minv0;
-  blas_syrk_lower(1.0, Wscaled.leftCols(negative), 1.0, Mg);
-  blas_syrk_lower(-1.0, Wscaled.rightCols(q - negative), 1.0, Mg);
+  blas_gemm(false, true, -1.0, T, Y, 1.0, Mg);
   // Accept only when the null-space method would call the problem
   // nonsingular: with M̄_g = D_s⁻¹M_gD_s⁻¹, ‖M̄_g‖₂ = 1/λ_min on the
   // constraint set (hard) or 1/λ_min(K̄) (soft), and λ_max there is at most
@@ -221,9 +238,7 @@ bool bordered_operators(const RangeSpace& rs, const MatD& A, bool soft, double d
   const double lambda_up = rs.hbar_max + (soft ? 2.0 * delta * (A * rs.scale.asDiagonal()).squaredNorm() : 0.0);
   const double cond_bound = lambda_up * std::sqrt(norm2);
   if (!std::isfinite(cond_bound) || !(cond_bound * rank_tolerance < 1.0)) return false;
-  out->T = W * s.cwiseInverse().asDiagonal();
-  out->Um = U.topRows(m);
-  return out->T.allFinite();
+  return T.allFinite();
 }
 
 }  // namespace

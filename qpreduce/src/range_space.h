@@ -22,13 +22,23 @@
 // q = m + ν) the bordered Schur complement is
 //     Σ = [[A·M0·Aᵀ + c·I_m, A·L], [Lᵀ·Aᵀ, diag(β)]]   (q × q),
 //     c = 0 (hard) or 1/(2δ) (soft),
-// and, with Σ = U·diag(s)·Uᵀ, W = Y'·U (p × q), T = W·diag(1/s) (p × q):
-//     M_g = M0 − T·Wᵀ,      M_c = T·U_mᵀ   (U_m: U's first m rows, m × q),
-// so M_g·G = M0·G − T·(WᵀG) for any G (p × k). The answer is accepted only
+// and, with T = Y'·Σ⁻¹ (p × q),
+//     M_g = M0 − T·Y'ᵀ,      M_c = T's first m columns,
+// so M_g·G = M0·G − T·(Y'ᵀG) for any G (p × k). The answer is accepted only
 // when λ_max(H̄)·‖D_s⁻¹M_gD_s⁻¹‖_F < 1/rank_tolerance (the condition bound
 // the null-space method tests) and, for hard constraints, when Ā = A·D_s has
 // full row rank m; anything else goes to the null-space method, which decides
 // the status. Both give the same unique minimiser when it exists.
+//
+// Σ is inverted through its blocks (bordered_inverse), not an
+// eigendecomposition (a q × q eigensolver was most of a demand's cost at
+// q ≈ 30): Σ₁₁ = A·M0·Aᵀ + c·I = L₁L₁ᵀ is positive definite whenever the
+// fast path applies (full-rank hard or soft constraints), and
+// N = Σ₁₂ᵀΣ₁₁⁻¹Σ₁₂ − diag(β) (ν × ν), the negated Schur complement of Σ₁₁, is
+// positive semidefinite (β ≤ 0), definite exactly when A pins every lifted
+// direction; N = L₂L₂ᵀ, and with E = Σ₁₁⁻¹Σ₁₂
+//     Σ⁻¹ = [[Σ₁₁⁻¹ − E·N⁻¹·Eᵀ, E·N⁻¹], [N⁻¹·Eᵀ, −N⁻¹]].
+// A failed Cholesky factor sends the demand to the null-space method.
 //
 // The rank test (a column-pivoted QR of Āᵀ, p×m) runs on Ā's nonzero columns
 // only: the other rows of Āᵀ are zero and change neither R nor the rank; for
@@ -70,10 +80,15 @@ bool range_space_rank(const RangeSpace& rs, const Matrix<double>& A, const Const
 // constraints' summary), from Ā's nonzero columns only.
 Index default_rank(const Matrix<double>& Abar);
 
+// Σ⁻¹ (q × q, symmetric) from Σ₁₁ (m × m, with c·I added), Σ₁₂ = A·L (m × ν)
+// and β = lift_block (ν), by the block elimination above. false when Σ₁₁ or
+// N is not positive definite or an entry is not finite.
+bool bordered_inverse(const Matrix<double>& S11, const Matrix<double>& S12, const Eigen::VectorXd& lift_block,
+                      Matrix<double>* Sinv);
+
 struct RangeSpaceOperators {
-  Matrix<double> W;   // Y'·U (p × q)
-  Matrix<double> T;   // W·diag(1/s) (p × q)
-  Matrix<double> Um;  // U_m: the first m rows of Σ's eigenvectors (m × q)
+  Matrix<double> Y;   // Y' = [M0·Aᵀ, L] (p × q)
+  Matrix<double> T;   // Y'·Σ⁻¹ (p × q); its first m columns are M_c
   Matrix<double> Mg;  // lower triangle of M_g (p × p); the strict upper triangle is M0's
 };
 

@@ -273,15 +273,15 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
       }
       fast = factored_;
     } else if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
-      // M_q = M_g (lower triangle), M_b = T·U_mᵀ, M_Y = P0 − T·(WᵀBᵀD).
+      // M_q = M_g (lower triangle), M_b = T's first m columns,
+      // M_Y = P0 − T·(Y'ᵀBᵀD).
       Mq = std::move(rso.Mg);
-      Mb.resize(Ar.cols(), m);
-      detail::blas_gemm(false, true, 1.0, rso.T, rso.Um, 0.0, Mb);
+      Mb = rso.T.leftCols(m);
       MY = P0_;
       if (k() > 0) {
-        MatD WtBd(rso.W.cols(), k());
-        detail::blas_gemm(true, false, 1.0, rso.W, BtD_d_, 0.0, WtBd);
-        detail::blas_gemm(false, false, -1.0, rso.T, WtBd, 1.0, MY);
+        MatD YtBd(rso.Y.cols(), k());
+        detail::blas_gemm(true, false, 1.0, rso.Y, BtD_d_, 0.0, YtBd);
+        detail::blas_gemm(false, false, -1.0, rso.T, YtBd, 1.0, MY);
       }
       fast = Mb.allFinite() && MY.allFinite();
     }

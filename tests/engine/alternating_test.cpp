@@ -202,10 +202,11 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
   };
   // scale < 1 makes the rounds a contraction (g is dominated by F_b·b).
   auto run = [&](FusedForm form, bool float_products, int threads, double tolerance, int iterations = 6,
-                 double scale = 1.0) {
+                 double scale = 1.0, FusedPrecision precision = FusedPrecision::Double) {
     FusedAlternation<double> fused;
-    fused.set(phase1, scale * Gz, scale * Gy, 1, form);
+    fused.set(phase1, scale * Gz, scale * Gy, 1, form, precision);
     CHECK(fused.factored() == (form == FusedForm::Factored));
+    CHECK(fused.float_set() == (form == FusedForm::Factored && precision == FusedPrecision::Float));
     AlternatingOptions o;
     o.iterations = iterations;
     o.float_products = float_products;
@@ -233,12 +234,33 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     Vector<double> z(d);
     phase1.solve(b, f.y, z);
     CHECK((f.z - z).norm() <= 1e-13 * (1 + z.norm()));
+    // A Float set (G_z·T and F_b in float): float round-off only, and Phase
+    // 1's z in double still.
+    const Run fs = run(FusedForm::Factored, true, threads, 0.0, 6, 1.0, FusedPrecision::Float);
+    close(fs, ref, 1e-5);
+    CHECK((fs.y - f.y).norm() > 0.0);  // G_z·T did change precision
+    phase1.solve(b, fs.y, z);
+    CHECK((fs.z - z).norm() <= 1e-13 * (1 + z.norm()));
     // Early exit: the same round on every thread count.
     const Run e1 = run(FusedForm::Factored, false, 1, 1e-9, 200, 0.05);
     const Run e2 = run(FusedForm::Factored, false, threads, 1e-9, 200, 0.05);
     INFO("last change " << e1.s.last_change);
     CHECK(e1.s.iterations < 200);
     close(e2, e1, 1e-12);
+  }
+
+  // Double rounds after a Float set are refused; the explicit form ignores
+  // the precision.
+  {
+    FusedAlternation<double> fused;
+    fused.set(phase1, Gz, Gy, 1, FusedForm::Factored, FusedPrecision::Float);
+    AlternatingOptions o;
+    Vector<double> z(d), y = y0;
+    CHECK_THROWS_WITH(fused.run(phase1, proj, b, o, z, y), Catch::Contains("float_products"));
+    CHECK(y == y0);
+    fused.set(phase1, Gz, Gy, 1, FusedForm::Explicit, FusedPrecision::Float);
+    CHECK_FALSE(fused.float_set());
+    CHECK_NOTHROW(fused.run(phase1, proj, b, o, z, y));
   }
 
   // set(phase1) reuses the last G_z, G_y: the same rounds for a new set.

@@ -639,21 +639,30 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   }
   const ConstraintSummary cs =
       S.phase1.set_reduced_constraints(S.solver, Ar.leftCols(S.nx), Ar.rightCols(9 * S.d), options);
-  S.tie_map.setZero(S.nx, 9 * S.d);
+  // (nx × 9d, 0.8 MB at the Tree's size: only formed when there are ties;
+  // frame() reads it only then.)
+  if (tied.empty()) {
+    S.tie_map.resize(0, 0);
+  } else {
+    S.tie_map.setZero(S.nx, 9 * S.d);
+  }
   for (size_t i = 0; i < tied.size(); ++i) {
     const Index k = S.rigid_cluster_of_patch[tied[i]];
     for (int a = 0; a < 3; ++a)
       for (int c = 0; c < 3; ++c)
         S.tie_map.col(9 * k + 3 * c + a) += S.phase1.Mb().col(tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
   }
+  // Float rounds: G_z·T, the largest product of a new handle set, in float too.
+  const FusedPrecision precision = S.alternating.float_products ? FusedPrecision::Float : FusedPrecision::Double;
   if (tied.empty() && S.fused_inputs_plain) {
-    S.fused.set(S.phase1, options.threads);  // G_z = M_N, G_y = M_U as last time: not compared again
+    // G_z = M_N, G_y = M_U as last time: not compared again
+    S.fused.set(S.phase1, options.threads, FusedForm::Automatic, precision);
   } else if (tied.empty()) {
-    S.fused.set(S.phase1, S.MN, S.MU, options.threads);
+    S.fused.set(S.phase1, S.MN, S.MU, options.threads, FusedForm::Automatic, precision);
     S.fused_inputs_plain = true;
   } else {
     S.MU_tied = S.MU + S.MN * S.tie_map;
-    S.fused.set(S.phase1, S.MN, S.MU_tied, options.threads);
+    S.fused.set(S.phase1, S.MN, S.MU_tied, options.threads, FusedForm::Automatic, precision);
     S.fused_inputs_plain = false;
   }
   S.tied_patches = std::move(tied);

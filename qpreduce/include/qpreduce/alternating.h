@@ -23,12 +23,12 @@
 // the first set_constraints after its precompute or restore): with
 // D_s = diag(H_zz)^(−1/2), H_zz's lifted inverse M0 = D_s·H̃_zz⁻¹·D_s (d×d),
 // its ν lifted directions V_L, and the unconstrained z-response to Y,
-// P0 = M0·G (d×k). Per constraint set, with
-// Y' = [M0·A_zᵀ, D_sV_L/σ] (d×μ, μ = m + ν), the bordered Schur complement
-// Σ = U·diag(s)·Uᵀ (μ×μ), W = Y'·U, T = W·diag(1/s) (d×μ), U_m = U's first m
-// rows (m×μ):
+// P0 = M0·G (d×k) and LᵀG (ν×k, L = D_sV_L/σ). Per constraint set, with
+// Y' = [M0·A_zᵀ, L] (d×μ, μ = m + ν), the bordered Schur complement Σ (μ×μ,
+// inverted through its blocks: src/range_space.h) and T = Y'·Σ⁻¹ (d×μ):
 //
-//     M_b = T·U_mᵀ,   M_Y = P0 − T·R,   R = WᵀG + U_mᵀ·A_y   (μ×k),
+//     M_b = T's first m columns,   M_Y = P0 − T·R,
+//     R = Y'ᵀG + [A_y; 0] = [A_z·P0 + A_y; LᵀG]   (μ×k),
 //
 // O(d·μ·(d + k)) instead of the null-space method's O(d³ + d²k). In double
 // M_Y is kept as (P0, T, R): `solve` applies P0·Y − T·(R·Y), μ·(d + k)
@@ -96,8 +96,7 @@ class FixedCoordinateSolver {
   mutable Vector<double> ry_;  // μ: R·Y in the factored solve
   // Fast path (see above), in double: the per-solver part, and M_Y = P0 − T·R.
   std::shared_ptr<const detail::FixedCoordinatePrep> prep_;
-  Matrix<double> T_;   // d × μ
-  Matrix<double> Um_;  // m × μ
+  Matrix<double> T_;   // d × μ; M_b is its first m columns
   Matrix<double> R_;   // μ × k
   bool fast_ = false;  // the current M_b, M_Y came from the fast path
   bool ready_ = false;
@@ -162,11 +161,13 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
 // so a round costs one q×k GEMV plus Π, g_b is formed once per call, and z
 // once after the last round. The iterates are those of `alternate` exactly.
 //
-// When Phase 1 came from its fast path (M_Y = P0 − T·R, M_b = T·U_mᵀ above),
+// When Phase 1 came from its fast path (M_Y = P0 − T·R, M_b = T's first m
+// columns, above),
 // `set` splits F_y into a part that depends on G_z and Phase 1's solver only
 // and a rank-μ correction:
 //
-//     F_y = C0 + G_y − (G_z·T)·R,   C0 = G_z·P0   (q×k),   F_b = (G_z·T)·U_mᵀ.
+//     F_y = C0 + G_y − (G_z·T)·R,   C0 = G_z·P0   (q×k),
+//     F_b = G_z·M_b = the first m columns of G_z·T.
 //
 // C0 is formed once and kept for as long as Phase 1's precomputed solver and
 // the contents of G_z stay the same (compared bitwise on each `set`; G_y may
@@ -208,6 +209,17 @@ class InputProjection {
 
 enum class FusedForm { Automatic, Explicit, Factored };
 
+// What `set` forms per constraint set in the factored form, in double or in
+// float. Float: G_z·T (q×μ×d multiply-adds, most of a new constraint set's
+// cost) by the BLAS in single precision, at about twice the double rate; for
+// rounds with AlternatingOptions::float_products, where G_z·T is a float
+// operand anyway. F_b = G_z·M_b, its first m columns, then carries float
+// round-off as well (g_b = F_b·b to ~1e-7 relative, the order of the float
+// rounds' own error); Phase 1's final z = M_b·b + M_Y·y stays in double, so
+// hard constraints still hold to double precision. `run` with double rounds
+// after a Float set throws. The explicit form is formed in double either way.
+enum class FusedPrecision { Double, Float };
+
 template <typename Scalar>
 class FusedAlternation {
  public:
@@ -220,26 +232,32 @@ class FusedAlternation {
   // 0 leaves the BLAS's own setting).
   // `form`: see "Factored form" above (Factored applies only when Phase 1
   // came from its fast path and Scalar is double; otherwise explicit).
+  // `precision`: see FusedPrecision.
   void set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
-           int threads = 1, FusedForm form = FusedForm::Automatic);
+           int threads = 1, FusedForm form = FusedForm::Automatic,
+           FusedPrecision precision = FusedPrecision::Double);
   // The same with the G_z, G_y of the last call above, without comparing them
   // (2 passes over q × (d + k) saved; the caller knows they did not change).
   // Throws std::invalid_argument before any G_z, G_y were given.
-  void set(const FixedCoordinateSolver<Scalar>& phase1, int threads = 1, FusedForm form = FusedForm::Automatic);
+  void set(const FixedCoordinateSolver<Scalar>& phase1, int threads = 1, FusedForm form = FusedForm::Automatic,
+           FusedPrecision precision = FusedPrecision::Double);
 
   // `options.iterations` rounds from the given y (warm start), then
-  // z = M_b·b + M_Y·y. No heap allocation.
+  // z = M_b·b + M_Y·y. No heap allocation. Throws std::invalid_argument for
+  // double rounds (float_products false) after a FusedPrecision::Float set.
   AlternatingSummary run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
                          const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
                          Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
 
   bool ready() const { return ready_; }
   bool factored() const { return factored_; }
+  // The factored form's G_z·T (and F_b) were formed in float.
+  bool float_set() const { return float_set_; }
 
  private:
   // Both `set`s; same_inputs: Gz, Gy are Gz_, Gy_ (no comparison, no copy).
   void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
-                int threads, FusedForm form, bool same_inputs);
+                int threads, FusedForm form, FusedPrecision precision, bool same_inputs);
   // Rows [r0, r1) of g = g_b + F_y·y into g_, from y, or from its float copy
   // yf when not null. ry, ryf: μ scratch for R·y (factored form).
   void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
@@ -254,6 +272,7 @@ class FusedAlternation {
   std::shared_ptr<const detail::FixedCoordinatePrep> prep_;
   Matrix<Scalar> Gz_;
   Matrix<double> C0_;
+  Matrix<float> Gz_f_;  // G_z in float, formed with C0 at the first Float set
   Matrix<float> Fy_f_;  // F_y in float (AlternatingOptions::float_products)
   // Factored form: F₀ = C0 + G_y in Fy_ / Fy_f_ (base_ready_), G_z·T (q×μ)
   // and R (μ×k); ry_ = R·y per round. Gz_ and Gy_ are the last inputs.
@@ -264,7 +283,7 @@ class FusedAlternation {
   Vector<float> ryf_;
   Matrix<double> ry_threads_;  // μ × threads, for run_parallel
   Matrix<float> ryf_threads_;
-  bool base_ready_ = false, factored_ = false, inputs_ready_ = false;
+  bool base_ready_ = false, factored_ = false, inputs_ready_ = false, float_set_ = false;
   Vector<Scalar> gb_, g_;
   Vector<float> gf_, yf_;
   // Parallel rounds: y as read by the next round's product, double-buffered
