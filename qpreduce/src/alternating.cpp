@@ -96,17 +96,7 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   ConstraintSummary summary;
   summary.m = m;
   if (options.fast_path) {
-    if (!prep_ || prep_->generation != solver.generation_) {
-      auto prep = std::make_shared<detail::FixedCoordinatePrep>();
-      prep->generation = solver.generation_;
-      prep->range = detail::prepare_range_space(solver.Hr_d_.topLeftCorner(d, d), solver.lift_tolerance_);
-      prep->G = solver.BtD_d_.topRows(d) - solver.Hr_d_.topRightCorner(d, k);
-      prep->P0.resize(d, k);
-      detail::blas_gemm(false, false, 1.0, prep->range.Minv0, prep->G, 0.0, prep->P0);
-      prep->LtG.resize(prep->range.lift_cols.cols(), k);
-      detail::blas_gemm(true, false, 1.0, prep->range.lift_cols, prep->G, 0.0, prep->LtG);
-      prep_ = std::move(prep);
-    }
+    prepare_impl(solver);
     detail::RangeSpaceOperators rso;
     if (detail::range_space_operators(prep_->range, Az, options, &summary, &rso)) {
       // M_b = T's first m columns, M_Y = P0 − T·R with
@@ -153,6 +143,28 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   ready_ = true;
   summary.seconds = timer.seconds();
   return summary;
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::prepare(const SubspaceSolver<Scalar>& solver) {
+  if (!solver.ready()) throw std::invalid_argument("FixedCoordinateSolver::prepare: the subspace solver is not ready");
+  const detail::ScopedBlasThreads blas(1);  // single-threaded BLAS, as set_constraints by default
+  prepare_impl(solver);
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::prepare_impl(const SubspaceSolver<Scalar>& solver) {
+  if (prep_ && prep_->generation == solver.generation_) return;
+  const Index d = solver.d(), k = solver.k();
+  auto prep = std::make_shared<detail::FixedCoordinatePrep>();
+  prep->generation = solver.generation_;
+  prep->range = detail::prepare_range_space(solver.Hr_d_.topLeftCorner(d, d), solver.lift_tolerance_);
+  prep->G = solver.BtD_d_.topRows(d) - solver.Hr_d_.topRightCorner(d, k);
+  prep->P0.resize(d, k);
+  detail::blas_gemm(false, false, 1.0, prep->range.Minv0, prep->G, 0.0, prep->P0);
+  prep->LtG.resize(prep->range.lift_cols.cols(), k);
+  detail::blas_gemm(true, false, 1.0, prep->range.lift_cols, prep->G, 0.0, prep->LtG);
+  prep_ = std::move(prep);
 }
 
 template <typename Scalar>
@@ -260,23 +272,14 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   bool fast = false;
   if constexpr (std::is_same_v<Scalar, double>) {
     if (phase1.fast_) {
-      if (prep_ != phase1.prep_) {
-        // C0 = G_z·P0, once per (Phase 1 preparation, G_z).
-        prep_.reset();
-        base_ready_ = false;
-        detail::check_finite("FusedAlternation::set: G_z", Gz);
-        C0_.resize(q, k);
-        detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
-        Gz_f_.resize(0, 0);
-        prep_ = phase1.prep_;
-      }
+      form_c0(phase1, Gz);
       const bool factored =
           form == FusedForm::Factored || (form == FusedForm::Automatic && q * k > kExplicitMaxEntries);
       // G_z·T (q × μ) and F_b = G_z·M_b, its first m columns.
       const Index m = phase1.m(), mu = phase1.T_.cols();
       Matrix<double> GzT;
       if (factored && precision == FusedPrecision::Float) {
-        if (Gz_f_.rows() != q || Gz_f_.cols() != Gz.cols()) Gz_f_ = Gz.template cast<float>();
+        if (Gz_f_.rows() != q || Gz_f_.cols() != Gz.cols()) Gz_f_ = Gz.template cast<float>();  // with C0
         const Matrix<float> Tf = phase1.T_.template cast<float>();
         GzT_f_.resize(q, mu);
         detail::blas_gemm(false, false, 1.0, Gz_f_, Tf, 0.0, GzT_f_);
@@ -339,6 +342,55 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   gf_.resize(q);
   yf_.resize(k);
   ready_ = true;
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::form_c0(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz) {
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (prep_ == phase1.prep_) return;
+    // C0 = G_z·P0, once per (Phase 1 preparation, G_z).
+    prep_.reset();
+    base_ready_ = false;
+    detail::check_finite("FusedAlternation: G_z", Gz);
+    C0_.resize(Gz.rows(), phase1.prep_->P0.cols());
+    detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
+    Gz_f_.resize(0, 0);
+    prep_ = phase1.prep_;
+  } else {
+    (void)phase1, (void)Gz;
+  }
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
+                                       const Matrix<Scalar>& Gy, FusedPrecision precision) {
+  detail::check_size("FusedAlternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
+  if (phase1.prep_) {
+    detail::check_size("FusedAlternation::prepare: G_z columns (d)", phase1.prep_->G.rows(), Gz.cols());
+    detail::check_size("FusedAlternation::prepare: G_y columns (k)", phase1.prep_->G.cols(), Gy.cols());
+  }
+  detail::check_finite("FusedAlternation::prepare: G_z", Gz);
+  detail::check_finite("FusedAlternation::prepare: G_y", Gy);
+  ready_ = false;
+  inputs_ready_ = false;
+  if (!same_matrix(Gz_, Gz)) {
+    prep_.reset();
+    Gz_ = Gz;
+  }
+  if (!same_matrix(Gy_, Gy)) {
+    base_ready_ = false;
+    Gy_ = Gy;
+  }
+  inputs_ready_ = true;
+  if constexpr (std::is_same_v<Scalar, double>) {
+    if (phase1.prep_) {
+      const detail::ScopedBlasThreads blas(1);
+      form_c0(phase1, Gz_);
+      if (precision == FusedPrecision::Float && Gz_f_.size() != Gz_.size()) Gz_f_ = Gz_.template cast<float>();
+    }
+  } else {
+    (void)precision;
+  }
 }
 
 template <typename Scalar>

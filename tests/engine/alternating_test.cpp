@@ -280,6 +280,36 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     CHECK((z1 - z2).norm() <= 1e-12 * (1 + z2.norm()));
   }
 
+  // prepare(): the per-solver parts ahead of the first constraint set, with
+  // the same operators and rounds as without it.
+  {
+    FixedCoordinateSolver<double> early;
+    early.prepare(solver);
+    CHECK_FALSE(early.ready());
+    FusedAlternation<double> fused, plain;
+    fused.prepare(early, Gz, Gy, FusedPrecision::Float);
+    CHECK_FALSE(fused.ready());
+    REQUIRE(early.set_constraints(solver, A).fast_path);
+    CHECK((early.Mb() - phase1.Mb()).norm() == 0.0);
+    CHECK((early.MY() - phase1.MY()).norm() == 0.0);
+    fused.set(early, 1, FusedForm::Factored, FusedPrecision::Float);  // the prepared G_z, G_y
+    plain.set(phase1, Gz, Gy, 1, FusedForm::Factored, FusedPrecision::Float);
+    AlternatingOptions o;
+    o.float_products = true;
+    Vector<double> z1(d), z2(d), y1 = y0, y2 = y0;
+    fused.run(early, proj, b, o, z1, y1);
+    plain.run(phase1, proj, b, o, z2, y2);
+    CHECK(y1 == y2);
+    CHECK(z1 == z2);
+    CHECK_THROWS_WITH(fused.prepare(early, Matrix<double>(k, d + 1), Gy), Catch::Contains("G_z columns"));
+    CHECK_THROWS_WITH(fused.prepare(early, Gz, Matrix<double>(k + 1, k)), Catch::Contains("G_y rows"));
+    Matrix<double> bad = Gy;
+    bad(1, 2) = std::numeric_limits<double>::infinity();
+    CHECK_THROWS_WITH(fused.prepare(early, Gz, bad), Catch::Contains("G_y"));
+    SubspaceSolver<double> not_ready;
+    CHECK_THROWS_WITH(early.prepare(not_ready), Catch::Contains("not ready"));
+  }
+
   // A_r given directly: the operators of set_constraints.
   FixedCoordinateSolver<double> reduced;
   const Matrix<double> Az = A.transpose() * solver.subspace().N, Ay = A.transpose() * solver.subspace().UD;

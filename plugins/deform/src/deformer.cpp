@@ -273,6 +273,12 @@ void Deformer::State::finish(const DeformerOptions& options) {
   alternating.float_products = options.float_rounds;
   alternating.threads = options.round_threads;
   global_rotation = options.global_rotation;
+  // Phase 1's and the fused rounds' per-solver parts (H_zz's lifted inverse,
+  // its responses P0, C0 = M_N·P0) belong to the precompute: the first handle
+  // set then costs what the later ones do.
+  phase1.prepare(solver);
+  fused.prepare(phase1, MN, MU, options.float_rounds ? FusedPrecision::Float : FusedPrecision::Double);
+  fused_inputs_plain = true;
   ready = true;
 }
 

@@ -76,6 +76,14 @@ class FixedCoordinateSolver {
   ConstraintSummary set_reduced_constraints(const SubspaceSolver<Scalar>& solver, const Matrix<double>& Az,
                                             const Matrix<double>& Ay, const ConstraintOptions& options = {});
 
+  // The fast path's per-solver part (H_zz's lifted inverse M0, P0 = M0·G
+  // and LᵀG; O(d³ + d²k)) now, instead of in the first set_constraints after
+  // the solver's precompute or restore; nothing when it is current. For
+  // callers that count it as precompute, so that the first handle set costs
+  // what the later ones do (the deformer). Throws std::invalid_argument when
+  // `solver` is not ready.
+  void prepare(const SubspaceSolver<Scalar>& solver);
+
   // z = M_b·b + M_Y·Y. b: m, Y: k, z: d. No heap allocation. Not for
   // concurrent calls on one object (the factored M_Y uses a scratch vector).
   void solve(const ConstRef& b, const ConstRef& Y, Ref z) const;
@@ -90,6 +98,7 @@ class FixedCoordinateSolver {
 
  private:
   friend class FusedAlternation<Scalar>;
+  void prepare_impl(const SubspaceSolver<Scalar>& solver);
   Matrix<Scalar> Mb_;  // d × m
   Matrix<Scalar> MY_;  // d × k; empty when factored (fast path, double)
   Index k_ = 0;
@@ -242,6 +251,15 @@ class FusedAlternation {
   void set(const FixedCoordinateSolver<Scalar>& phase1, int threads = 1, FusedForm form = FusedForm::Automatic,
            FusedPrecision precision = FusedPrecision::Double);
 
+  // C0 = G_z·P0 (and G_z's float copy for `precision` Float) now, for the
+  // solver `phase1` was prepared for (FixedCoordinateSolver::prepare or a
+  // fast-path set_constraints), instead of in the first `set`; keeps G_z, G_y
+  // as the inputs of set(phase1). Without a prepared fast path (or for
+  // Scalar = float) it only keeps the inputs. Call `set` before `run`.
+  // Throws std::invalid_argument on mismatched sizes or NaN.
+  void prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
+               FusedPrecision precision = FusedPrecision::Double);
+
   // `options.iterations` rounds from the given y (warm start), then
   // z = M_b·b + M_Y·y. No heap allocation. Throws std::invalid_argument for
   // double rounds (float_products false) after a FusedPrecision::Float set.
@@ -258,6 +276,8 @@ class FusedAlternation {
   // Both `set`s; same_inputs: Gz, Gy are Gz_, Gy_ (no comparison, no copy).
   void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
                 int threads, FusedForm form, FusedPrecision precision, bool same_inputs);
+  // C0 = G_z·P0 unless it is current for phase1's preparation (double).
+  void form_c0(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz);
   // Rows [r0, r1) of g = g_b + F_y·y into g_, from y, or from its float copy
   // yf when not null. ry, ryf: μ scratch for R·y (factored form).
   void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
