@@ -254,20 +254,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   ready_ = false;
   factored_ = false;
   float_set_ = false;
-  // Keep copies of the inputs (for set(phase1, ...) and the bitwise tests);
-  // a changed input invalidates what was formed from it.
-  if (!same_inputs) {
-    inputs_ready_ = false;
-    if (!same_matrix(Gz_, Gz)) {
-      prep_.reset();
-      Gz_ = Gz;
-    }
-    if (!same_matrix(Gy_, Gy)) {
-      base_ready_ = false;
-      Gy_ = Gy;
-    }
-    inputs_ready_ = true;
-  }
+  if (!same_inputs) keep_inputs(Gz, Gy);
   const Index q = Gz.rows(), k = Gy.cols();
   bool fast = false;
   if constexpr (std::is_same_v<Scalar, double>) {
@@ -345,6 +332,20 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
 }
 
 template <typename Scalar>
+void FusedAlternation<Scalar>::keep_inputs(const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy) {
+  inputs_ready_ = false;
+  if (!same_matrix(Gz_, Gz)) {
+    prep_.reset();
+    Gz_ = Gz;
+  }
+  if (!same_matrix(Gy_, Gy)) {
+    base_ready_ = false;
+    Gy_ = Gy;
+  }
+  inputs_ready_ = true;
+}
+
+template <typename Scalar>
 void FusedAlternation<Scalar>::form_c0(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz) {
   if constexpr (std::is_same_v<Scalar, double>) {
     if (prep_ == phase1.prep_) return;
@@ -372,16 +373,7 @@ void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phas
   detail::check_finite("FusedAlternation::prepare: G_z", Gz);
   detail::check_finite("FusedAlternation::prepare: G_y", Gy);
   ready_ = false;
-  inputs_ready_ = false;
-  if (!same_matrix(Gz_, Gz)) {
-    prep_.reset();
-    Gz_ = Gz;
-  }
-  if (!same_matrix(Gy_, Gy)) {
-    base_ready_ = false;
-    Gy_ = Gy;
-  }
-  inputs_ready_ = true;
+  keep_inputs(Gz, Gy);
   if constexpr (std::is_same_v<Scalar, double>) {
     if (phase1.prep_) {
       const detail::ScopedBlasThreads blas(1);

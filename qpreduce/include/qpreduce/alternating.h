@@ -276,6 +276,9 @@ class FusedAlternation {
   // Both `set`s; same_inputs: Gz, Gy are Gz_, Gy_ (no comparison, no copy).
   void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
                 int threads, FusedForm form, FusedPrecision precision, bool same_inputs);
+  // Keep copies of the inputs (for set(phase1, ...) and the bitwise tests);
+  // a changed input invalidates what was formed from it.
+  void keep_inputs(const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy);
   // C0 = G_z·P0 unless it is current for phase1's preparation (double).
   void form_c0(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz);
   // Rows [r0, r1) of g = g_b + F_y·y into g_, from y, or from its float copy
