@@ -7,7 +7,8 @@ RESULT.json comes from
     build/bin/bench_deform --benchmark_out=RESULT.json --benchmark_out_format=json
 Prints a Markdown table: per model our median iteration (µs), reconstruction
 (ms), streaming read of the same bytes (ms) and their ratio, frame (ms),
-precompute (s) and peak resident memory (GB), OP (ms), and in parentheses the
+precompute (s: the median over Precompute's repetitions, each a fresh
+precompute) and peak resident memory (GB: of the first repetition), OP (ms), and in parentheses the
 paper's figure for the same column (Table 1, i7-2670QM, serial). The read and
 the ratio come from ReconstructionVsRead (the two sampled alternately, each
 after a frame's rounds; ratio of the medians) when the run has it, otherwise
@@ -47,6 +48,7 @@ def main(path, recon_path=None):
         kind, model = r["name"].split("/")[:2]
         row = rows.setdefault(model, {})
         row[kind] = r
+        row.setdefault(kind + "_runs", []).append(r)
     print("| model | vertices | linear / rot. | iteration µs | reconstruction ms | stream read ms | recon ÷ read "
           "| frame ms | precompute s | peak GB | OP ms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
@@ -62,8 +64,10 @@ def main(path, recon_path=None):
         if "ReconstructionVsRead" in row:
             pair = row["ReconstructionVsRead"]
             rd, ratio = pair["read_ms"], pair["ratio"]
-        pre_s = pre["real_time"]  # unit: s
-        peak_gb = pre["peak_MiB"] / 1024.0
+        pre_runs = sorted(run["real_time"] for run in row["Precompute_runs"])  # unit: s
+        pre_s = pre_runs[len(pre_runs) // 2]
+        pre_note = ", ".join(f"{x:.2f}" for x in pre_runs)
+        peak_gb = row["Precompute_runs"][0]["peak_MiB"] / 1024.0  # the first: no heap left over from a repetition
         print(f"| {model} | {int(pre['vertices']):,} | {int(pre['linear'])} / {int(pre['rotational'])} "
               f"| {it:.1f} ({paper[0]}) | {rec:.2f} ({paper[1]}) | {rd:.2f} | {ratio:.2f} "
               f"| {fr:.2f} ({paper[2]}) | {pre_s:.1f} ({paper[3]}) | {peak_gb:.2f} ({paper[4]}) "
@@ -72,10 +76,10 @@ def main(path, recon_path=None):
         targets.append((f"{model}: reconstruction ≤ 1.3 × streaming read", ratio, ratio <= 1.3))
         if model == "BumpyPlane":
             targets.append(("BumpyPlane: one iteration ≤ 15 µs", it, it <= 15))
-            targets.append(("BumpyPlane: precompute ≤ 10 s", pre_s, pre_s <= 10))
+            targets.append((f"BumpyPlane: precompute ≤ 10 s (median of {pre_note})", pre_s, pre_s <= 10))
             targets.append(("BumpyPlane: peak ≤ 1 GB", peak_gb, peak_gb <= 1))
         if model == "Dragon":
-            targets.append(("Dragon: precompute ≤ 15 s", pre_s, pre_s <= 15))
+            targets.append((f"Dragon: precompute ≤ 15 s (median of {pre_note})", pre_s, pre_s <= 15))
     print()
     print("| model | recon. ms | plain read ms | AVX2 read ms | recon ÷ AVX2 read "
           "| recon. back to back ms | plain read back to back ms | ratio |")
