@@ -423,7 +423,11 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
                                                  const Eigen::Ref<const Vector<Scalar>>& b,
                                                  const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
                                                  Eigen::Ref<Vector<Scalar>> y) {
-  assert(ready_ && options.is_valid(nullptr) && b.size() == Fb_.cols() && y.size() == Fy_.cols());
+  if (!ready_) throw std::invalid_argument("FusedAlternation::run: not set (call set after set_constraints or prepare)");
+  detail::check_size("FusedAlternation::run: b (m)", Fb_.cols(), b.size());
+  detail::check_size("FusedAlternation::run: y (k)", Fy_.cols(), y.size());
+  detail::check_size("FusedAlternation::run: z (d)", phase1.d(), z.size());
+  assert(options.is_valid(nullptr));
   if (float_set_ && !options.float_products) {
     throw std::invalid_argument(
         "FusedAlternation::run: set with FusedPrecision::Float needs float rounds "

@@ -302,6 +302,14 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     CHECK(y1 == y2);
     CHECK(z1 == z2);
     CHECK_THROWS_WITH(fused.prepare(early, Matrix<double>(k, d + 1), Gy), Catch::Contains("G_z columns"));
+    // prepare resets the last set: run refuses until the next one.
+    fused.prepare(early, Gz, Gy, FusedPrecision::Float);
+    CHECK_THROWS_WITH(fused.run(early, proj, b, o, z1, y1), Catch::Contains("not set"));
+    fused.set(early, 1, FusedForm::Factored, FusedPrecision::Float);
+    Vector<double> short_b(m - 1), long_y(k + 1), short_z(d - 1);
+    CHECK_THROWS_WITH(fused.run(early, proj, short_b, o, z1, y1), Catch::Contains("b (m)"));
+    CHECK_THROWS_WITH(fused.run(early, proj, b, o, z1, long_y), Catch::Contains("y (k)"));
+    CHECK_THROWS_WITH(fused.run(early, proj, b, o, short_z, y1), Catch::Contains("z (d)"));
     CHECK_THROWS_WITH(fused.prepare(early, Gz, Matrix<double>(k + 1, k)), Catch::Contains("G_y rows"));
     Matrix<double> bad = Gy;
     bad(1, 2) = std::numeric_limits<double>::infinity();

@@ -261,8 +261,9 @@ class FusedAlternation {
                FusedPrecision precision = FusedPrecision::Double);
 
   // `options.iterations` rounds from the given y (warm start), then
-  // z = M_b·b + M_Y·y. No heap allocation. Throws std::invalid_argument for
-  // double rounds (float_products false) after a FusedPrecision::Float set.
+  // z = M_b·b + M_Y·y. No heap allocation. Throws std::invalid_argument
+  // before a `set` (a `prepare` resets it), on sizes other than phase1's, and
+  // for double rounds (float_products false) after a FusedPrecision::Float set.
   AlternatingSummary run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
                          const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
                          Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
