@@ -266,7 +266,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
       const Index m = phase1.m(), mu = phase1.T_.cols();
       Matrix<double> GzT;
       if (factored && precision == FusedPrecision::Float) {
-        if (Gz_f_.rows() != q || Gz_f_.cols() != Gz.cols()) Gz_f_ = Gz.template cast<float>();  // with C0
+        form_gz_float(Gz);
         const Matrix<float> Tf = phase1.T_.template cast<float>();
         GzT_f_.resize(q, mu);
         detail::blas_gemm(false, false, 1.0, Gz_f_, Tf, 0.0, GzT_f_);
@@ -363,6 +363,12 @@ void FusedAlternation<Scalar>::form_c0(const FixedCoordinateSolver<Scalar>& phas
 }
 
 template <typename Scalar>
+void FusedAlternation<Scalar>::form_gz_float(const Matrix<Scalar>& Gz) {
+  // form_c0 empties it whenever G_z or Phase 1's preparation changes.
+  if (Gz_f_.rows() != Gz.rows() || Gz_f_.cols() != Gz.cols()) Gz_f_ = Gz.template cast<float>();
+}
+
+template <typename Scalar>
 void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
                                        const Matrix<Scalar>& Gy, FusedPrecision precision) {
   detail::check_size("FusedAlternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
@@ -378,7 +384,7 @@ void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phas
     if (phase1.prep_) {
       const detail::ScopedBlasThreads blas(1);
       form_c0(phase1, Gz_);
-      if (precision == FusedPrecision::Float && Gz_f_.size() != Gz_.size()) Gz_f_ = Gz_.template cast<float>();
+      if (precision == FusedPrecision::Float) form_gz_float(Gz_);
     }
   } else {
     (void)precision;

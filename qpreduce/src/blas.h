@@ -16,8 +16,6 @@ extern "C" void dgemm_(const char* transa, const char* transb, const int* m, con
 extern "C" void sgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k,
                        const float* alpha, const float* a, const int* lda, const float* b, const int* ldb,
                        const float* beta, float* c, const int* ldc);
-extern "C" void dsyrk_(const char* uplo, const char* trans, const int* n, const int* k, const double* alpha,
-                       const double* a, const int* lda, const double* beta, double* c, const int* ldc);
 
 namespace qpreduce::detail {
 
@@ -50,22 +48,6 @@ void blas_gemm(bool transpose_a, bool transpose_b, double alpha, const MA& A, co
     const float a = static_cast<float>(alpha), b = static_cast<float>(beta);
     sgemm_(&ta, &tb, &m, &n, &k, &a, A.data(), &lda, B.data(), &ldb, &b, C.data(), &ldc);
   }
-}
-
-// Lower triangle of C = alpha·A·Aᵀ + beta·C (A: n × k, C: n × n); the strict
-// upper triangle of C is not touched.
-template <typename MA, typename MC>
-void blas_syrk_lower(double alpha, const MA& A, double beta, MC&& C) {
-  const int n = static_cast<int>(C.rows()), k = static_cast<int>(A.cols());
-  assert(C.cols() == n && A.rows() == n && A.innerStride() == 1 && C.innerStride() == 1);
-  if (n == 0) return;
-  const char uplo = 'L', trans = 'N';
-  const int lda = static_cast<int>(A.outerStride()), ldc = static_cast<int>(C.outerStride());
-  if (k == 0) {
-    C.template triangularView<Eigen::Lower>() *= beta;
-    return;
-  }
-  dsyrk_(&uplo, &trans, &n, &k, &alpha, A.data(), &lda, &beta, C.data(), &ldc);
 }
 
 // Sets the BLAS's own thread count for the scope when it is OpenBLAS (looked

@@ -282,6 +282,8 @@ class FusedAlternation {
   void keep_inputs(const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy);
   // C0 = G_z·P0 unless it is current for phase1's preparation (double).
   void form_c0(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz);
+  // G_z's float copy (FusedPrecision::Float) unless it is current.
+  void form_gz_float(const Matrix<Scalar>& Gz);
   // Rows [r0, r1) of g = g_b + F_y·y into g_, from y, or from its float copy
   // yf when not null. ry, ryf: μ scratch for R·y (factored form).
   void round_product(const Scalar* y, const float* yf, Index r0, Index r1, double* ry, float* ryf);
