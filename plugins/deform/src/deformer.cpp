@@ -277,7 +277,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   // its responses P0, C0 = M_N·P0) belong to the precompute: the first handle
   // set then costs what the later ones do.
   phase1.prepare(solver);
-  fused.prepare(phase1, MN, MU, options.float_rounds ? FusedPrecision::Float : FusedPrecision::Double);
+  fused.prepare(phase1, MN, MU, fused_precision());
   fused_inputs_plain = true;
   ready = true;
 }
@@ -658,8 +658,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       for (int c = 0; c < 3; ++c)
         S.tie_map.col(9 * k + 3 * c + a) += S.phase1.Mb().col(tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
   }
-  // Float rounds: G_z·T, the largest product of a new handle set, in float too.
-  const FusedPrecision precision = S.alternating.float_products ? FusedPrecision::Float : FusedPrecision::Double;
+  const FusedPrecision precision = S.fused_precision();
   if (tied.empty() && S.fused_inputs_plain) {
     // G_z = M_N, G_y = M_U as last time: not compared again
     S.fused.set(S.phase1, options.threads, FusedForm::Automatic, precision);

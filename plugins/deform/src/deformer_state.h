@@ -79,6 +79,11 @@ struct Deformer::State {
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   FusedAlternation<double> fused;
   bool fused_inputs_plain = false;  // fused was last set with G_z = MN, G_y = MU (MN, MU never change after precompute)
+  // With float rounds, G_z·T (the largest product of a new handle set) in
+  // float too (FusedPrecision); finish() sets alternating.float_products.
+  FusedPrecision fused_precision() const {
+    return alternating.float_products ? FusedPrecision::Float : FusedPrecision::Double;
+  }
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
   Index nx = 0;           // 3m + 12s
   // For the on-site step's A_r = AᵀB from contiguous rows: the control rows
