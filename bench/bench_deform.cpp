@@ -50,14 +50,14 @@
 // bench/table1.py turns the JSON output into docs/performance.md's table.
 #include "bench_util.h"
 
-#include <qpreduce/deform/deformer.h>
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/deform/mesh_io.h>
-#include <qpreduce/deform/proxies.h>
-#include <qpreduce/deform/tet_io.h>
+#include <qpreduce/deform/deformer/deformer.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/io/mesh_io.h>
+#include <qpreduce/deform/proxies/proxies.h>
+#include <qpreduce/deform/io/tet_io.h>
 #include <qpreduce/point_reconstruction.h>
 
-#include <qpreduce/detail/timer.h>
+#include <qpreduce/support.h>
 
 #include <benchmark/benchmark.h>
 #include <fmt/format.h>
@@ -228,7 +228,7 @@ void BM_OP(benchmark::State& state, const ModelSpec* spec, bool fast_path) {
   std::vector<double> samples;
   bool fast = false;
   for (auto _ : state) {
-    const qpreduce::detail::Timer t;
+    const qpreduce::Timer t;
     const ConstraintSummary cs = s.deformer.set_handles(s.handles, options);
     samples.push_back(t.seconds());
     fast = cs.fast_path;
@@ -310,7 +310,7 @@ void BM_StreamRead(benchmark::State& state, const ModelSpec* spec) {
   const auto& basis = s.deformer.reconstruction_basis();
   std::vector<double> samples;
   for (auto _ : state) {
-    const qpreduce::detail::Timer t;
+    const qpreduce::Timer t;
     benchmark::DoNotOptimize(stream_read(basis, sum_eigen));
     const double seconds = t.seconds();
     state.SetIterationTime(seconds);
@@ -331,7 +331,7 @@ void BM_ReconstructionBackToBack(benchmark::State& state, const ModelSpec* spec)
   const Eigen::Matrix3f r0 = s.deformer.global_rotation().cast<float>();
   std::vector<double> samples;
   for (auto _ : state) {
-    const qpreduce::detail::Timer t;
+    const qpreduce::Timer t;
     reconstruct_points(s.deformer.reconstruction_basis(), s.deformer.reduced_coordinates(), r0, &s.out);
     const double seconds = t.seconds();
     state.SetIterationTime(seconds);
@@ -356,7 +356,7 @@ void BM_ReconstructionVsRead(benchmark::State& state, const ModelSpec* spec) {
     state.SetIterationTime(f.reconstruct_seconds);
     recon.push_back(f.reconstruct_seconds);
     s.deformer.frame(next_targets(s), nullptr);
-    qpreduce::detail::Timer t;
+    qpreduce::Timer t;
     benchmark::DoNotOptimize(stream_read(basis, sum_eigen));
     plain.push_back(t.seconds());
 #ifdef BENCH_HAVE_AVX2

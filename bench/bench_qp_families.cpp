@@ -29,9 +29,9 @@
 // (family, size).
 //
 // Arguments: family (0 gmrf, 1 trajectory, 2 portfolio), size (n ≈ size).
-#include "qpreduce/families.h"
+#include "qpreduce/problems/families.h"
 #include "qpreduce/full_solve.h"
-#include "qpreduce/schur_baseline.h"
+#include "qpreduce/problems/schur_baseline.h"
 #include "qpreduce/subspace_solver.h"
 
 #include <benchmark/benchmark.h>

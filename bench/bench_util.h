@@ -3,7 +3,7 @@
 // generators themselves live in qpreduce/generators.h.
 #pragma once
 
-#include "qpreduce/generators.h"
+#include "qpreduce/problems/generators.h"
 
 #include <sys/resource.h>
 

@@ -10,9 +10,9 @@
 // with it, and checks every cluster turned about z only.
 //
 // Usage: axis_locked_model   (exit status 0 when every check holds)
-#include <qpreduce/deform/deformer.h>
-#include <qpreduce/deform/model.h>
-#include <qpreduce/deform/shapes.h>
+#include <qpreduce/deform/deformer/deformer.h>
+#include <qpreduce/deform/energy/model.h>
+#include <qpreduce/deform/mesh/shapes.h>
 #include <qpreduce/testing/invariants.h>
 
 #include <Eigen/Geometry>

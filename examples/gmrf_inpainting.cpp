@@ -18,7 +18,7 @@
 // bound (docs/theorem.md), per query.
 //
 // Usage: gmrf_inpainting [nx] [queries] [seed]   (defaults 400 20 1)
-#include <qpreduce/families.h>
+#include <qpreduce/problems/families.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/quotient.h>
 #include <qpreduce/subspace_solver.h>

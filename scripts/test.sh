@@ -2,7 +2,8 @@
 # Installs what is missing, builds, and runs every test:
 #   1. the Release build and its full Catch2 suite (ctest);
 #   2. the same suite built with AddressSanitizer + UBSan (./build-asan);
-#   3. a tiny consumer project built against the installed package config.
+#   3. two tiny consumer projects built against the installed package config
+#      (the engine and deformer without Ceres; the reference component).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 jobs="$(nproc 2>/dev/null || echo 2)"
@@ -22,10 +23,17 @@ cmake --build "$root/build-asan" -j "$jobs"
 ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
 
-echo "== installed package consumer"
+echo "== installed package consumers"
+# consumer: the engine and the deformer, with Ceres hidden from find_package
+# (they must not need it); reference_consumer: the optional reference component.
 prefix="$root/build/install-test"
-rm -rf "$prefix" "$root/build/consumer"
+rm -rf "$prefix" "$root/build/consumer" "$root/build/reference_consumer"
 cmake --install "$root/build" --prefix "$prefix" >/dev/null
-cmake -S "$root/tests/packaging/consumer" -B "$root/build/consumer" -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+cmake -S "$root/tests/packaging/consumer" -B "$root/build/consumer" -DCMAKE_PREFIX_PATH="$prefix" \
+  -DCMAKE_DISABLE_FIND_PACKAGE_Ceres=ON >/dev/null
 cmake --build "$root/build/consumer" -j "$jobs"
 "$root/build/consumer/consumer"
+cmake -S "$root/tests/packaging/reference_consumer" -B "$root/build/reference_consumer" \
+  -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+cmake --build "$root/build/reference_consumer" -j "$jobs"
+"$root/build/reference_consumer/reference_consumer"

@@ -5,8 +5,8 @@
 #include "deform_run.h"
 #include "guard.h"
 
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/deform/reference.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/reference/reference.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>

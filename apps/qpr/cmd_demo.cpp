@@ -5,8 +5,8 @@
 #include "deform_run.h"
 #include "guard.h"
 
-#include <qpreduce/deform/mesh_io.h>
-#include <qpreduce/deform/shapes.h>
+#include <qpreduce/deform/io/mesh_io.h>
+#include <qpreduce/deform/mesh/shapes.h>
 
 #include <CLI/CLI.hpp>
 #include <Eigen/Geometry>

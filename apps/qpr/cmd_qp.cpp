@@ -25,9 +25,9 @@
 #include "guard.h"
 
 #include <qpreduce/full_solve.h>
-#include <qpreduce/matrix_market.h>
+#include <qpreduce/problems/matrix_market.h>
 #include <qpreduce/quotient.h>
-#include <qpreduce/schur_baseline.h>
+#include <qpreduce/problems/schur_baseline.h>
 #include <qpreduce/subspace_solver.h>
 
 #include <CLI/CLI.hpp>

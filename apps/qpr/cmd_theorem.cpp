@@ -7,7 +7,7 @@
 #include "commands.h"
 #include "svg_plot.h"
 
-#include <qpreduce/generators.h>
+#include <qpreduce/problems/generators.h>
 #include <qpreduce/quotient.h>
 
 #include <CLI/CLI.hpp>

@@ -1,9 +1,9 @@
 #include "deform_run.h"
 
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/deform/mesh_io.h>
-#include <qpreduce/deform/tet_io.h>
-#include <qpreduce/detail/timer.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/io/mesh_io.h>
+#include <qpreduce/deform/io/tet_io.h>
+#include <qpreduce/support.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -231,7 +231,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   }
   const double peak_mb = peak_rss_mb();
 
-  const detail::Timer op_timer;
+  const Timer op_timer;
   const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
   const double op_ms = 1e3 * op_timer.seconds();
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);

@@ -4,7 +4,7 @@
 // and writes the meshes and the JSON report.
 #pragma once
 
-#include <qpreduce/deform/scenario.h>
+#include <qpreduce/deform/io/scenario.h>
 
 #include <nlohmann/json.hpp>
 

@@ -21,7 +21,7 @@
 #include "gl.h"
 #include "image.h"
 
-#include <qpreduce/deform/mesh.h>
+#include <qpreduce/deform/mesh/mesh.h>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>

@@ -1,8 +1,8 @@
 #include "session.h"
 
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/deform/proxies.h>
-#include <qpreduce/detail/timer.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/proxies/proxies.h>
+#include <qpreduce/support.h>
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -240,7 +240,7 @@ double Session::update_constraints(std::string* note) {
   }
   targets_.points.resize(static_cast<Index>(flat_.points.size()), 3);
   targets_.patch_transforms.resize(flat_.patches.size());
-  const detail::Timer t;
+  const Timer t;
   const ConstraintSummary cs = deformer_->set_handles(flat_, constraints_);
   const double ms = 1e3 * t.seconds();
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
@@ -290,12 +290,12 @@ FrameStats Session::step(MeshRenderer* renderer) {
   if (!constraints_ready_) update_constraints(nullptr);
   fill_targets();
   FrameStats stats;
-  const detail::Timer total;
+  const Timer total;
   if (path_ == Reconstruction::Gpu) {
     const FrameSummary fs = deformer_->frame(targets_, nullptr);
     stats.solve_ms = 1e3 * fs.solve_seconds;
     stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
-    const detail::Timer t;
+    const Timer t;
     renderer->reconstruct_gpu(deformer_->reduced_coordinates(), deformer_->global_rotation().cast<float>());
     glFinish();  // honest timing: wait for the GPU
     stats.reconstruction_ms = 1e3 * t.seconds();
@@ -303,7 +303,7 @@ FrameStats Session::step(MeshRenderer* renderer) {
     const FrameSummary fs = deformer_->frame(targets_, &cpu_out_);
     stats.solve_ms = 1e3 * fs.solve_seconds;
     stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
-    const detail::Timer t;
+    const Timer t;
     renderer->upload_positions(cpu_out_);
     glFinish();
     stats.reconstruction_ms = 1e3 * (fs.reconstruct_seconds + t.seconds());

@@ -17,8 +17,8 @@
 
 #include "renderer.h"
 
-#include <qpreduce/deform/deformer.h>
-#include <qpreduce/deform/scenario.h>
+#include <qpreduce/deform/deformer/deformer.h>
+#include <qpreduce/deform/io/scenario.h>
 
 #include <atomic>
 #include <memory>

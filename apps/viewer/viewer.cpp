@@ -3,8 +3,8 @@
 #include "context.h"
 #include "motion.h"
 
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/detail/timer.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/support.h>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>

@@ -4,8 +4,8 @@
 #include "range_space.h"
 #include "simd_kernels.h"
 
-#include "qpreduce/detail/qp_operators.h"
-#include "qpreduce/detail/timer.h"
+#include "qp_operators.h"
+#include "qpreduce/support.h"
 
 #include <fmt/format.h>
 
@@ -60,9 +60,9 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
   if (!solver.ready()) {
     throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
   }
-  detail::check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
-  detail::check_finite("FixedCoordinateSolver::set_constraints: A", A);
-  const detail::Timer timer;
+  check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
+  check_finite("FixedCoordinateSolver::set_constraints: A", A);
+  const Timer timer;
   const MatD Az = (A.transpose() * solver.subspace().N).template cast<double>();
   const MatD Ay = (A.transpose() * solver.subspace().UD).template cast<double>();
   ConstraintSummary summary = set_reduced_constraints(solver, Az, Ay, options);
@@ -81,12 +81,12 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   if (!solver.ready()) {
     throw std::invalid_argument("FixedCoordinateSolver::set_reduced_constraints: the subspace solver is not ready");
   }
-  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_z columns (d)", solver.d(), Az.cols());
-  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_y columns (k)", solver.k(), Ay.cols());
-  detail::check_size("FixedCoordinateSolver::set_reduced_constraints: A_y rows (as A_z)", Az.rows(), Ay.rows());
-  detail::check_finite("FixedCoordinateSolver::set_reduced_constraints: A_z", Az);
-  detail::check_finite("FixedCoordinateSolver::set_reduced_constraints: A_y", Ay);
-  const detail::Timer timer;
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_z columns (d)", solver.d(), Az.cols());
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_y columns (k)", solver.k(), Ay.cols());
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_y rows (as A_z)", Az.rows(), Ay.rows());
+  check_finite("FixedCoordinateSolver::set_reduced_constraints: A_z", Az);
+  check_finite("FixedCoordinateSolver::set_reduced_constraints: A_y", Ay);
+  const Timer timer;
   ready_ = false;
   fast_ = false;
   const Index d = solver.d(), k = solver.k(), m = Az.rows();
@@ -248,9 +248,9 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (threads > 0) blas.emplace(threads);
   if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
-  detail::check_size("FusedAlternation::set: G_z columns (d)", phase1.d(), Gz.cols());
-  detail::check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), Gy.cols());
-  detail::check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
+  check_size("FusedAlternation::set: G_z columns (d)", phase1.d(), Gz.cols());
+  check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), Gy.cols());
+  check_size("FusedAlternation::set: G_y rows (as G_z)", Gz.rows(), Gy.rows());
   ready_ = false;
   factored_ = false;
   float_set_ = false;
@@ -279,7 +279,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
       if (factored) {
         // F₀ = C0 + G_y, once per (C0, G_y); the rank-μ part stays factored.
         if (!base_ready_) {
-          detail::check_finite("FusedAlternation::set: G_y", Gy);
+          check_finite("FusedAlternation::set: G_y", Gy);
           Fy_ = C0_ + Gy;
           Fy_f_ = Fy_.template cast<float>();
           base_ready_ = true;
@@ -300,7 +300,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
         Fy_f_.resize(q, k);
         for (Index c0 = 0; c0 < k; c0 += kColumnBlock) {
           const Index w = std::min(kColumnBlock, k - c0);
-          if (!Gy.middleCols(c0, w).allFinite()) detail::check_finite("FusedAlternation::set: G_y", Gy);  // throws
+          if (!Gy.middleCols(c0, w).allFinite()) check_finite("FusedAlternation::set: G_y", Gy);  // throws
           Fy_.middleCols(c0, w) = C0_.middleCols(c0, w) + Gy.middleCols(c0, w);
           detail::blas_gemm(false, false, -1.0, GzT, phase1.R_.middleCols(c0, w), 1.0, Fy_.middleCols(c0, w));
           Fy_f_.middleCols(c0, w) = Fy_.middleCols(c0, w).template cast<float>();
@@ -311,8 +311,8 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   }
   if (!fast) {
     base_ready_ = false;
-    detail::check_finite("FusedAlternation::set: G_z", Gz);
-    detail::check_finite("FusedAlternation::set: G_y", Gy);
+    check_finite("FusedAlternation::set: G_z", Gz);
+    check_finite("FusedAlternation::set: G_y", Gy);
     Fy_ = Gy;
     if constexpr (std::is_same_v<Scalar, double>) {
       Fb_.resize(q, phase1.m());
@@ -352,7 +352,7 @@ void FusedAlternation<Scalar>::form_c0(const FixedCoordinateSolver<Scalar>& phas
     // C0 = G_z·P0, once per (Phase 1 preparation, G_z).
     prep_.reset();
     base_ready_ = false;
-    detail::check_finite("FusedAlternation: G_z", Gz);
+    check_finite("FusedAlternation: G_z", Gz);
     C0_.resize(Gz.rows(), phase1.prep_->P0.cols());
     detail::blas_gemm(false, false, 1.0, Gz, phase1.prep_->P0, 0.0, C0_);
     Gz_f_.resize(0, 0);
@@ -371,13 +371,13 @@ void FusedAlternation<Scalar>::form_gz_float(const Matrix<Scalar>& Gz) {
 template <typename Scalar>
 void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
                                        const Matrix<Scalar>& Gy, FusedPrecision precision) {
-  detail::check_size("FusedAlternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
+  check_size("FusedAlternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
   if (phase1.prep_) {
-    detail::check_size("FusedAlternation::prepare: G_z columns (d)", phase1.prep_->G.rows(), Gz.cols());
-    detail::check_size("FusedAlternation::prepare: G_y columns (k)", phase1.prep_->G.cols(), Gy.cols());
+    check_size("FusedAlternation::prepare: G_z columns (d)", phase1.prep_->G.rows(), Gz.cols());
+    check_size("FusedAlternation::prepare: G_y columns (k)", phase1.prep_->G.cols(), Gy.cols());
   }
-  detail::check_finite("FusedAlternation::prepare: G_z", Gz);
-  detail::check_finite("FusedAlternation::prepare: G_y", Gy);
+  check_finite("FusedAlternation::prepare: G_z", Gz);
+  check_finite("FusedAlternation::prepare: G_y", Gy);
   ready_ = false;
   keep_inputs(Gz, Gy);
   if constexpr (std::is_same_v<Scalar, double>) {
@@ -430,9 +430,9 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
                                                  const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
                                                  Eigen::Ref<Vector<Scalar>> y) {
   if (!ready_) throw std::invalid_argument("FusedAlternation::run: not set (call set after set_constraints or prepare)");
-  detail::check_size("FusedAlternation::run: b (m)", Fb_.cols(), b.size());
-  detail::check_size("FusedAlternation::run: y (k)", Fy_.cols(), y.size());
-  detail::check_size("FusedAlternation::run: z (d)", phase1.d(), z.size());
+  check_size("FusedAlternation::run: b (m)", Fb_.cols(), b.size());
+  check_size("FusedAlternation::run: y (k)", Fy_.cols(), y.size());
+  check_size("FusedAlternation::run: z (d)", phase1.d(), z.size());
   assert(options.is_valid(nullptr));
   if (float_set_ && !options.float_products) {
     throw std::invalid_argument(

@@ -1,6 +1,6 @@
 #include "qpreduce/full_solve.h"
 
-#include "qpreduce/detail/timer.h"
+#include "qpreduce/support.h"
 
 namespace qpreduce {
 
@@ -9,12 +9,12 @@ FullSolveSummary solve_full(const SparseMatrix<Scalar>& H, const SparseMatrix<Sc
                             const Vector<Scalar>& b, const Vector<Scalar>& q, Vector<Scalar>* X,
                             const SubspaceOptions& options) {
   if (X == nullptr) throw std::invalid_argument("solve_full: output pointer is null");
-  detail::check_size("solve_full: A rows", H.rows(), A.rows());
-  detail::check_size("solve_full: b size", A.cols(), b.size());
-  detail::check_size("solve_full: q size", H.rows(), q.size());
-  detail::check_finite("solve_full: b", b);
-  detail::check_finite("solve_full: q", q);
-  const detail::Timer timer;
+  check_size("solve_full: A rows", H.rows(), A.rows());
+  check_size("solve_full: b size", A.cols(), b.size());
+  check_size("solve_full: q size", H.rows(), q.size());
+  check_finite("solve_full: b", b);
+  check_finite("solve_full: q", q);
+  const Timer timer;
   X->resize(0);
   const bool has_q = q.squaredNorm() > 0;
   SparseMatrix<Scalar> D(H.rows(), has_q ? 1 : 0);

@@ -1,3 +1,4 @@
+#include "qpreduce/support.h"
 #include "qpreduce/point_reconstruction.h"
 
 #include "simd_kernels.h"
@@ -29,9 +30,9 @@ void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Ei
   if (B.rows() % 3 != 0)
     throw std::invalid_argument(
         fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
-  detail::check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
-  detail::check_finite("reconstruct_points: w", w);
-  detail::check_finite("reconstruct_points: R", R);
+  check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
+  check_finite("reconstruct_points: w", w);
+  check_finite("reconstruct_points: R", R);
   const Index n = B.rows() / 3, p = B.cols();
   if (X_out->rows() != n) X_out->resize(n, 3);
   const float* base = B.data();

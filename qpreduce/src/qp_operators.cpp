@@ -1,4 +1,4 @@
-#include "qpreduce/detail/qp_operators.h"
+#include "qp_operators.h"
 
 #include "blas.h"
 

@@ -1,6 +1,6 @@
 #include "qpreduce/quotient.h"
 
-#include "qpreduce/detail/timer.h"
+#include "qpreduce/support.h"
 
 #include <Eigen/Dense>
 #include <fmt/format.h>
@@ -138,11 +138,11 @@ double PsdFactor::distance(const Vector<double>& x, const Vector<double>& y) con
 FactorSummary factor_psd(const Matrix<double>& H, const QuotientOptions& options, PsdFactor* out) {
   require_options(options);
   if (!out) throw std::invalid_argument("factor_psd: out must not be null");
-  detail::check_size("factor_psd: H cols", H.rows(), H.cols());
-  detail::check_finite("factor_psd: H", H);
+  check_size("factor_psd: H cols", H.rows(), H.cols());
+  check_finite("factor_psd: H", H);
   check_dense_symmetric("factor_psd: H", H, options.symmetry_tolerance);
   const ScopedThreads threads(options.threads);
-  const detail::Timer timer;
+  const Timer timer;
   *out = PsdFactor{};
   FactorSummary s;
   const Index n = H.rows();
@@ -191,16 +191,16 @@ FactorSummary factor_psd(const Matrix<double>& H, const QuotientOptions& options
 
 FactorSummary factor_psd(const SparseMatrix<double>& H, const QuotientOptions& options, PsdFactor* out) {
   require_options(options);
-  detail::check_size("factor_psd: H cols", H.rows(), H.cols());
-  detail::check_finite("factor_psd: H", H);
-  detail::check_symmetric("factor_psd: H", H, options.symmetry_tolerance);
+  check_size("factor_psd: H cols", H.rows(), H.cols());
+  check_finite("factor_psd: H", H);
+  check_symmetric("factor_psd: H", H, options.symmetry_tolerance);
   return factor_psd(MatD(H), options, out);
 }
 
 double h_distance(const SparseMatrix<double>& H, const Vector<double>& x, const Vector<double>& y) {
-  detail::check_size("h_distance: H cols", H.rows(), H.cols());
-  detail::check_size("h_distance: x size", H.rows(), x.size());
-  detail::check_size("h_distance: y size", H.rows(), y.size());
+  check_size("h_distance: H cols", H.rows(), H.cols());
+  check_size("h_distance: x size", H.rows(), x.size());
+  check_size("h_distance: y size", H.rows(), y.size());
   const VecD v = x - y;
   return std::sqrt(std::max(0.0, v.dot(H * v)));
 }
@@ -210,10 +210,10 @@ double h_distance(const SparseMatrix<double>& H, const Vector<double>& x, const 
 WhitenedDesign whiten_design(const PsdFactor& factor, const Matrix<double>& C, const Matrix<double>& D,
                              const QuotientOptions& options) {
   require_options(options);
-  detail::check_size("whiten_design: C rows", factor.n(), C.rows());
-  detail::check_size("whiten_design: D rows", factor.n(), D.rows());
-  detail::check_finite("whiten_design: C", C);
-  detail::check_finite("whiten_design: D", D);
+  check_size("whiten_design: C rows", factor.n(), C.rows());
+  check_size("whiten_design: D rows", factor.n(), D.rows());
+  check_finite("whiten_design: C", C);
+  check_finite("whiten_design: D", D);
   const ScopedThreads threads(options.threads);
   const Index r = factor.rank(), d = C.cols(), k = D.cols();
   WhitenedDesign w;
@@ -247,14 +247,14 @@ WhitenedDesign whiten_design(const PsdFactor& factor, const Matrix<double>& C, c
 
 CompanionDemand companion_demand(const PsdFactor& factor, const Matrix<double>& A, const Vector<double>& b,
                                  const Vector<double>& q, const Vector<double>& X_min) {
-  detail::check_size("companion_demand: A rows", factor.n(), A.rows());
-  detail::check_size("companion_demand: b size", A.cols(), b.size());
-  detail::check_size("companion_demand: q size", factor.n(), q.size());
-  detail::check_size("companion_demand: X_min size", factor.n(), X_min.size());
-  detail::check_finite("companion_demand: A", A);
-  detail::check_finite("companion_demand: b", b);
-  detail::check_finite("companion_demand: q", q);
-  detail::check_finite("companion_demand: X_min", X_min);
+  check_size("companion_demand: A rows", factor.n(), A.rows());
+  check_size("companion_demand: b size", A.cols(), b.size());
+  check_size("companion_demand: q size", factor.n(), q.size());
+  check_size("companion_demand: X_min size", factor.n(), X_min.size());
+  check_finite("companion_demand: A", A);
+  check_finite("companion_demand: b", b);
+  check_finite("companion_demand: q", q);
+  check_finite("companion_demand: X_min", X_min);
   CompanionDemand c;
   c.A_hat = factor.whiten(A);
   c.q_hat = factor.whiten(q);
@@ -266,8 +266,8 @@ CompanionDemand companion_demand(const PsdFactor& factor, const Matrix<double>& 
 bool companion_solution(const CompanionDemand& demand, Vector<double>* X_hat, const QuotientOptions& options) {
   require_options(options);
   const MatD& A = demand.A_hat;
-  detail::check_size("companion_solution: q_hat size", A.rows(), demand.q_hat.size());
-  detail::check_size("companion_solution: b_hat size", A.cols(), demand.b_hat.size());
+  check_size("companion_solution: q_hat size", A.rows(), demand.q_hat.size());
+  check_size("companion_solution: b_hat size", A.cols(), demand.b_hat.size());
   if (A.cols() > A.rows()) return false;
   const TruncatedSvd s = truncated_svd(A, options.basis_tolerance);
   if (s.rank < A.cols()) return false;
@@ -281,9 +281,9 @@ bool subspace_companion_solution(const WhitenedDesign& design, const CompanionDe
                                  Vector<double>* X_hat, const QuotientOptions& options) {
   require_options(options);
   const MatD& A = demand.A_hat;
-  detail::check_size("subspace_companion_solution: A_hat rows", design.I_hat.rows(), A.rows());
-  detail::check_size("subspace_companion_solution: q_hat size", A.rows(), demand.q_hat.size());
-  detail::check_size("subspace_companion_solution: b_hat size", A.cols(), demand.b_hat.size());
+  check_size("subspace_companion_solution: A_hat rows", design.I_hat.rows(), A.rows());
+  check_size("subspace_companion_solution: q_hat size", A.rows(), demand.q_hat.size());
+  check_size("subspace_companion_solution: b_hat size", A.cols(), demand.b_hat.size());
   if (A.cols() > A.rows()) return false;
   const MatD Ap = design.I_hat * A;
   const TruncatedSvd s = truncated_svd(Ap, options.basis_tolerance, spectral_norm(A));
@@ -301,9 +301,9 @@ TheoremBound theorem_bound(const WhitenedDesign& design, const CompanionDemand& 
   require_options(options);
   const MatD& A = demand.A_hat;
   const Index r = A.rows(), m = A.cols();
-  detail::check_size("theorem_bound: A_hat rows", design.I_hat.rows(), r);
-  detail::check_size("theorem_bound: q_hat size", r, demand.q_hat.size());
-  detail::check_size("theorem_bound: b_hat size", m, demand.b_hat.size());
+  check_size("theorem_bound: A_hat rows", design.I_hat.rows(), r);
+  check_size("theorem_bound: q_hat size", r, demand.q_hat.size());
+  check_size("theorem_bound: b_hat size", m, demand.b_hat.size());
   const ScopedThreads threads(options.threads);
   TheoremBound t;
   t.r = r;
@@ -374,13 +374,13 @@ double TheoremCheck::eta() const { return practical_error > 0.0 ? bound.bound / 
 TheoremSetupSummary TheoremChecker::precompute(const SparseMatrix<double>& H, const SparseMatrix<double>& C,
                                                const SparseMatrix<double>& D, const QuotientOptions& options) {
   require_options(options);
-  detail::check_size("TheoremChecker::precompute: H cols", H.rows(), H.cols());
-  detail::check_size("TheoremChecker::precompute: C rows", H.rows(), C.rows());
-  detail::check_size("TheoremChecker::precompute: D rows", H.rows(), D.rows());
-  detail::check_finite("TheoremChecker::precompute: C", C);
-  detail::check_finite("TheoremChecker::precompute: D", D);
+  check_size("TheoremChecker::precompute: H cols", H.rows(), H.cols());
+  check_size("TheoremChecker::precompute: C rows", H.rows(), C.rows());
+  check_size("TheoremChecker::precompute: D rows", H.rows(), D.rows());
+  check_finite("TheoremChecker::precompute: C", C);
+  check_finite("TheoremChecker::precompute: D", D);
   const ScopedThreads threads(options.threads);
-  const detail::Timer timer;
+  const Timer timer;
   ready_ = false;
   options_ = options;
   TheoremSetupSummary s;
@@ -413,14 +413,14 @@ TheoremCheck TheoremChecker::check(const SparseMatrix<double>& A, const Vector<d
                                    TheoremSolutions* solutions) {
   if (!ready_) throw std::invalid_argument("TheoremChecker::check: called before a successful precompute");
   const Index n = H_.rows(), m = A.cols();
-  detail::check_size("TheoremChecker::check: A rows", n, A.rows());
-  detail::check_size("TheoremChecker::check: b size", m, b.size());
-  detail::check_size("TheoremChecker::check: q size", n, q.size());
-  detail::check_finite("TheoremChecker::check: A", A);
-  detail::check_finite("TheoremChecker::check: b", b);
-  detail::check_finite("TheoremChecker::check: q", q);
+  check_size("TheoremChecker::check: A rows", n, A.rows());
+  check_size("TheoremChecker::check: b size", m, b.size());
+  check_size("TheoremChecker::check: q size", n, q.size());
+  check_finite("TheoremChecker::check: A", A);
+  check_finite("TheoremChecker::check: b", b);
+  check_finite("TheoremChecker::check: q", q);
   const ScopedThreads threads(options_.threads);
-  const detail::Timer timer;
+  const Timer timer;
   TheoremCheck out;
   auto fail = [&](std::string message) {
     out.status = TheoremStatus::SolveFailed;

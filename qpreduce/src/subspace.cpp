@@ -4,8 +4,8 @@
 #include "simd_kernels.h"
 #include "subspace_internal.h"
 
-#include "qpreduce/detail/dense.h"
-#include "qpreduce/detail/timer.h"
+#include "dense.h"
+#include "qpreduce/support.h"
 
 #include <Eigen/Eigenvalues>
 #include <fmt/format.h>
@@ -250,21 +250,21 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
   if (!options.is_valid(&why)) throw std::invalid_argument("SubspaceOptions: " + why);
   if (out == nullptr) throw std::invalid_argument("build_subspace: output pointer is null");
   const Index n = H_in.rows();
-  detail::check_size("build_subspace: H columns (H must be square)", n, H_in.cols());
-  detail::check_size("build_subspace: C rows", n, C_in.rows());
-  detail::check_size("build_subspace: D rows", n, D_in.rows());
+  check_size("build_subspace: H columns (H must be square)", n, H_in.cols());
+  check_size("build_subspace: C rows", n, C_in.rows());
+  check_size("build_subspace: D rows", n, D_in.rows());
   if (n == 0) throw std::invalid_argument("build_subspace: H is empty");
   if (C_in.cols() == 0) throw std::invalid_argument("build_subspace: C has no columns (d = 0)");
   if (C_in.cols() > n) {
     throw std::invalid_argument(fmt::format("build_subspace: C has more columns ({}) than rows ({})",
                                             C_in.cols(), n));
   }
-  detail::check_finite("build_subspace: H", H_in);
-  detail::check_finite("build_subspace: C", C_in);
-  detail::check_finite("build_subspace: D", D_in);
-  detail::check_symmetric("build_subspace: H", H_in, options.symmetry_tolerance);
+  check_finite("build_subspace: H", H_in);
+  check_finite("build_subspace: C", C_in);
+  check_finite("build_subspace: D", D_in);
+  check_symmetric("build_subspace: H", H_in, options.symmetry_tolerance);
   if (!options.ordering_groups.empty()) {
-    detail::check_size("SubspaceOptions::ordering_groups size (one group per unknown)", n,
+    check_size("SubspaceOptions::ordering_groups size (one group per unknown)", n,
                        static_cast<Index>(options.ordering_groups.size()));
     for (Index g : options.ordering_groups) {
       if (g < 0) throw std::invalid_argument(fmt::format("SubspaceOptions::ordering_groups: negative group {}", g));
@@ -280,7 +280,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
   out->N.resize(0, 0);
   out->UD.resize(0, 0);
   if (extras) *extras = SubspaceExtras{};
-  const detail::Timer total;
+  const Timer total;
   SubspaceSummary summary;
   const Index d = C_in.cols(), k = D_in.cols();
   summary.n = n;
@@ -325,7 +325,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
   std::string psd_message;
   auto factor_psd_check = [&]() {
     if (psd_by_factor) return *psd_by_factor;
-    const detail::Timer t;
+    const Timer t;
     SpD shifted = H;
     SpD I(n, n);
     I.setIdentity();
@@ -382,7 +382,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
     }
     SpD Hrho = SpD(H + summary.rho * (Cp * Cp.transpose())).pruned();
 
-    detail::Timer t;
+    Timer t;
     auto factor = make_factorization(spd_backend);
     factor->setOrderingGroups(options.ordering_groups);
     factor->compute(Hrho);
@@ -404,7 +404,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
     // the n × p solution make the build's memory peak.
     const double hrho_bound = gershgorin_bound(Hrho);
     Hrho = SpD();
-    detail::release_free_heap();  // and the analysis's workspace (METIS graphs)
+    release_free_heap();  // and the analysis's workspace (METIS graphs)
 
     // G = H_ρ⁻¹C and F = H_ρ⁻¹D, solved in place in the output storage.
     t.reset();
@@ -438,7 +438,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
     // check asks. Only when the certificate fails is the factorization run.
     // Without augmentation H itself was factored as SPD: nothing to certify.
     if (options.check_psd && !options.psd_check_by_factorization && !aug.empty()) {
-      const detail::Timer tc;
+      const Timer tc;
       MatD T(aug.size(), aug.size());
       for (size_t a = 0; a < aug.size(); ++a)
         for (size_t b = 0; b < aug.size(); ++b) T(a, b) = summary.rho * S(aug[a], aug[b]);
@@ -468,7 +468,7 @@ SubspaceSummary build_subspace_with_extras(const SparseMatrix<Scalar>& H_in, con
       }
     }
   } else {
-    detail::Timer t;
+    Timer t;
     const SpD K = kkt_matrix(H, C);
     auto factor = make_factorization(Backend::SparseLU);
     factor->compute(K);

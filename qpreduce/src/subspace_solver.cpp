@@ -5,8 +5,8 @@
 #include "simd_kernels.h"
 #include "subspace_internal.h"
 
-#include "qpreduce/detail/qp_operators.h"
-#include "qpreduce/detail/timer.h"
+#include "qp_operators.h"
+#include "qpreduce/support.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
@@ -119,16 +119,16 @@ void SubspaceSolver<Scalar>::restore(VariationalSubspace<Scalar> subspace, Matri
   ready_ = constrained_ = false;
   const Index n = subspace.N.rows(), d = subspace.N.cols(), k = subspace.UD.cols();
   const Index p = d + k;
-  detail::check_size("SubspaceSolver::restore: UD rows", n, subspace.UD.rows());
-  detail::check_size("SubspaceSolver::restore: H_r rows", p, Hr.rows());
-  detail::check_size("SubspaceSolver::restore: H_r cols", p, Hr.cols());
-  detail::check_size("SubspaceSolver::restore: BᵀD rows", p, BtD.rows());
-  detail::check_size("SubspaceSolver::restore: BᵀD cols", k, BtD.cols());
+  check_size("SubspaceSolver::restore: UD rows", n, subspace.UD.rows());
+  check_size("SubspaceSolver::restore: H_r rows", p, Hr.rows());
+  check_size("SubspaceSolver::restore: H_r cols", p, Hr.cols());
+  check_size("SubspaceSolver::restore: BᵀD rows", p, BtD.rows());
+  check_size("SubspaceSolver::restore: BᵀD cols", k, BtD.cols());
   if (d == 0) throw std::invalid_argument("SubspaceSolver::restore: N has no columns");
-  detail::check_finite("SubspaceSolver::restore: N", subspace.N);
-  detail::check_finite("SubspaceSolver::restore: UD", subspace.UD);
-  detail::check_finite("SubspaceSolver::restore: H_r", Hr);
-  detail::check_finite("SubspaceSolver::restore: BᵀD", BtD);
+  check_finite("SubspaceSolver::restore: N", subspace.N);
+  check_finite("SubspaceSolver::restore: UD", subspace.UD);
+  check_finite("SubspaceSolver::restore: H_r", Hr);
+  check_finite("SubspaceSolver::restore: BᵀD", BtD);
   const double asym = (Hr - Hr.transpose()).norm();
   if (asym > 1e-12 * std::max(1.0, Hr.norm())) {
     throw std::invalid_argument(fmt::format("SubspaceSolver::restore: H_r is not symmetric (‖H_r − H_rᵀ‖ = {:.3e})",
@@ -185,9 +185,9 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Sca
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
   require_ready("SubspaceSolver::set_constraints");
-  detail::check_size("SubspaceSolver::set_constraints: A rows", n_, A.rows());
-  detail::check_finite("SubspaceSolver::set_constraints: A", A);
-  const detail::Timer timer;
+  check_size("SubspaceSolver::set_constraints: A rows", n_, A.rows());
+  check_finite("SubspaceSolver::set_constraints: A", A);
+  const Timer timer;
   const detail::ScopedOmpThreads threads(options.threads);
   constrained_ = false;
   const Index d = this->d(), k = this->k(), p = d + k, m = A.cols();
@@ -216,9 +216,9 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints_in_design(const Matrix
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
   require_ready("SubspaceSolver::set_constraints_in_design");
-  detail::check_size("SubspaceSolver::set_constraints_in_design: A_c rows", d(), A_c.rows());
-  detail::check_finite("SubspaceSolver::set_constraints_in_design: A_c", A_c);
-  const detail::Timer timer;
+  check_size("SubspaceSolver::set_constraints_in_design: A_c rows", d(), A_c.rows());
+  check_finite("SubspaceSolver::set_constraints_in_design: A_c", A_c);
+  const Timer timer;
   const detail::ScopedOmpThreads threads(options.threads);
   constrained_ = false;
   // A_r = A_cᵀ·Cᵀ[N UD] = [A_cᵀ 0]: CᵀN = I and CᵀUD = 0 (Eq. 4, second row).
@@ -312,8 +312,8 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
 template <typename Scalar>
 void SubspaceSolver<Scalar>::reduce_linear_term(const ConstRef& q, Ref q_r) const {
   require_ready("SubspaceSolver::reduce_linear_term");
-  detail::check_size("SubspaceSolver::reduce_linear_term: q size", n_, q.size());
-  detail::check_size("SubspaceSolver::reduce_linear_term: q_r size", p(), q_r.size());
+  check_size("SubspaceSolver::reduce_linear_term: q size", n_, q.size());
+  check_size("SubspaceSolver::reduce_linear_term: q_r size", p(), q_r.size());
   // Column dot products, OpenMP over column blocks of the basis.
   const Index d = this->d(), p = this->p();
   constexpr Index kCols = 8;
@@ -328,8 +328,8 @@ void SubspaceSolver<Scalar>::reduce_linear_term(const ConstRef& q, Ref q_r) cons
 template <typename Scalar>
 void SubspaceSolver<Scalar>::reduce_linear_term_in_D(const ConstRef& Y, Ref q_r) const {
   require_ready("SubspaceSolver::reduce_linear_term_in_D");
-  detail::check_size("SubspaceSolver::reduce_linear_term_in_D: Y size", k(), Y.size());
-  detail::check_size("SubspaceSolver::reduce_linear_term_in_D: q_r size", p(), q_r.size());
+  check_size("SubspaceSolver::reduce_linear_term_in_D: Y size", k(), Y.size());
+  check_size("SubspaceSolver::reduce_linear_term_in_D: q_r size", p(), q_r.size());
   q_r.noalias() = BtD_ * Y;
 }
 
@@ -386,8 +386,8 @@ void SubspaceSolver<Scalar>::solve_in_D(const ConstRef& b, const ConstRef& Y, Re
 template <typename Scalar>
 void SubspaceSolver<Scalar>::reconstruct(const ConstRef& w, Ref X) const {
   require_ready("SubspaceSolver::reconstruct");
-  detail::check_size("SubspaceSolver::reconstruct: w size", p(), w.size());
-  detail::check_size("SubspaceSolver::reconstruct: X size", n_, X.size());
+  check_size("SubspaceSolver::reconstruct: w size", p(), w.size());
+  check_size("SubspaceSolver::reconstruct: X size", n_, X.size());
   // Row blocks, OpenMP: X_r = N_r·z + UD_r·y.
   const Index d = this->d(), k = this->k();
   const Index blocks = (n_ + kReconstructRows - 1) / kReconstructRows;

@@ -2,7 +2,7 @@
 #include <catch2/catch.hpp>
 
 #include "qpreduce/alternating.h"
-#include "qpreduce/generators.h"
+#include "qpreduce/problems/generators.h"
 
 #include <Eigen/Dense>
 

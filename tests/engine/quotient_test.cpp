@@ -3,7 +3,7 @@
 // and the error bound on seeded trials (generators::theorem_problem).
 #include <catch2/catch.hpp>
 
-#include "qpreduce/generators.h"
+#include "qpreduce/problems/generators.h"
 #include "qpreduce/quotient.h"
 
 #include <Eigen/Dense>

@@ -4,7 +4,7 @@
 
 #include "qpreduce/factorization.h"
 #include "qpreduce/full_solve.h"
-#include "qpreduce/generators.h"
+#include "qpreduce/problems/generators.h"
 #include "qpreduce/subspace_solver.h"
 
 #include <Eigen/Dense>

@@ -9,8 +9,8 @@
 #include <renderer.h>
 #include <session.h>
 
-#include <qpreduce/deform/geometry.h>
-#include <qpreduce/deform/shapes.h>
+#include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/mesh/shapes.h>
 
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>

@@ -5,12 +5,12 @@
 //   * `std::invalid_argument` at the API boundary, with "expected N, got M";
 //   * numerical outcomes (not positive definite, rank deficient, infeasible)
 //     as a `Status` plus a message in a summary struct, never a silent zero.
+// The argument checks themselves are in support.h.
 #pragma once
 
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
-#include <stdexcept>
 #include <string>
 
 namespace qpreduce {
@@ -54,33 +54,4 @@ inline bool usable(Status status) {
   return status == Status::Success || status == Status::ConstraintsLeastSquares;
 }
 
-namespace detail {
-
-// Throws std::invalid_argument("<what>: expected <expected>, got <got>").
-void check_size(const char* what, Index expected, Index got);
-// Throws std::invalid_argument when any stored entry is NaN or infinite.
-template <typename Derived>
-void check_finite(const char* what, const Eigen::MatrixBase<Derived>& m) {
-  if (!m.allFinite()) {
-    throw std::invalid_argument(std::string(what) + ": contains NaN or infinite entries");
-  }
-}
-template <typename Scalar>
-void check_finite(const char* what, const SparseMatrix<Scalar>& m) {
-  const Eigen::Map<const Vector<Scalar>> values(m.valuePtr(), m.nonZeros());
-  if (!values.allFinite()) {
-    throw std::invalid_argument(std::string(what) + ": contains NaN or infinite entries");
-  }
-}
-// Throws when ‖H − Hᵀ‖_F > tolerance·‖H‖_F.
-template <typename Scalar>
-void check_symmetric(const char* what, const SparseMatrix<Scalar>& H, double tolerance);
-
-// Hands the heap's free memory back to the system (glibc's malloc_trim; a
-// no-op elsewhere). glibc keeps freed blocks that lie below live ones, so the
-// temporaries of one phase of a large precompute (assembly, symbolic
-// analysis) would otherwise stay resident under the next phase's peak.
-void release_free_heap();
-
-}  // namespace detail
 }  // namespace qpreduce

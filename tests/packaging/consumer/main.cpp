@@ -1,10 +1,16 @@
-// Builds against the installed headers and library; solves one tiny demand.
-#include <qpreduce/generators.h>
+// Builds against the installed headers and libraries without Ceres: solves
+// one tiny demand with the engine, and deforms a built-in shape.
+#include <qpreduce/deform/deformer/deformer.h>
+#include <qpreduce/deform/mesh/shapes.h>
+#include <qpreduce/problems/generators.h>
 #include <qpreduce/subspace_solver.h>
 
+#include <cmath>
 #include <cstdio>
 
-int main() {
+namespace {
+
+int engine_demand() {
   using namespace qpreduce;
   const SparseMatrix<double> H = generators::grid_laplacian_2d(10, 10);
   const SparseMatrix<double> C = generators::selection(100, {0, 45, 99});
@@ -23,6 +29,35 @@ int main() {
   solver.reconstruct(w, X);
   // Hard constraints hold exactly (up to round-off) at the selected vertices.
   const double err = std::abs(X(0) - 1.0) + std::abs(X(45) - 2.0) + std::abs(X(99) - 3.0);
-  std::printf("consumer: qpreduce package OK (constraint error %.2e)\n", err);
+  std::printf("consumer: engine OK (constraint error %.2e)\n", err);
   return err < 1e-10 ? 0 : 1;
 }
+
+int deformer_frame() {
+  using namespace qpreduce::deform;
+  const TriangleMesh mesh = shapes::capped_cylinder(0.5, 2.0, 12, 8);
+  DeformableModel model;
+  model.V = mesh.V;
+  model.F = mesh.F;
+  DeformerOptions options;
+  options.rotational_proxies = 4;
+  options.linear_proxies = 4;
+  Deformer deformer;
+  if (!deformer.precompute(model, options).ok()) return 1;
+  Handles handles;
+  handles.points = {PointHandle{{0}, {}}, PointHandle{{model.V.rows() - 1}, {}}};
+  if (!deformer.set_handles(handles).ok()) return 1;
+  HandleTargets targets;
+  targets.points.resize(2, 3);
+  targets.points.row(0) = model.V.row(0);
+  targets.points.row(1) = model.V.row(model.V.rows() - 1) + Eigen::RowVector3d(0.1, 0.0, 0.0);
+  Vertices out;
+  deformer.frame(targets, &out);
+  const double err = (out.row(0) - targets.points.row(0)).norm();
+  std::printf("consumer: deformer OK (handle error %.2e)\n", err);
+  return out.allFinite() && err < 1e-4 ? 0 : 1;
+}
+
+}  // namespace
+
+int main() { return engine_demand() + deformer_frame(); }

@@ -1,0 +1,207 @@
+// qpreduce::deform — the reduced ARAP deformer session (paper Section 3.2):
+// precompute → set handles (on-site preconditioning, "OP") → frames.
+//
+// Unknowns. Vertices split into free ones and affine patches (Appendix,
+// Eq. 47): a vertex of patch s moves as v′ = t_s·v + d_s. The control layer
+// is u = [V′_free (3·n_free); for each patch s: t_s row-major (9), d_s (3)],
+// and V′ = P·u with P (3n × n_u) sparse. With Q eliminated (arap_energy.h)
+// the energy in u is
+//     E(u, S) = ½ uᵀ(PᵀHP)u − Sᵀ(PᵀD_s)ᵀu + c(S).
+// The engine builds the variational subspace (Eq. 14–15) of
+//     H_u = PᵀHP (n_u × n_u),  C = [Pᵀ(Ŵ ⊗ I₃)ᵀ | patch selections] (n_u × (3m + 12s)),
+//     D = PᵀD_s (n_u × 9d),
+// so u = N·X + UD·S with X the linear proxies (3 per proxy, 12 per patch) and S
+// the rotational proxies (9 per cluster). Only V′ = P·[N UD] is kept for
+// reconstruction, in float, row-interleaved (3n × (3m + 12s + 9d)).
+//
+// The energy and the Phase 2 projection come from a DeformationModel
+// (model.h, the plugin contract): ARAP by default, conformal-like, or a
+// custom one. When the model's L_QQ is not block diagonal (γ > 0), Q is not
+// eliminated: u gets 4r more unknowns [.., Q], P has zero columns for them,
+// and the engine factors that larger system once.
+//
+// Per frame, k rounds of
+//   Phase 1 (Eq. 17): X = M_b·b + M_S·S   (engine FixedCoordinateSolver), and
+//   Phase 2 (Eq. 19): S = the model's projection of G = M_N·X + M_U·S with
+//                     M_N = D_Vᵀ·P·N, M_U = D_Vᵀ·P·UD (9d × ·, precomputed)
+//                     (ARAP: s_i = nearest rotation of G_i),
+// warm-started from the previous frame, with the global rotation adaptation
+// of the appendix: r₀ = nearest rotation of Σ_i a_i s_i is factored out before
+// the rounds (targets and S rotated by r₀ᵀ) and put back after.
+#pragma once
+
+#include "qpreduce/deform/energy/arap_energy.h"
+#include "qpreduce/deform/mesh/mesh.h"
+#include "qpreduce/deform/energy/model.h"
+#include "qpreduce/deform/proxies/proxies.h"
+#include "qpreduce/deform/deformer/handles.h"
+
+#include <qpreduce/alternating.h>
+#include <qpreduce/subspace_solver.h>
+
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace qpreduce::deform {
+
+// The built-in models of model.h.
+enum class ModelKind { Arap, Conformal };
+
+struct DeformerOptions {
+  EnergyParameters energy;
+  // The deformation model (plugin contract, model.h): ARAP (rotations) or
+  // conformal-like (scaled rotations within [1/conformal_bound,
+  // conformal_bound], Eq. 48–49), both over the energy E′ of `energy`.
+  ModelKind model = ModelKind::Arap;
+  // ψ_max of the conformal model (> 1). 2 lets a cluster shrink to half or
+  // grow to twice its size: enough for the uniform scalings of the paper's
+  // Fig. 10 setting, while keeping ψ from running away where few handles
+  // leave a region unconstrained.
+  double conformal_bound = 2.0;
+  // A model of your own (docs/plugins.md); when set, it replaces `model` and
+  // `energy`.
+  std::shared_ptr<const DeformationModel> custom_model;
+  // Automatic proxy counts, used when the model does not give them. The
+  // paper's Table 1 uses 20–60 of each; 27 rotational clusters and 33 linear
+  // proxies are its Cactus/Bumpy Plane setting.
+  Index rotational_proxies = 27;
+  Index linear_proxies = 33;
+  ClusterOptions clustering;
+  // Rounds of Phase 1/Phase 2 per frame (the paper uses 8).
+  int iterations = 8;
+  // Factor out a global rotation each frame (appendix "Global rotation adaptation").
+  bool global_rotation = true;
+  // Phase 2 inputs from a float product in each round
+  // (AlternatingOptions::float_products); the handles still hold to double
+  // precision. false: every round in double.
+  bool float_rounds = true;
+  // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
+  // split the clusters when the model's Phase 2 is cluster-separable (γ = 0)
+  // and 9d ≥ 256; 0: omp_get_max_threads(). Serial by default: a round is
+  // ~10–40 µs with a barrier, and while another process held one of two
+  // cores a round took ~5 ms (a scheduler quantum); on an otherwise idle
+  // machine it still did not pay on most models (docs/performance.md, "OP
+  // after the factored Phase 1 operators …"). The reconstruction always uses
+  // all threads.
+  int round_threads = 1;
+  SubspaceOptions subspace;
+
+  bool is_valid(std::string* why) const;
+  // The model these options select: custom_model, or make_arap_model(energy),
+  // or make_conformal_model(energy, conformal_bound).
+  std::shared_ptr<const DeformationModel> resolve_model() const;
+};
+
+// Called during precompute with a stage name and the overall fraction done.
+using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
+
+struct PrecomputeSummary {
+  Status status = Status::NotRun;
+  std::string message;
+  Index vertices = 0, elements = 0, rotational_proxies = 0, linear_proxies = 0, patches = 0;
+  Index reduced_size = 0;  // 3m + 12s + 9d
+  SubspaceSummary subspace;
+  double clustering_seconds = 0.0, assembly_seconds = 0.0, subspace_seconds = 0.0, reduction_seconds = 0.0,
+         total_seconds = 0.0;
+
+  bool ok() const { return status == Status::Success; }
+};
+
+struct FrameSummary {
+  int iterations = 0;
+  double last_change = 0.0;        // ‖ΔS‖ of the last Phase 2
+  double solve_seconds = 0.0;      // the alternating rounds
+  double reconstruct_seconds = 0.0;
+  double total_seconds = 0.0;
+};
+
+class Deformer {
+ public:
+  Deformer();
+  ~Deformer();
+  Deformer(Deformer&&) noexcept;
+  Deformer& operator=(Deformer&&) noexcept;
+
+  // Throws std::invalid_argument on an invalid model or options (sizes,
+  // labels out of range, degenerate elements, a component without a linear
+  // proxy or patch). Numerical failures come back in the summary.
+  PrecomputeSummary precompute(const DeformableModel& model, const DeformerOptions& options = {},
+                               const ProgressFn& progress = {});
+
+  // Writes the precomputed model to `path` (binary, versioned, CRC-32
+  // checked; layout in docs/formats.md), through a temporary file renamed at
+  // the end so an existing cache is never left half-written. Throws IoError
+  // when the file cannot be written, std::invalid_argument before precompute.
+  void save(const std::string& path) const;
+
+  // Reads a model written by save() instead of precomputing it. `model` and
+  // `options` must be what precompute was given: the file keeps them and
+  // load compares (rest positions, elements, patches, given proxies, energy
+  // and proxy options); the runtime options (iterations, global_rotation)
+  // are taken from `options`. Throws IoError naming the file and the problem
+  // for a missing, truncated or corrupted file, another format version, or a
+  // cache made from other inputs; the session is then left as it was.
+  PrecomputeSummary load(const std::string& path, const DeformableModel& model, const DeformerOptions& options = {});
+
+  // The on-site step: forms the reduced constraint operators for this handle
+  // set. Fixed patches are always included. Cost independent of n (a few rows
+  // of the subspace per handle).
+  ConstraintSummary set_handles(const Handles& handles, const ConstraintOptions& options = {});
+
+  // One frame: alternation warm-started from the previous frame, then
+  // reconstruction into *out (n × 3, resized once). With out == nullptr the
+  // reconstruction is left to the caller (e.g. a GPU, paper Fig. 5 step 5):
+  // V′ = r₀·(B·w) with B = reconstruction_basis(), w = reduced_coordinates(),
+  // r₀ = global_rotation().
+  FrameSummary frame(const HandleTargets& targets, Vertices* out);
+
+  // Back to the rest rotations (S = identity, r₀ = identity).
+  void reset_pose();
+  // Changes DeformerOptions::round_threads for the following frames (≥ 0).
+  void set_round_threads(int threads);
+
+  bool ready() const;
+  Index vertex_count() const;
+  Index rotational_proxies() const;
+  Index linear_proxies() const;
+  Index patch_count() const;
+  Index handle_rows() const;  // constraint rows of the current handle set
+  const std::vector<int>& clusters() const;          // per rotation element
+  const std::vector<int>& patch_of_vertex() const;
+  const RotationElements& elements() const;
+  const Eigen::VectorXd& rotations() const;  // S, 9d (world frame)
+  // The transform [t_s | d_s] (world frame) of patch p after the last frame:
+  // its vertices are at t_s·v + d_s (up to the float reconstruction). Rigid
+  // patches have t_s ∈ SO(3), Fixed ones the identity.
+  Eigen::Matrix<double, 3, 4> patch_transform(Index p) const;
+  // ψ_a = det(s_a)^(1/3) per cluster (1 for rotations; the conformal scale).
+  Eigen::VectorXd cluster_scales() const;
+  // The model in use (name(), parameters()); null before precompute.
+  const std::shared_ptr<const DeformationModel>& model() const;
+  const Eigen::Matrix3d& global_rotation() const;
+  // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
+  // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
+  // Empty before precompute.
+  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
+  // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
+  // and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
+  // cluster, each 3 × 3 column-major). Valid after the first frame().
+  const Eigen::VectorXf& reduced_coordinates() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// Builds the model, handles and targets of a Botsch–Sorkine scenario: `sel`
+// (0 fixed, 1 free, 2 handle) gives a Fixed patch and an Affine handle patch
+// whose transform is `def` (4 × 4, column vectors).
+struct SelDefScenario {
+  Handles handles;
+  HandleTargets targets;
+};
+SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableModel* model);
+
+}  // namespace qpreduce::deform

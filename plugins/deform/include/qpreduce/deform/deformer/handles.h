@@ -1,0 +1,69 @@
+// qpreduce::deform — what the deformer is given: the mesh with its proxies
+// and affine patches, the handle set of the on-site step, and the targets of
+// one frame.
+#pragma once
+
+#include "qpreduce/deform/mesh/mesh.h"
+#include "qpreduce/deform/proxies/proxies.h"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace qpreduce::deform {
+
+// A region whose vertices move together: Fixed (stay at rest), Rigid (one
+// rotation + translation), Affine (one affine map, paper Eq. 47).
+enum class PatchType { Fixed, Rigid, Affine };
+
+// What precompute needs. Exactly one of F (surface) and T (solid) is set.
+struct DeformableModel {
+  Vertices V;    // n × 3 rest positions
+  Triangles F;   // surface triangles, or empty
+  Tetrahedra T;  // tetrahedra, or empty
+  // Rotational cluster per rotation element (vertices for surfaces, tets for
+  // solids). Empty: computed (rotation_clusters, DeformerOptions::rotational_proxies).
+  std::vector<int> clusters;
+  // Linear proxies. Empty (count() == 0): farthest-point samples
+  // (DeformerOptions::linear_proxies). Vertices inside patches are dropped
+  // from the groups (a patch has its own 12 proxies).
+  LinearProxies linear;
+  // Affine patches (Eq. 47): patch_of_vertex has n entries, −1 for a free
+  // vertex, else the patch index in [0, patch_types.size()). Fixed patches
+  // are constrained to the rest pose at every frame; Rigid and Affine patches
+  // move with their own transform (prescribed by a handle, or free).
+  std::vector<int> patch_of_vertex;
+  std::vector<PatchType> patch_types;
+
+  bool is_tet() const { return T.rows() > 0; }
+};
+
+// A point handle: one vertex, or the weighted point Σ w_i v_i of a group.
+struct PointHandle {
+  std::vector<Index> vertices;
+  std::vector<double> weights;  // empty: a single vertex (vertices.size() == 1)
+};
+
+// The handle set of the on-site step.
+struct Handles {
+  std::vector<PointHandle> points;
+  // Non-fixed patches whose transform is prescribed each frame (a Rigid
+  // patch's must be a rotation). A Rigid patch not listed here moves with
+  // its own cluster's rotation (t_s = s_c), found by Phase 2.
+  std::vector<Index> patches;
+};
+
+// Targets of one frame, matching the Handles given to set_handles.
+struct HandleTargets {
+  Vertices points;  // one row per point handle
+  // One per prescribed patch: p ↦ A·p + t, stored as [A | t] (3 × 4).
+  std::vector<Eigen::Matrix<double, 3, 4>> patch_transforms;
+};
+
+// Largest distance between where the handles are in `deformed` (n × 3) and
+// where `targets` put them: point handles by their weighted point, patch
+// handles by every vertex of the patch, Fixed patches by every vertex at rest.
+double handle_residual(const DeformableModel& model, const Handles& handles, const HandleTargets& targets,
+                       const Vertices& deformed);
+
+}  // namespace qpreduce::deform

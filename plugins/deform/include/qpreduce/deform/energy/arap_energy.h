@@ -1,0 +1,145 @@
+// qpreduce::deform — ARAP energies (paper Section 3.1, Eq. 6–10).
+//
+// Rotation elements. The ARAP energy (Eq. 6) is
+//     E(V′, R) = ½ Σ_k Σ_{(i,j)∈G_k} c_ijk ‖(v′_i − v′_j) − r_k (v_i − v_j)‖²,
+// one rotation r_k per element k with edge set G_k and weights c_ijk:
+//   * surfaces, spokes-and-rims (Chao et al. 2010): one element per VERTEX k;
+//     G_k = the three edges of every triangle incident to k, each with
+//     c = ½ cot(angle opposite the edge in that triangle);
+//   * tets, elements: one element per TET; G_k = its six edges, each with
+//     c = (1/6)·ℓ_opp·cot θ_opp (ℓ_opp the length of the opposite edge, θ_opp
+//     the dihedral angle there).
+// Weights are unclamped (as CGAL's default), so obtuse elements give negative c.
+// The element measure a_k is the barycentric vertex area (surfaces) or the
+// tet volume; the element normal n_k is the area-weighted vertex normal
+// (surfaces only).
+//
+// Modified energy E′ (Eq. 8–10). Each rotation is split r_k ≈ s_{i_k} + q_k:
+// s_i ∈ SO(3) one per rotational cluster i (the rotational proxies S), and the
+// linearised correction (Eq. 9)
+//     q_k = q0·I + [ω]_×,   ω = (q1, q2, q3),   so q_k·e = q0·e + ω × e = J(e)·Q_k,
+//     J(e) = [e, −[e]_×] (3×4), Q_k = (q0, q1, q2, q3),
+// penalised by α·a_k‖q_k‖²_F = α·a_k(3q0² + 2‖ω‖²) and
+// β·a_k‖q_k n_k‖² = β·a_k(q0² + ‖ω‖² − (ω·n_k)²) (β surfaces only).
+//
+// Moving-frame penalty (Eq. 11), optional (γ > 0):
+//     γ·Σ_{(k,j)∈H} a_kj‖s_{i_k} + q_k − s_{i_j} − q_j‖²_F,   a_kj = (a_k + a_j)/2,
+// over neighbouring elements H (element_neighbours): vertices joined by an
+// edge (surfaces), tets sharing a face (solids). With d_0 = I, d_1..3 = [e_a]×
+// (⟨d_a, d_b⟩ = diag(3, 2, 2, 2)) it couples Q_k with Q_j, S with Q, and the
+// cluster rotations s_a, s_b of neighbouring elements in different clusters.
+//
+// Layout. Unknowns u = [V′; Q]: V′ is 3n with vertex i at rows 3i..3i+2 (x,
+// y, z interleaved), Q is 4r with element k at rows 3n + 4k..3n + 4k + 3.
+// Rotational proxies S are 9d: cluster i at 9i + 3c + r holds s_i(r, c)
+// (column-major). Then
+//     E′(u, S) = ½ uᵀ L u − Sᵀ Dᵀ u + ½ Sᵀ N S           (exactly, no constant)
+//     L: (3n + 4r)² symmetric PSD,  D: (3n + 4r) × 9d,  N: 9d × 9d,
+// i.e. the linear term is q = D·S (the engine's "D" design space), and the
+// joint Hessian [[L, −D], [−Dᵀ, N]] of (u, S) is symmetric PSD (E′ is a sum
+// of squares). N = ½Σ c‖s e‖²'s Hessian plus γ's s–s coupling; it does not
+// enter Phase 1.
+//
+// Eliminating Q. Without γ, L_QQ is block diagonal (one 4×4 SPD block per
+// element when α > 0), so Q can be minimised out element by element (DESIGN
+// choice 3); with γ > 0 it is not, and Q stays an unknown of the factored system:
+//     H = L_VV − L_VQ L_QQ⁻¹ L_QV   (3n × 3n, PSD, null space = translations),
+//     D_s = D_V − L_VQ L_QQ⁻¹ D_Q   (3n × 9d).
+// The minimum of E′ over Q for fixed (V′, S) is
+//     ½V′ᵀHV′ − SᵀD_sᵀV′ − ½(D_Q S)ᵀL_QQ⁻¹(D_Q S) + c(S),
+// where the last two terms depend on S only (they do not enter Phase 1).
+#pragma once
+
+#include "qpreduce/deform/mesh/mesh.h"
+
+#include <qpreduce/common.h>
+
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace qpreduce::deform {
+
+struct RotationElements {
+  // Edges of element k are [offsets[k], offsets[k+1]).
+  std::vector<Index> offsets{0};
+  std::vector<int> edge_i, edge_j;
+  std::vector<double> weight;      // c_ijk
+  Eigen::VectorXd measure;         // a_k, r entries
+  Vertices normal;                 // r × 3 unit normals (surfaces), empty for tets
+  bool is_surface = true;
+
+  Index size() const { return static_cast<Index>(offsets.size()) - 1; }
+};
+
+// Spokes-and-rims elements of a triangle mesh (one per vertex). Unreferenced
+// vertices get an element with no edges and zero measure.
+RotationElements spokes_and_rims_elements(const Vertices& V, const Triangles& F);
+// One element per tetrahedron.
+RotationElements tet_elements(const Vertices& V, const Tetrahedra& T);
+
+struct EnergyParameters {
+  // α: overall penalty on the linearised rotation correction q_k (Eq. 10).
+  // Larger α keeps each element's rotation closer to its cluster's s_i
+  // (stiffer, more rigid clusters); smaller α lets q_k absorb more of the
+  // deformation (smoother, closer to full ARAP, but q_k is only a linear
+  // approximation of a rotation). See docs/deform.md for the study.
+  double alpha = 0.1;
+  // β: extra penalty on q_k's action on the normal (surfaces only), which
+  // discourages out-of-surface distortion such as bulging.
+  double beta = 0.1;
+  // γ: moving-frame differential penalty (Eq. 11) between neighbouring
+  // rotation elements; 0 (the default) switches it off. It counters folds
+  // in sharp bends (paper Fig. 8) at the cost of keeping Q (4 per element)
+  // in the factored system. See docs/plugins.md for its effect.
+  double gamma = 0.0;
+
+  bool is_valid(std::string* why) const;
+};
+
+struct ModifiedArapSystem {
+  Index n = 0, r = 0, d = 0;
+  SparseMatrix<double> L;  // (3n + 4r) × (3n + 4r)
+  SparseMatrix<double> D;  // (3n + 4r) × 9d
+  SparseMatrix<double> N;  // 9d × 9d
+  bool q_separable = true;  // L_QQ block diagonal (γ = 0): Q can be eliminated
+};
+
+// Pairs (k, j), k < j, of neighbouring rotation elements (the set H of
+// Eq. 11): surface elements k, j whose vertices share an edge; tets sharing a
+// face. Sorted.
+std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& elements);
+
+// Assembles L and D of E′. cluster_of_element: r entries in [0, d).
+ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& elements,
+                                          const std::vector<int>& cluster_of_element, Index d,
+                                          const EnergyParameters& params);
+
+struct EliminatedArapSystem {
+  SparseMatrix<double> H;   // 3n × 3n = L_VV − L_VQ L_QQ⁻¹ L_QV
+  SparseMatrix<double> Ds;  // 3n × 9d = D_V − L_VQ L_QQ⁻¹ D_Q
+  SparseMatrix<double> DV;  // 3n × 9d = D_V, the pure ARAP coupling: DVᵀ·V′
+                            // stacks the per-cluster Σ c e′ eᵀ of Phase 2 (Eq. 19)
+};
+
+// Eliminates Q. Throws std::invalid_argument when an L_QQ block is singular
+// (α = 0 with an element whose edges do not determine q_k), or when L_QQ is
+// not block diagonal (γ > 0; !system.q_separable).
+EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& system);
+
+// E′(V′, Q, S) evaluated term by term from Eq. 10–11 (for tests and reports).
+// Vp: n × 3, Q: 4r, S: 9d.
+double modified_arap_energy(const Vertices& V, const RotationElements& elements,
+                            const std::vector<int>& cluster_of_element, const EnergyParameters& params,
+                            const Vertices& Vp, const Eigen::VectorXd& Q, const Eigen::VectorXd& S);
+
+// Classic ARAP energy of a deformed pose (Eq. 6 with the best rotation per
+// element): ½ Σ_k min_{r_k ∈ SO(3)} Σ_{(i,j)∈G_k} c_ijk ‖e′_ij − r_k e_ij‖².
+double arap_energy(const Vertices& V, const RotationElements& elements, const Vertices& Vp);
+
+// Nearest rotation to a 3×3 matrix G in the sense max tr(RᵀG) over SO(3):
+// R = U·diag(1, 1, det(UVᵀ))·Vᵀ from G = UΣVᵀ, so det R = +1 even when G is
+// reflected (paper Phase 2, Eq. 19).
+Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G);
+
+}  // namespace qpreduce::deform

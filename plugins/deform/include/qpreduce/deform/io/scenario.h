@@ -1,0 +1,49 @@
+// qpreduce::deform — a deformation scenario: a model, its handles and the
+// targets of every frame, built from the inputs users bring (Botsch–Sorkine
+// .sel/.def, the paper demo's .anim, our JSON scene, or code), plus the
+// measurements every report needs (handle residual, ARAP energy).
+#pragma once
+
+#include "qpreduce/deform/deformer/deformer.h"
+#include "qpreduce/deform/io/handles_io.h"
+#include "qpreduce/deform/io/scene.h"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace qpreduce::deform {
+
+struct Scenario {
+  DeformableModel model;
+  Handles handles;
+  std::vector<HandleTargets> frames;  // at least one
+  ConstraintOptions constraints;      // hard by default
+  // Overrides from a scene file (unset: keep the caller's options).
+  std::optional<double> alpha, beta, gamma, psi;
+  std::optional<ModelKind> model_kind;
+  std::optional<int> iterations;
+};
+
+// Applies the scenario's overrides (α, β, γ, model, ψ, iterations) to `options`.
+void apply_scenario_options(const Scenario& scenario, DeformerOptions* options);
+
+// .sel/.def: a Fixed patch (role 0) and an Affine handle patch (role 2) moved
+// by `def`; `frames` frames interpolate from the rest pose to `def` (the
+// rotation by its axis–angle, the rest linearly), the last one being `def`.
+Scenario scenario_from_sel_def(const Vertices& V, const Selection& sel, const Eigen::Matrix4d& def, int frames = 1);
+
+// .anim: one point handle per animation handle (its weighted vertices), one
+// frame per recorded point list.
+Scenario scenario_from_anim(const Vertices& V, const HandleAnimation& anim);
+
+// JSON scene: handles (vertex lists pinned point by point, or weighted
+// groups), patches, proxies given as .id files, energy parameters.
+Scenario scenario_from_scene(const Scene& scene);
+
+// Largest distance between where the handles are in `deformed` and where the
+// targets put them: point handles by their weighted point, patch handles by
+// every vertex of the patch, Fixed patches by every vertex at rest.
+double handle_residual(const Scenario& scenario, const HandleTargets& targets, const Vertices& deformed);
+
+}  // namespace qpreduce::deform

@@ -1,0 +1,204 @@
+// qpreduce::deform — full-space references for the reduced deformer: what
+// the reduced model (deformer.h) is measured against.
+//
+// Two energies, both on the rest pose V (n × 3) and the rotation elements of
+// arap_energy.h (spokes-and-rims for surfaces, one per tet for solids):
+//   * ClassicArap (paper Eq. 6): one rotation r_k per element,
+//         E(V′, R) = ½ Σ_k Σ_{(i,j)∈G_k} c_ijk ‖e′_ij − r_k e_ij‖²,
+//     what libigl and CGAL users run; the energy reported is arap_energy(V′).
+//   * ModifiedArap (Eq. 8–10): one rotation s_i ∈ SO(3) per rotational cluster
+//     (DeformableModel::clusters, required) plus the linearised corrections
+//     q_k, i.e. E′(V′, Q, S) = ½ uᵀLu − SᵀDᵀu + ½ Σ c ‖s e‖² with u = [V′; Q]
+//     (arap_energy.h). The reduced model minimises E′ with V′ restricted to
+//     the variational subspace, so the full-space minimiser isolates the
+//     subspace error; the energy reported is modified_arap_energy.
+//
+// Constraints are hard and exactly those of Deformer::set_handles: Fixed
+// patches stay at rest, prescribed patches (Handles::patches) follow their
+// 3 × 4 transform, point handles put their (weighted) point on the target.
+// Patches that are not prescribed move with a free affine map (Eq. 47).
+//
+// Two solvers:
+//   * LocalGlobalArap — Sorkine–Alexa alternation in full space: the global
+//     step minimises over V′ (Q eliminated for E′) with rotations fixed, by one
+//     sparse Cholesky cached per handle set; the local step fits every
+//     rotation (fit_rotation, det = +1). Monotone in the energy.
+//   * solve_ceres_reference — Ceres Solver (Levenberg–Marquardt, sparse normal
+//     Cholesky, automatic derivatives) on all unknowns at once, rotations as
+//     unit quaternions on ceres::QuaternionManifold. Constrained vertices are
+//     constant parameter blocks, so only Fixed patches, prescribed patches and
+//     single-vertex point handles are supported (std::invalid_argument for
+//     weighted point handles and free patches; use LocalGlobalArap there).
+//
+// Both start from the rest pose (or a given initial guess) and report the
+// energy, iterations, time and whether they converged.
+//
+// The deformer's global rotation adaptation (appendix) minimises E′ in the
+// frame rotated by r₀ᵀ. ReferenceOptions::frame = r₀ does the same here: the
+// result minimises E′(frameᵀV′, Q, frameᵀS) (only meaningful for E′; the
+// classic energy is rotation invariant and ignores it).
+#pragma once
+
+#include "qpreduce/deform/energy/arap_energy.h"
+#include "qpreduce/deform/deformer/deformer.h"
+
+#include <qpreduce/factorization.h>
+
+#include <Eigen/Core>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace qpreduce::deform {
+
+enum class ReferenceEnergy { ClassicArap, ModifiedArap };
+const char* to_string(ReferenceEnergy energy);
+
+// The rotation step of LocalGlobalArap for ModifiedArap.
+enum class ClusterRotationFit {
+  // s_i = nearest rotation of the S-coefficient of E′ at (V′, Q), i.e. of
+  // (Dᵀu)_i: exact block-coordinate descent on E′, whose fixed points are the
+  // stationary points of E′ (the same minimiser Ceres finds).
+  Exact,
+  // The paper's Phase 2 (Eq. 19): Q dropped, s_i = nearest rotation of
+  // (D_Vᵀ V′)_i. Its fixed point is what the reduced deformer converges to
+  // when the linear proxies cover every vertex, which is not exactly the E′
+  // minimiser (the two differ by the Q term, O(‖Q‖)).
+  PaperPhase2,
+};
+
+struct ReferenceOptions {
+  ReferenceEnergy energy = ReferenceEnergy::ClassicArap;
+  // α, β of E′ (ModifiedArap only; β is ignored for tets, as in the deformer).
+  EnergyParameters parameters;
+  // E′ is minimised in the frame rotated by frameᵀ (see above). Identity: plain E′.
+  Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();
+  // Iteration limit (local-global rounds, or Ceres LM iterations).
+  int max_iterations = 20000;
+  // Local-global: converged when the largest vertex move of a round is below
+  // step_tolerance × the bounding-box diagonal AND the energy dropped by less
+  // than energy_tolerance (relative). 1e-10 / 1e-13: the alternation is only
+  // linearly convergent, so the step must be far below the accuracy wanted
+  // (an energy within ~1e-8 relative of the limit on meshes of 10²–10⁴ vertices).
+  double step_tolerance = 1e-10;
+  double energy_tolerance = 1e-13;
+  // Ceres: function, gradient and parameter tolerances (Ceres' own meaning),
+  // far tighter than Ceres' defaults so that it stops at the minimiser.
+  double function_tolerance = 1e-15;
+  double gradient_tolerance = 1e-14;
+  double parameter_tolerance = 1e-13;
+  // Local-global with ModifiedArap: which rotation step (see above).
+  ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
+  // Factorization of the global step (local-global).
+  Backend backend = Backend::Cholmod;
+  // Threads for Ceres' Jacobian evaluation and linear algebra.
+  int threads = 1;
+
+  bool is_valid(std::string* why) const;
+};
+
+struct ReferenceSummary {
+  Status status = Status::NotRun;
+  std::string message;
+  ReferenceEnergy energy_kind = ReferenceEnergy::ClassicArap;
+  bool converged = false;    // a convergence test held (not the iteration limit)
+  int iterations = 0;
+  double initial_energy = 0.0;  // of the starting pose (Ceres: constrained vertices already at their targets)
+  double energy = 0.0;       // arap_energy (classic) or E′ (modified) of the result
+  double handle_residual = 0.0;  // largest constraint violation (absolute distance)
+  double last_step = 0.0;    // local-global: largest vertex move of the last round
+  double setup_seconds = 0.0;    // elements, assembly, factorization (local-global: per handle set)
+  double solve_seconds = 0.0;    // the iterations
+  std::string solver_report;     // Ceres: Solver::Summary::FullReport(); local-global: a line
+
+  bool ok() const { return status == Status::Success; }
+};
+
+// The result: deformed positions V′ (n × 3) and the rotations.
+struct ReferenceSolution {
+  Vertices V;
+  // ClassicArap: one 3 × 3 rotation per element, 9r (column-major per element).
+  // ModifiedArap: S, 9d (as Deformer::rotations), and Q, 4r (arap_energy.h).
+  Eigen::VectorXd rotations;
+  Eigen::VectorXd Q;
+};
+
+// Sorkine–Alexa local-global ARAP in full space, one cached factorization per
+// handle set:
+//   precompute(model, options)  elements, energy matrices (both energies);
+//   set_handles(handles)        eliminates the pinned coordinates, factors
+//                               K (free coordinates, with the remaining
+//                               weighted-point rows as ρAᵀA) and the small
+//                               Schur complement of the point rows;
+//   solve(targets, …)           rounds of global (one back-substitution) and
+//                               local steps until converged.
+// Global step: the control layer of deformer.h, u = [V′_free; t_s, d_s per
+// patch] (n_u), V′ = P u; minimise ½uᵀ(PᵀHP)u − uᵀPᵀq(R) subject to the
+// constraints, with H = the cotangent ARAP matrix Σ c (ξ_i − ξ_j)(ξ_i − ξ_j)ᵀ ⊗ I₃
+// (classic) or the Q-eliminated H of arap_energy.h (E′, q = D_s S).
+class LocalGlobalArap {
+ public:
+  LocalGlobalArap();
+  ~LocalGlobalArap();
+  LocalGlobalArap(LocalGlobalArap&&) noexcept;
+  LocalGlobalArap& operator=(LocalGlobalArap&&) noexcept;
+
+  // Throws std::invalid_argument on a bad model (as Deformer::precompute), on
+  // ModifiedArap without clusters, or on invalid options.
+  void precompute(const DeformableModel& model, const ReferenceOptions& options = {});
+
+  // Throws std::invalid_argument on handles out of range, on a connected
+  // component that nothing anchors (no Fixed/prescribed patch, no handle: its
+  // position would be undetermined), or on linearly dependent weighted
+  // handles. Factorization failures come back as the status.
+  Status set_handles(const Handles& handles, std::string* message = nullptr);
+
+  // Runs the alternation from `initial` (n × 3; empty: the rest pose) to the
+  // targets. Throws std::invalid_argument on target sizes, NaN, or conflicting
+  // targets (one vertex held at two different places by two constraints).
+  ReferenceSummary solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial = {});
+
+  const RotationElements& elements() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> state_;
+};
+
+// One-off local-global solve (precompute, set_handles, solve).
+ReferenceSummary solve_local_global(const DeformableModel& model, const Handles& handles,
+                                    const HandleTargets& targets, const ReferenceOptions& options,
+                                    ReferenceSolution* out, const Vertices& initial = {});
+
+// Ceres full-space minimiser of the chosen energy. Residuals: per element k
+// and triangle t of G_k (tets: the tet itself), (B_t ⊗ I₃)·δ with δ_i =
+// v′_i − r v_i for the corners of t, r = r_k (classic) or s_{i_k} + q_k (E′),
+// and B_tᵀB_t = the element's cotangent stiffness on t (PSD even where a
+// cotangent is negative, so the sum of squares equals the energy exactly);
+// for E′ also U_k Q_k with U_kᵀU_k the Eq. 10 penalty Hessian. Constrained
+// vertices are constant parameter blocks. Throws std::invalid_argument on
+// the unsupported constraints named above, bad input, or conflicting targets.
+// Throws std::runtime_error when qpreduce was built without Ceres
+// (QPREDUCE_NO_CERES; has_ceres_reference() tells).
+ReferenceSummary solve_ceres_reference(const DeformableModel& model, const Handles& handles,
+                                       const HandleTargets& targets, const ReferenceOptions& options,
+                                       ReferenceSolution* out, const Vertices& initial = {});
+
+// Whether solve_ceres_reference is available (qpreduce was built with Ceres).
+bool has_ceres_reference();
+
+// Where the constraints put each vertex, when they put it somewhere: the
+// Fixed patches, the prescribed patches and the single-vertex point handles
+// (weighted handles and free patches are not per-vertex). `pinned` has n
+// entries (true where a target is set). Throws std::invalid_argument on
+// conflicting targets (a vertex held at two places more than `tolerance`
+// apart), naming the vertex and both constraints.
+struct VertexTargets {
+  std::vector<char> pinned;
+  Vertices position;  // n × 3, meaningful where pinned
+};
+VertexTargets vertex_targets(const DeformableModel& model, const Handles& handles, const HandleTargets& targets,
+                             double tolerance);
+
+}  // namespace qpreduce::deform

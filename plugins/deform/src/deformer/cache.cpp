@@ -1,0 +1,412 @@
+// Deformer::save / Deformer::load — the precomputed model on disk.
+//
+// Layout (little-endian, version 2; docs/formats.md):
+//   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
+//   payload  records in a fixed order (below): integers as i64, labels as i32,
+//            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
+//   trailer  u64 payload bytes, u32 CRC-32 (zlib) of the payload
+//
+// The payload keeps what precompute was given (rest positions, elements,
+// patches, given clusters and groups, the options that change the result)
+// and what it made (cluster labels, m, the subspace B = [N UD], H_r, BᵀD,
+// M_N, M_U). The float reconstruction basis P·B is recomputed on load
+// (O(n·p)), not stored. load() first checks size and CRC over the whole file,
+// then parses with every count bounded by the bytes left, then compares the
+// stored inputs with the given ones, and only then replaces the session.
+#include "qpreduce/deform/deformer/deformer.h"
+#include "qpreduce/deform/io/io_error.h"
+
+#include "state.h"
+
+#include <qpreduce/support.h>
+
+#include <fmt/format.h>
+#include <zlib.h>
+
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <type_traits>
+
+namespace qpreduce::deform {
+
+namespace {
+
+constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
+constexpr std::uint32_t kVersion = 2;  // 2: the model's name and parameters, Q kept or not
+constexpr std::uint32_t kByteOrder = 0x01020304u;
+constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
+constexpr std::streamoff kTrailerBytes = 8 + 4;
+
+// Running CRC-32 (crc32_z takes sizes beyond zlib's uInt). A null pointer
+// would make zlib return the initial value instead, so empty ranges (an
+// empty vector's data() may be null) are skipped.
+std::uint32_t crc_update(std::uint32_t crc, const char* data, std::size_t bytes) {
+  if (bytes == 0) return crc;
+  return static_cast<std::uint32_t>(crc32_z(crc, reinterpret_cast<const Bytef*>(data), bytes));
+}
+
+class Writer {
+ public:
+  explicit Writer(std::string path) : path_(std::move(path)), out_(path_, std::ios::binary | std::ios::trunc) {
+    if (!out_) throw IoError(path_, 0, "cannot open for writing");
+    out_.write(kMagic, sizeof kMagic);
+    raw(kVersion);
+    raw(kByteOrder);
+    crc_ = static_cast<std::uint32_t>(crc32_z(0L, Z_NULL, 0));
+  }
+
+  template <typename T>
+  void put(T value) {
+    static_assert(std::is_arithmetic_v<T>);
+    bytes(reinterpret_cast<const char*>(&value), sizeof(T));
+  }
+  template <typename Derived>
+  void put_matrix(const Eigen::PlainObjectBase<Derived>& M) {
+    using T = typename Derived::Scalar;
+    put<std::int64_t>(M.rows());
+    put<std::int64_t>(M.cols());
+    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> col_major = M;
+    bytes(reinterpret_cast<const char*>(col_major.data()), sizeof(T) * static_cast<std::size_t>(M.size()));
+  }
+  template <typename T>
+  void put_vector(const std::vector<T>& v) {
+    put<std::int64_t>(static_cast<std::int64_t>(v.size()));
+    bytes(reinterpret_cast<const char*>(v.data()), sizeof(T) * v.size());
+  }
+
+  void close() {
+    raw(static_cast<std::uint64_t>(payload_));
+    raw(crc_);
+    out_.close();
+    if (!out_) throw IoError(path_, 0, "write failed (disk full?)");
+  }
+
+ private:
+  template <typename T>
+  void raw(T value) {
+    out_.write(reinterpret_cast<const char*>(&value), sizeof(T));
+  }
+  void bytes(const char* data, std::size_t n) {
+    out_.write(data, static_cast<std::streamsize>(n));
+    crc_ = crc_update(crc_, data, n);
+    payload_ += n;
+    if (!out_) throw IoError(path_, 0, "write failed (disk full?)");
+  }
+
+  std::string path_;
+  std::ofstream out_;
+  std::uint32_t crc_ = 0;
+  std::uint64_t payload_ = 0;
+};
+
+class Reader {
+ public:
+  // Opens `path`, checks header, size and CRC; then reads the payload.
+  explicit Reader(std::string path) : path_(std::move(path)), in_(path_, std::ios::binary) {
+    if (!in_) throw IoError(path_, 0, "cannot open (missing file or no permission)");
+    in_.seekg(0, std::ios::end);
+    const std::streamoff size = in_.tellg();
+    in_.seekg(0);
+    if (size < kHeaderBytes + kTrailerBytes) {
+      throw IoError(path_, 0, fmt::format("truncated: {} bytes is shorter than a cache header", size));
+    }
+    char magic[16];
+    in_.read(magic, sizeof magic);
+    if (std::memcmp(magic, kMagic, sizeof magic) != 0) {
+      throw IoError(path_, 0, "not a qpreduce deformer cache (wrong magic bytes)");
+    }
+    const auto version = raw<std::uint32_t>();
+    const auto order = raw<std::uint32_t>();
+    if (order != kByteOrder) throw IoError(path_, 0, "written on a machine with another byte order");
+    if (version != kVersion) {
+      throw IoError(path_, 0,
+                    fmt::format("format version {} (this build reads version {}); precompute again", version, kVersion));
+    }
+    in_.seekg(size - kTrailerBytes);
+    const auto payload = raw<std::uint64_t>();
+    const auto crc = raw<std::uint32_t>();
+    const auto expected = static_cast<std::uint64_t>(size - kHeaderBytes - kTrailerBytes);
+    if (payload != expected) {
+      throw IoError(path_, 0,
+                    fmt::format("truncated or padded: the trailer says {} payload bytes, the file holds {}", payload,
+                                expected));
+    }
+    // CRC over the whole payload before anything is parsed.
+    in_.seekg(kHeaderBytes);
+    std::vector<char> chunk(1 << 20);
+    std::uint32_t got = static_cast<std::uint32_t>(crc32_z(0L, Z_NULL, 0));
+    for (std::uint64_t left = payload; left > 0;) {
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, chunk.size()));
+      in_.read(chunk.data(), static_cast<std::streamsize>(n));
+      if (!in_) throw IoError(path_, 0, "read failed");
+      got = crc_update(got, chunk.data(), n);
+      left -= n;
+    }
+    if (got != crc) {
+      throw IoError(path_, 0, fmt::format("corrupted: CRC-32 {:08x} does not match the stored {:08x}", got, crc));
+    }
+    in_.seekg(kHeaderBytes);
+    left_ = payload;
+  }
+
+  template <typename T>
+  T get(const char* what) {
+    T value;
+    bytes(reinterpret_cast<char*>(&value), sizeof(T), what);
+    return value;
+  }
+  Index get_count(const char* what, std::uint64_t element_bytes) {
+    const auto count = get<std::int64_t>(what);
+    if (count < 0 || static_cast<std::uint64_t>(count) > left_ / std::max<std::uint64_t>(element_bytes, 1)) {
+      throw IoError(path_, 0, fmt::format("{}: count {} does not fit in the file", what, count));
+    }
+    return static_cast<Index>(count);
+  }
+  template <typename T, int R, int C, int O>
+  void get_matrix(const char* what, Eigen::Matrix<T, R, C, O>* M) {
+    const Index rows = get_count(what, 0);
+    const Index cols = get_count(what, 0);
+    if (cols > 0 && static_cast<std::uint64_t>(rows) > left_ / sizeof(T) / static_cast<std::uint64_t>(cols)) {
+      throw IoError(path_, 0, fmt::format("{}: {} × {} entries do not fit in the file", what, rows, cols));
+    }
+    if ((C != Eigen::Dynamic && cols != C) || (R != Eigen::Dynamic && rows != R)) {
+      throw IoError(path_, 0, fmt::format("{}: unexpected shape {} × {}", what, rows, cols));
+    }
+    Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> col_major(rows, cols);
+    bytes(reinterpret_cast<char*>(col_major.data()), sizeof(T) * static_cast<std::size_t>(rows * cols), what);
+    if constexpr (std::is_floating_point_v<T>) {
+      if (!col_major.allFinite()) throw IoError(path_, 0, fmt::format("{}: NaN or infinite entries", what));
+    }
+    *M = col_major;
+  }
+  template <typename T>
+  std::vector<T> get_vector(const char* what) {
+    std::vector<T> v(static_cast<std::size_t>(get_count(what, sizeof(T))));
+    bytes(reinterpret_cast<char*>(v.data()), sizeof(T) * v.size(), what);
+    return v;
+  }
+  void expect_end() {
+    if (left_ != 0) throw IoError(path_, 0, fmt::format("{} unexpected bytes after the last record", left_));
+  }
+  [[noreturn]] void mismatch(const std::string& what) const {
+    throw IoError(path_, 0, "made from other inputs: " + what + "; precompute again (or delete the cache file)");
+  }
+  const std::string& path() const { return path_; }
+
+ private:
+  template <typename T>
+  T raw() {
+    T value;
+    in_.read(reinterpret_cast<char*>(&value), sizeof(T));
+    if (!in_) throw IoError(path_, 0, "read failed");
+    return value;
+  }
+  void bytes(char* data, std::size_t n, const char* what) {
+    if (n > left_) throw IoError(path_, 0, fmt::format("truncated inside {}", what));
+    in_.read(data, static_cast<std::streamsize>(n));
+    if (!in_) throw IoError(path_, 0, fmt::format("read failed inside {}", what));
+    left_ -= n;
+  }
+
+  std::string path_;
+  std::ifstream in_;
+  std::uint64_t left_ = 0;
+};
+
+// The options that change what precompute makes, as (name, value) pairs in
+// a fixed order: the model's parameters, then the deformer's. Runtime
+// options (iterations, global_rotation) are not here.
+std::vector<std::pair<std::string, double>> result_options(const DeformationModel& model, const DeformerOptions& o) {
+  std::vector<std::pair<std::string, double>> opts = model.parameters();
+  const std::vector<std::pair<std::string, double>> rest = {
+          {"rotational_proxies", static_cast<double>(o.rotational_proxies)},
+          {"linear_proxies", static_cast<double>(o.linear_proxies)},
+          {"clustering.kmeans.seed", static_cast<double>(o.clustering.kmeans.seed)},
+          {"clustering.kmeans.max_iterations", static_cast<double>(o.clustering.kmeans.max_iterations)},
+          {"clustering.kmeans.tolerance", o.clustering.kmeans.tolerance},
+          {"clustering.spectral.eigenvectors", static_cast<double>(o.clustering.spectral.eigenvectors)},
+          {"clustering.spectral.shift_scale", o.clustering.spectral.shift_scale},
+          {"subspace.reduced_lift_tolerance", o.subspace.reduced_lift_tolerance}};
+  opts.insert(opts.end(), rest.begin(), rest.end());
+  return opts;
+}
+
+std::vector<int> name_codes(const std::string& name) { return std::vector<int>(name.begin(), name.end()); }
+
+std::vector<std::int64_t> flatten(const std::vector<std::vector<Index>>& groups) {
+  std::vector<std::int64_t> flat;
+  for (const auto& g : groups) {
+    flat.push_back(static_cast<std::int64_t>(g.size()));
+    flat.insert(flat.end(), g.begin(), g.end());
+  }
+  return flat;
+}
+
+std::vector<int> patch_codes(const std::vector<PatchType>& types) {
+  std::vector<int> codes;
+  for (PatchType t : types) codes.push_back(static_cast<int>(t));
+  return codes;
+}
+
+template <typename M>
+void compare_matrix(const Reader& r, const char* what, const M& stored, const M& given) {
+  if (stored.rows() != given.rows()) {
+    r.mismatch(fmt::format("{} has {} rows in the cache, {} given", what, stored.rows(), given.rows()));
+  }
+  for (Index i = 0; i < stored.rows(); ++i) {
+    if (stored.row(i) != given.row(i)) r.mismatch(fmt::format("{} differ (first at row {})", what, i));
+  }
+}
+
+template <typename T>
+void compare_vector(const Reader& r, const char* what, const std::vector<T>& stored, const std::vector<T>& given) {
+  if (stored.size() != given.size()) {
+    r.mismatch(fmt::format("{} has {} entries in the cache, {} given", what, stored.size(), given.size()));
+  }
+  for (std::size_t i = 0; i < stored.size(); ++i) {
+    if (stored[i] != given[i]) r.mismatch(fmt::format("{} differ (first at entry {})", what, i));
+  }
+}
+
+}  // namespace
+
+void Deformer::save(const std::string& path) const {
+  const State& S = *state_;
+  if (!S.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  const std::string tmp = path + ".tmp";
+  {
+    Writer w(tmp);
+    // Inputs.
+    w.put_matrix(S.rest);
+    w.put_matrix(S.inputs.F);
+    w.put_matrix(S.inputs.T);
+    w.put_vector(S.inputs.clusters);
+    w.put_vector(flatten(S.inputs.groups));
+    w.put_vector(S.patch_of_vertex);
+    w.put_vector(patch_codes(S.patch_types));
+    w.put_vector(name_codes(S.model->name()));
+    const auto opts = result_options(*S.model, S.inputs.options);
+    w.put<std::int64_t>(static_cast<std::int64_t>(opts.size()));
+    for (const auto& [name, value] : opts) w.put(value);
+    w.put<std::int64_t>(S.keep_q ? 1 : 0);
+    // What precompute made.
+    w.put_vector(S.clusters);
+    w.put<std::int64_t>(S.d);
+    w.put<std::int64_t>(S.m);
+    w.put_matrix(S.solver.subspace().N);
+    w.put_matrix(S.solver.subspace().UD);
+    w.put_matrix(S.solver.reduced_hessian());
+    w.put_matrix(S.solver.reduced_linear_map());
+    w.put_matrix(S.MN);
+    w.put_matrix(S.MU);
+    w.close();
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw IoError(path, 0, "cannot replace the file with the new cache");
+  }
+}
+
+PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel& model,
+                                 const DeformerOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+  const Timer total;
+  Reader r(path);
+  auto st = std::make_unique<State>();
+  State& S = *st;
+  S.set_topology(model);
+  S.inputs = {model.F, model.T, model.clusters, model.linear.groups, options};
+
+  // Inputs: compare with what is given.
+  Vertices V;
+  r.get_matrix("rest positions", &V);
+  if (V.rows() != S.n) r.mismatch(fmt::format("the cache has {} vertices, the mesh {}", V.rows(), S.n));
+  compare_matrix(r, "rest positions", V, S.rest);
+  Triangles F;
+  Tetrahedra T;
+  r.get_matrix("triangles", &F);
+  r.get_matrix("tetrahedra", &T);
+  compare_matrix(r, "triangles", F, model.F);
+  compare_matrix(r, "tetrahedra", T, model.T);
+  compare_vector(r, "given rotational clusters", r.get_vector<int>("given clusters"), model.clusters);
+  compare_vector(r, "given linear proxy groups", r.get_vector<std::int64_t>("given groups"),
+                 flatten(model.linear.groups));
+  // As set_topology made them (with the internal patch of unreferenced vertices).
+  compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), S.patch_of_vertex);
+  compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(S.patch_types));
+  S.model = options.resolve_model();
+  const std::vector<int> stored_name = r.get_vector<int>("model name");
+  if (stored_name != name_codes(S.model->name())) {
+    r.mismatch(fmt::format("the cache was made with the model \"{}\", \"{}\" given",
+                           std::string(stored_name.begin(), stored_name.end()), S.model->name()));
+  }
+  const auto opts = result_options(*S.model, options);
+  const Index stored_opts = r.get_count("options", sizeof(double));
+  if (stored_opts != static_cast<Index>(opts.size())) {
+    r.mismatch(fmt::format("{} stored options, {} expected", stored_opts, opts.size()));
+  }
+  for (const auto& [name, value] : opts) {
+    const double stored = r.get<double>(name.c_str());
+    if (stored != value) r.mismatch(fmt::format("option {} is {} in the cache, {} given", name, stored, value));
+  }
+  const auto keep_q = r.get<std::int64_t>("Q kept");
+  if (keep_q != 0 && keep_q != 1) throw IoError(path, 0, fmt::format("invalid Q-kept flag {}", keep_q));
+  if (keep_q == 1) S.keep_rotation_corrections();
+
+  // What precompute made.
+  std::vector<int> labels = r.get_vector<int>("cluster labels");
+  const auto d = r.get<std::int64_t>("cluster count");
+  const auto m = r.get<std::int64_t>("linear proxy count");
+  if (d < 1 || m < 0) throw IoError(path, 0, fmt::format("invalid proxy counts d = {}, m = {}", d, m));
+  try {
+    S.set_clusters(std::move(labels), d);
+    S.find_rigid_clusters(model.T);
+  } catch (const std::invalid_argument& e) {
+    throw IoError(path, 0, e.what());
+  }
+  S.m = m;
+  S.nx = 3 * S.m + 12 * S.s;
+  VariationalSubspace<double> B;
+  Matrix<double> Hr, BtD;
+  r.get_matrix("N", &B.N);
+  r.get_matrix("UD", &B.UD);
+  r.get_matrix("H_r", &Hr);
+  r.get_matrix("BᵀD", &BtD);
+  r.get_matrix("M_N", &S.MN);
+  r.get_matrix("M_U", &S.MU);
+  r.expect_end();
+  const Index p = S.nx + 9 * S.d;
+  if (B.N.rows() != S.nu || B.N.cols() != S.nx || B.UD.rows() != S.nu || B.UD.cols() != 9 * S.d ||
+      S.MN.rows() != 9 * S.d || S.MN.cols() != S.nx || S.MU.rows() != 9 * S.d || S.MU.cols() != 9 * S.d) {
+    throw IoError(path, 0,
+                  fmt::format("inconsistent sizes: N {}×{}, UD {}×{}, M_N {}×{}, M_U {}×{} for n_u = {}, p = {}",
+                              B.N.rows(), B.N.cols(), B.UD.rows(), B.UD.cols(), S.MN.rows(), S.MN.cols(),
+                              S.MU.rows(), S.MU.cols(), S.nu, p));
+  }
+  try {
+    S.solver.restore(std::move(B), std::move(Hr), std::move(BtD), options.subspace);
+  } catch (const std::invalid_argument& e) {
+    throw IoError(path, 0, e.what());
+  }
+  S.make_basis(S.control_matrix());
+  S.finish(options);
+  state_ = std::move(st);
+  reset_pose();
+
+  PrecomputeSummary summary;
+  summary.status = Status::Success;
+  summary.message = "loaded from " + path;
+  summary.vertices = S.n;
+  summary.elements = S.elements.size();
+  summary.rotational_proxies = S.d;
+  summary.linear_proxies = S.m;
+  summary.patches = S.s;
+  summary.reduced_size = p;
+  summary.total_seconds = total.seconds();
+  return summary;
+}
+
+}  // namespace qpreduce::deform

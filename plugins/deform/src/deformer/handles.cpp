@@ -1,0 +1,37 @@
+#include "qpreduce/deform/deformer/handles.h"
+
+#include <qpreduce/support.h>
+
+#include <algorithm>
+
+namespace qpreduce::deform {
+
+double handle_residual(const DeformableModel& m, const Handles& handles, const HandleTargets& targets,
+                       const Vertices& deformed) {
+  check_size("handle_residual: deformed vertex count", m.V.rows(), deformed.rows());
+  double worst = 0.0;
+  for (size_t h = 0; h < handles.points.size(); ++h) {
+    const PointHandle& ph = handles.points[h];
+    Eigen::RowVector3d p = Eigen::RowVector3d::Zero();
+    for (size_t i = 0; i < ph.vertices.size(); ++i)
+      p += (ph.weights.empty() ? 1.0 : ph.weights[i]) * deformed.row(ph.vertices[i]);
+    worst = std::max(worst, (p - targets.points.row(static_cast<Index>(h))).norm());
+  }
+  for (Index v = 0; v < m.V.rows(); ++v) {
+    if (m.patch_of_vertex.empty() || m.patch_of_vertex[v] < 0) continue;
+    const Index p = m.patch_of_vertex[v];
+    Eigen::Vector3d target;
+    if (m.patch_types[p] == PatchType::Fixed) {
+      target = m.V.row(v).transpose();
+    } else {
+      const auto it = std::find(handles.patches.begin(), handles.patches.end(), p);
+      if (it == handles.patches.end()) continue;  // a free patch has no target
+      const auto& T = targets.patch_transforms[static_cast<size_t>(it - handles.patches.begin())];
+      target = T.leftCols<3>() * m.V.row(v).transpose() + T.col(3);
+    }
+    worst = std::max(worst, (deformed.row(v).transpose() - target).norm());
+  }
+  return worst;
+}
+
+}  // namespace qpreduce::deform

@@ -1,0 +1,52 @@
+// Shared by the full-space references (local_global.cpp, reference_ceres.cpp):
+// model checks, anchors, and the constraint targets in the solve frame.
+#pragma once
+
+#include "qpreduce/deform/mesh/geometry.h"
+#include "qpreduce/deform/reference/reference.h"
+
+#include <vector>
+
+namespace qpreduce::deform::detail_reference {
+
+// The checked model: rotation elements, clusters (E′), components.
+struct PreparedModel {
+  Vertices V;
+  bool tet = false;
+  RotationElements elements;
+  std::vector<int> clusters;  // per element (E′ only)
+  Index d = 0;                // clusters (E′ only)
+  EnergyParameters parameters;  // β = 0 for tets
+  std::vector<int> patch_of_vertex;  // n entries (−1: free)
+  std::vector<PatchType> patch_types;
+  MeshComponents components;
+  double diagonal = 0.0;
+};
+
+// Throws std::invalid_argument on an invalid model or options.
+PreparedModel prepare_model(const DeformableModel& model, const ReferenceOptions& options);
+
+// Range checks of a handle set (vertices, weights, patch indices).
+void check_handles(const PreparedModel& m, const Handles& handles);
+// Sizes and finiteness of one frame's targets.
+void check_targets(const Handles& handles, const HandleTargets& targets);
+
+// Throws when a connected component has no constrained vertex (Fixed or
+// prescribed patch, point handle), naming it.
+void check_anchored(const PreparedModel& m, const Handles& handles);
+
+// Prescribed patches in constraint order: the Fixed patches, then
+// handles.patches; with each one's 3 × 4 transform in the solve frame
+// (frameᵀ·[A | t]).
+struct PatchTarget {
+  Index patch;
+  Eigen::Matrix<double, 3, 4> transform;
+};
+std::vector<PatchTarget> patch_targets(const PreparedModel& m, const Handles& handles, const HandleTargets& targets,
+                                       const Eigen::Matrix3d& frame);
+
+// Energy of a pose in the solve frame: arap_energy (classic) or E′.
+double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& Vp, const Eigen::VectorXd& Q,
+                 const Eigen::VectorXd& S);
+
+}  // namespace qpreduce::deform::detail_reference

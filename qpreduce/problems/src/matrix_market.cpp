@@ -1,0 +1,305 @@
+#include "qpreduce/problems/matrix_market.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+namespace qpreduce {
+
+MatrixMarketError::MatrixMarketError(std::string file, long line, std::string problem)
+    : std::runtime_error(line > 0 ? fmt::format("{}:{}: {}", file, line, problem) : fmt::format("{}: {}", file, problem)),
+      file_(std::move(file)),
+      line_(line),
+      problem_(std::move(problem)) {}
+
+bool MarketReadOptions::is_valid(std::string* why) const {
+  auto fail = [&](const std::string& s) {
+    if (why) *why = s;
+    return false;
+  };
+  if (rows < -1 || cols < -1) return fail(fmt::format("rows/cols must be ≥ −1, got {}, {}", rows, cols));
+  if (!(symmetry_tolerance >= 0.0) || !std::isfinite(symmetry_tolerance)) {
+    return fail(fmt::format("symmetry_tolerance must be finite and ≥ 0, got {}", symmetry_tolerance));
+  }
+  return true;
+}
+
+namespace {
+
+struct Entry {
+  Index row, col;
+  double value;
+  long line;
+};
+
+enum class Field { Real, Integer, Pattern };
+enum class Symmetry { General, Symmetric };
+
+struct Parsed {
+  Index rows = 0, cols = 0;
+  Symmetry symmetry = Symmetry::General;
+  long size_line = 0;
+  std::vector<Entry> entries;  // 0-based, as stored (one triangle for symmetric)
+};
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::istringstream in(line);
+  std::vector<std::string> out;
+  for (std::string t; in >> t;) out.push_back(t);
+  return out;
+}
+
+bool blank(const std::string& line) {
+  return std::all_of(line.begin(), line.end(), [](char c) { return std::isspace(static_cast<unsigned char>(c)); });
+}
+
+class LineReader {
+ public:
+  explicit LineReader(const std::string& path) : path_(path), in_(path) {
+    if (!in_) throw MatrixMarketError(path, 0, "cannot open file");
+  }
+  // Next line that is neither blank nor a comment; false at end of file.
+  bool next_data(std::string* line) {
+    while (std::getline(in_, *line)) {
+      ++line_;
+      if (!line->empty() && line->back() == '\r') line->pop_back();
+      if (blank(*line) || (*line)[line->find_first_not_of(" \t")] == '%') continue;
+      return true;
+    }
+    return false;
+  }
+  bool next_raw(std::string* line) {
+    if (!std::getline(in_, *line)) return false;
+    ++line_;
+    if (!line->empty() && line->back() == '\r') line->pop_back();
+    return true;
+  }
+  [[noreturn]] void fail(const std::string& problem) const { throw MatrixMarketError(path_, line_, problem); }
+  long line() const { return line_; }
+
+ private:
+  std::string path_;
+  std::ifstream in_;
+  long line_ = 0;
+};
+
+Index parse_index(LineReader& r, const std::string& token, const char* what) {
+  errno = 0;
+  char* end = nullptr;
+  const long long v = std::strtoll(token.c_str(), &end, 10);
+  if (end == token.c_str() || *end != '\0' || errno == ERANGE) r.fail(fmt::format("{} '{}' is not an integer", what, token));
+  return static_cast<Index>(v);
+}
+
+double parse_value(LineReader& r, const std::string& token, Field field) {
+  if (field == Field::Integer) return static_cast<double>(parse_index(r, token, "value"));
+  errno = 0;
+  char* end = nullptr;
+  const double v = std::strtod(token.c_str(), &end);
+  if (end == token.c_str() || *end != '\0') r.fail(fmt::format("value '{}' is not a number", token));
+  if (!std::isfinite(v)) r.fail(fmt::format("value '{}' is not finite", token));
+  return v;
+}
+
+Parsed parse(const std::string& path, const MarketReadOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("MarketReadOptions: " + why);
+  LineReader r(path);
+  std::string line;
+  if (!r.next_raw(&line)) throw MatrixMarketError(path, 1, "empty file (expected a '%%MatrixMarket' header)");
+  const std::vector<std::string> h = split(line);
+  if (h.empty() || lower(h[0]) != "%%matrixmarket") r.fail("expected a '%%MatrixMarket matrix ...' header");
+  if (h.size() != 5) {
+    r.fail(fmt::format("header: expected 5 words (%%MatrixMarket matrix <format> <field> <symmetry>), got {}",
+                       h.size()));
+  }
+  if (lower(h[1]) != "matrix") r.fail(fmt::format("header: object '{}' is not supported (expected 'matrix')", h[1]));
+  const std::string format = lower(h[2]), field_s = lower(h[3]), sym_s = lower(h[4]);
+  if (format != "coordinate" && format != "array") {
+    r.fail(fmt::format("header: format '{}' is not supported (expected coordinate or array)", h[2]));
+  }
+  Field field = Field::Real;
+  if (field_s == "integer") field = Field::Integer;
+  else if (field_s == "pattern") field = Field::Pattern;
+  else if (field_s != "real" && field_s != "double") {
+    r.fail(fmt::format("header: field '{}' is not supported (expected real, integer or pattern)", h[3]));
+  }
+  Parsed p;
+  if (sym_s == "symmetric") p.symmetry = Symmetry::Symmetric;
+  else if (sym_s != "general") {
+    r.fail(fmt::format("header: symmetry '{}' is not supported (expected general or symmetric)", h[4]));
+  }
+  const bool array = format == "array";
+  if (array && field == Field::Pattern) r.fail("header: array storage cannot be 'pattern'");
+
+  if (!r.next_data(&line)) r.fail("missing size line");
+  p.size_line = r.line();
+  const std::vector<std::string> s = split(line);
+  const size_t size_fields = array ? 2 : 3;
+  if (s.size() != size_fields) {
+    r.fail(fmt::format("size line: expected {} integers ({}), got {} fields", size_fields,
+                       array ? "rows cols" : "rows cols entries", s.size()));
+  }
+  p.rows = parse_index(r, s[0], "rows");
+  p.cols = parse_index(r, s[1], "cols");
+  const Index declared = array ? 0 : parse_index(r, s[2], "entries");
+  if (p.rows < 0 || p.cols < 0 || declared < 0) r.fail("size line: negative size");
+  if (options.rows >= 0 && p.rows != options.rows) {
+    r.fail(fmt::format("expected {} rows, got {}", options.rows, p.rows));
+  }
+  if (options.cols >= 0 && p.cols != options.cols) {
+    r.fail(fmt::format("expected {} columns, got {}", options.cols, p.cols));
+  }
+  if (p.symmetry == Symmetry::Symmetric && p.rows != p.cols) {
+    r.fail(fmt::format("symmetric storage needs a square matrix, got {} × {}", p.rows, p.cols));
+  }
+  if (options.require_symmetric && p.rows != p.cols) {
+    r.fail(fmt::format("expected a square (symmetric) matrix, got {} × {}", p.rows, p.cols));
+  }
+
+  const bool sym = p.symmetry == Symmetry::Symmetric;
+  if (array) {
+    // Column-major; symmetric storage lists the lower triangle only.
+    Index i = 0, j = 0;
+    const Index total = sym ? p.rows * (p.rows + 1) / 2 : p.rows * p.cols;
+    p.entries.reserve(static_cast<size_t>(total));
+    for (Index e = 0; e < total; ++e) {
+      if (!r.next_data(&line)) r.fail(fmt::format("expected {} values, the file ends after {}", total, e));
+      const std::vector<std::string> t = split(line);
+      if (t.size() != 1) r.fail(fmt::format("expected 1 value per line (array storage), got {} fields", t.size()));
+      const double v = parse_value(r, t[0], field);
+      if (v != 0.0) p.entries.push_back({i, j, v, r.line()});
+      if (++i == p.rows) {
+        ++j;
+        i = sym ? j : 0;
+      }
+    }
+  } else {
+    p.entries.reserve(static_cast<size_t>(declared));
+    const size_t fields = field == Field::Pattern ? 2 : 3;
+    for (Index e = 0; e < declared; ++e) {
+      if (!r.next_data(&line)) r.fail(fmt::format("expected {} entries, the file ends after {}", declared, e));
+      const std::vector<std::string> t = split(line);
+      if (t.size() != fields) {
+        r.fail(fmt::format("expected {} fields ({}), got {}", fields, fields == 2 ? "row col" : "row col value",
+                           t.size()));
+      }
+      const Index i = parse_index(r, t[0], "row"), j = parse_index(r, t[1], "col");
+      if (i < 1 || i > p.rows) r.fail(fmt::format("row {} out of range [1, {}]", i, p.rows));
+      if (j < 1 || j > p.cols) r.fail(fmt::format("col {} out of range [1, {}]", j, p.cols));
+      if (sym && i < j) r.fail(fmt::format("entry ({}, {}) above the diagonal in symmetric storage", i, j));
+      const double v = field == Field::Pattern ? 1.0 : parse_value(r, t[2], field);
+      p.entries.push_back({i - 1, j - 1, v, r.line()});
+    }
+  }
+  if (r.next_data(&line)) {
+    r.fail(array ? "more values than rows × cols" : fmt::format("more entries than the {} declared", declared));
+  }
+
+  // Duplicates: sort by (col, row) and compare neighbours.
+  std::stable_sort(p.entries.begin(), p.entries.end(),
+                   [](const Entry& a, const Entry& b) { return a.col != b.col ? a.col < b.col : a.row < b.row; });
+  for (size_t e = 1; e < p.entries.size(); ++e) {
+    const Entry &a = p.entries[e - 1], &b = p.entries[e];
+    if (a.row == b.row && a.col == b.col) {
+      throw MatrixMarketError(path, b.line,
+                              fmt::format("duplicate entry ({}, {}) (first on line {})", b.row + 1, b.col + 1, a.line));
+    }
+  }
+
+  if (options.require_symmetric && !sym) {
+    double max_abs = 0.0;
+    for (const Entry& e : p.entries) max_abs = std::max(max_abs, std::abs(e.value));
+    const double tol = options.symmetry_tolerance * max_abs;
+    auto find = [&](Index row, Index col) -> const Entry* {
+      const auto it = std::lower_bound(p.entries.begin(), p.entries.end(), std::make_pair(col, row),
+                                       [](const Entry& a, const std::pair<Index, Index>& key) {
+                                         return a.col != key.first ? a.col < key.first : a.row < key.second;
+                                       });
+      return it != p.entries.end() && it->row == row && it->col == col ? &*it : nullptr;
+    };
+    for (const Entry& e : p.entries) {
+      if (e.row == e.col) continue;
+      const Entry* mirror = find(e.col, e.row);
+      const double m = mirror ? mirror->value : 0.0;
+      if (std::abs(e.value - m) > tol) {
+        throw MatrixMarketError(
+            path, e.line,
+            mirror ? fmt::format("not symmetric: entry ({}, {}) = {} but ({}, {}) = {} (line {})", e.row + 1,
+                                 e.col + 1, e.value, e.col + 1, e.row + 1, m, mirror->line)
+                   : fmt::format("not symmetric: entry ({}, {}) = {} has no mirror entry ({}, {})", e.row + 1,
+                                 e.col + 1, e.value, e.col + 1, e.row + 1));
+      }
+    }
+  }
+  return p;
+}
+
+}  // namespace
+
+SparseMatrix<double> read_market_sparse(const std::string& path, const MarketReadOptions& options) {
+  const Parsed p = parse(path, options);
+  std::vector<Eigen::Triplet<double>> t;
+  t.reserve(p.entries.size() * (p.symmetry == Symmetry::Symmetric ? 2 : 1));
+  for (const Entry& e : p.entries) {
+    t.emplace_back(e.row, e.col, e.value);
+    if (p.symmetry == Symmetry::Symmetric && e.row != e.col) t.emplace_back(e.col, e.row, e.value);
+  }
+  SparseMatrix<double> M(p.rows, p.cols);
+  M.setFromTriplets(t.begin(), t.end());
+  return M;
+}
+
+Matrix<double> read_market_dense(const std::string& path, const MarketReadOptions& options) {
+  const Parsed p = parse(path, options);
+  Matrix<double> M = Matrix<double>::Zero(p.rows, p.cols);
+  for (const Entry& e : p.entries) {
+    M(e.row, e.col) = e.value;
+    if (p.symmetry == Symmetry::Symmetric) M(e.col, e.row) = e.value;
+  }
+  return M;
+}
+
+namespace {
+void finish(std::ofstream& out, const std::string& path) {
+  out.close();
+  if (!out) throw MatrixMarketError(path, 0, "cannot write file");
+}
+}  // namespace
+
+void write_market(const std::string& path, const SparseMatrix<double>& M, bool symmetric) {
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw MatrixMarketError(path, 0, "cannot open file for writing");
+  Index count = 0;
+  for (Index j = 0; j < M.outerSize(); ++j)
+    for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it) count += !symmetric || it.row() >= it.col();
+  out << "%%MatrixMarket matrix coordinate real " << (symmetric ? "symmetric" : "general") << "\n";
+  out << M.rows() << " " << M.cols() << " " << count << "\n";
+  for (Index j = 0; j < M.outerSize(); ++j)
+    for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it)
+      if (!symmetric || it.row() >= it.col()) out << fmt::format("{} {} {:.17g}\n", it.row() + 1, it.col() + 1, it.value());
+  finish(out, path);
+}
+
+void write_market(const std::string& path, const Matrix<double>& M) {
+  std::ofstream out(path, std::ios::binary);
+  if (!out) throw MatrixMarketError(path, 0, "cannot open file for writing");
+  out << "%%MatrixMarket matrix array real general\n" << M.rows() << " " << M.cols() << "\n";
+  for (Index j = 0; j < M.cols(); ++j)
+    for (Index i = 0; i < M.rows(); ++i) out << fmt::format("{:.17g}\n", M(i, j));
+  finish(out, path);
+}
+
+}  // namespace qpreduce

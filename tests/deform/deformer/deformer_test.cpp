@@ -1,0 +1,495 @@
+// The modified ARAP energy (Eq. 6–10) and the reduced deformer (Section 3.2).
+#include <catch2/catch.hpp>
+
+#include "qpreduce/deform/energy/arap_energy.h"
+#include "qpreduce/deform/deformer/deformer.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
+#include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
+
+#include <random>
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+namespace {
+
+Eigen::Matrix3d rotation(double angle, Eigen::Vector3d axis) {
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+// Small surface and solid used throughout.
+TriangleMesh small_cylinder() { return shapes::capped_cylinder(1.0, 3.0, 8, 6); }
+TetMesh small_box() { return shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 3); }
+
+std::vector<int> round_robin_clusters(Index r, Index d) {
+  std::vector<int> c(static_cast<size_t>(r));
+  for (Index k = 0; k < r; ++k) c[k] = static_cast<int>((k * d) / r);
+  return c;
+}
+
+Eigen::VectorXd random_vector(Index n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N;
+  Eigen::VectorXd v(n);
+  for (Index i = 0; i < n; ++i) v(i) = N(rng);
+  return v;
+}
+
+Eigen::VectorXd rotations_vector(Index d, unsigned seed) {
+  Eigen::VectorXd S(9 * d);
+  for (Index i = 0; i < d; ++i) {
+    const Eigen::VectorXd a = random_vector(4, seed + static_cast<unsigned>(i));
+    Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i) = rotation(a(0), a.tail(3));
+  }
+  return S;
+}
+
+struct EnergyCase {
+  Vertices V;
+  RotationElements el;
+  std::vector<int> clusters;
+  Index d = 3;
+};
+
+EnergyCase energy_case(bool tet) {
+  EnergyCase c;
+  if (tet) {
+    const TetMesh m = small_box();
+    c.V = m.V;
+    c.el = tet_elements(m.V, m.T);
+  } else {
+    const TriangleMesh m = small_cylinder();
+    c.V = m.V;
+    c.el = spokes_and_rims_elements(m.V, m.F);
+  }
+  c.clusters = round_robin_clusters(c.el.size(), c.d);
+  return c;
+}
+
+// u = [V′ interleaved; Q].
+Eigen::VectorXd pack(const Vertices& Vp, const Eigen::VectorXd& Q) {
+  Eigen::VectorXd u(3 * Vp.rows() + Q.size());
+  for (Index i = 0; i < Vp.rows(); ++i) u.segment<3>(3 * i) = Vp.row(i).transpose();
+  u.tail(Q.size()) = Q;
+  return u;
+}
+
+}  // namespace
+
+TEST_CASE("E′ assembled as ½uᵀLu − SᵀDᵀu + c(S) equals the term-by-term energy", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const EnergyCase c = energy_case(tet);
+  const EnergyParameters params{0.3, tet ? 0.0 : 0.2};
+  const ModifiedArapSystem sys = assemble_modified_arap(c.V, c.el, c.clusters, c.d, params);
+  const Index n = c.V.rows(), r = c.el.size();
+  REQUIRE(sys.L.rows() == 3 * n + 4 * r);
+  REQUIRE(sys.D.cols() == 9 * c.d);
+
+  // Symmetric and PSD.
+  const Matrix<double> L(sys.L);
+  CHECK((L - L.transpose()).norm() <= 1e-12 * L.norm());
+  const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Matrix<double>>(L).eigenvalues();
+  CHECK(ev.minCoeff() >= -1e-10 * ev.maxCoeff());
+
+  Vertices Vp = c.V;
+  Vp += 0.1 * Eigen::Map<const Vertices>(random_vector(3 * n, 1).data(), n, 3);
+  const Eigen::VectorXd Q = 0.05 * random_vector(4 * r, 2);
+  const Eigen::VectorXd S = rotations_vector(c.d, 3);
+  const Eigen::VectorXd u = pack(Vp, Q);
+  // Constant term ½ Σ c ‖s e‖² = E′(0, 0, S).
+  const double constant = modified_arap_energy(c.V, c.el, c.clusters, params, Vertices::Zero(n, 3),
+                                               Eigen::VectorXd::Zero(4 * r), S);
+  const double assembled = 0.5 * u.dot(sys.L * u) - S.dot(sys.D.transpose() * u) + constant;
+  const double direct = modified_arap_energy(c.V, c.el, c.clusters, params, Vp, Q, S);
+  CHECK(assembled == Approx(direct).epsilon(1e-10));
+
+  // Gradient Lu − DS against central finite differences of the direct energy.
+  const Eigen::VectorXd grad = sys.L * u - sys.D * S;
+  double worst = 0.0;
+  for (Index i = 0; i < u.size(); i += std::max<Index>(1, u.size() / 40)) {
+    const double h = 1e-6;
+    Eigen::VectorXd up = u, um = u;
+    up(i) += h;
+    um(i) -= h;
+    auto energy_of = [&](const Eigen::VectorXd& x) {
+      Vertices V2(n, 3);
+      for (Index v = 0; v < n; ++v) V2.row(v) = x.segment<3>(3 * v).transpose();
+      return modified_arap_energy(c.V, c.el, c.clusters, params, V2, x.tail(4 * r), S);
+    };
+    const double fd = (energy_of(up) - energy_of(um)) / (2 * h);
+    worst = std::max(worst, std::abs(fd - grad(i)) / (1.0 + std::abs(grad(i))));
+  }
+  CHECK(worst < 1e-6);
+}
+
+TEST_CASE("eliminating Q gives the minimum of E′ over Q", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const EnergyCase c = energy_case(tet);
+  const EnergyParameters params{0.2, tet ? 0.0 : 0.4};
+  const ModifiedArapSystem sys = assemble_modified_arap(c.V, c.el, c.clusters, c.d, params);
+  const EliminatedArapSystem e = eliminate_rotation_corrections(sys);
+  const Index n = c.V.rows(), r = c.el.size(), nv = 3 * n;
+  const Eigen::VectorXd V = 0.3 * random_vector(nv, 4), S = rotations_vector(c.d, 5);
+  // Minimise over Q directly: L_QQ Q = D_Q S − L_QV V.
+  const Matrix<double> L(sys.L);
+  const Matrix<double> D(sys.D);
+  const Eigen::VectorXd Q = L.bottomRightCorner(4 * r, 4 * r).ldlt().solve(D.bottomRows(4 * r) * S -
+                                                                             L.bottomLeftCorner(4 * r, nv) * V);
+  Eigen::VectorXd u(nv + 4 * r);
+  u << V, Q;
+  const double full = 0.5 * u.dot(L * u) - S.dot(D.transpose() * u);
+  // min_Q E′ = ½VᵀHV − SᵀD_sᵀV − ½(D_Q S)ᵀL_QQ⁻¹(D_Q S): the last term depends on S only.
+  const Eigen::VectorXd DQS = D.bottomRows(4 * r) * S;
+  const double s_only = -0.5 * DQS.dot(L.bottomRightCorner(4 * r, 4 * r).ldlt().solve(DQS));
+  const double reduced = 0.5 * V.dot(e.H * V) - S.dot(e.Ds.transpose() * V) + s_only;
+  CHECK(reduced == Approx(full).epsilon(1e-10));
+  // H is symmetric PSD with the translations as null space.
+  const Matrix<double> H(e.H);
+  CHECK((H - H.transpose()).norm() <= 1e-12 * H.norm());
+  Eigen::VectorXd tx = Eigen::VectorXd::Zero(nv);
+  for (Index i = 0; i < n; ++i) tx(3 * i) = 1.0;
+  CHECK((e.H * tx).norm() <= 1e-10 * H.norm());
+}
+
+TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range", "[arap][phase2]") {
+  // G = R·S, S symmetric positive definite with cond S from 1 to 99 (the
+  // closed-form path takes cond G < 100): the polar factor is R exactly.
+  double worst = 0.0;
+  for (unsigned seed = 0; seed < 200; ++seed) {
+    const Eigen::VectorXd a = random_vector(10, 1000 + seed);
+    const Eigen::Matrix3d R = rotation(3.0 * a(0), a.segment<3>(1));
+    const Eigen::Matrix3d Q = rotation(3.0 * a(4), a.segment<3>(5));
+    const double cond = 1.0 + 98.0 * std::abs(a(8)) / (1.0 + std::abs(a(8)));
+    const Eigen::Vector3d sigma(1.0, std::sqrt(cond), cond);
+    const Eigen::Matrix3d S = Q * sigma.asDiagonal() * Q.transpose();
+    const Eigen::Matrix3d F = fit_rotation((1.0 + std::abs(a(9))) * R * S);
+    worst = std::max(worst, (F - R).norm());
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-13);
+  }
+  CHECK(worst < 1e-12);
+}
+
+TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
+  for (unsigned seed = 0; seed < 50; ++seed) {
+    const Eigen::VectorXd a = random_vector(4, seed);
+    const Eigen::Matrix3d R = rotation(a(0), a.tail(3));
+    Eigen::Matrix3d G = R * Eigen::Vector3d(3.0, 2.0, 1.0).asDiagonal();
+    if (seed % 2) G.col(seed % 3) *= -1.0;  // reflected
+    const Eigen::Matrix3d F = fit_rotation(G);
+    CHECK(F.determinant() == Approx(1.0).epsilon(1e-12));
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-12);
+    if (seed % 2 == 0) CHECK((F - R).norm() < 1e-12);  // unreflected: recovers R
+    // The fit maximises tr(FᵀG) over SO(3): no nearby rotation does better.
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+      axis(k) = 1.0;
+      for (double eps : {1e-4, -1e-4}) CHECK((rotation(eps, axis) * F).cwiseProduct(G).sum() <= F.cwiseProduct(G).sum() + 1e-12);
+    }
+  }
+}
+
+TEST_CASE("classic ARAP energy is zero at rest and invariant under rigid motion", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  const EnergyCase c = energy_case(tet);
+  CHECK(arap_energy(c.V, c.el, c.V) == Approx(0.0).margin(1e-20));
+  const Eigen::Matrix3d R = rotation(0.7, Eigen::Vector3d(1, 2, 3));
+  Vertices moved = (c.V * R.transpose()).rowwise() + Eigen::RowVector3d(1, -2, 0.5);
+  CHECK(arap_energy(c.V, c.el, moved) == Approx(0.0).margin(1e-18));
+  Vertices bent = c.V;
+  bent.col(0) += 0.1 * bent.col(2).array().square().matrix();
+  CHECK(arap_energy(c.V, c.el, bent) > 1e-6);
+}
+
+namespace {
+
+DeformableModel cylinder_model(Index rot, Index lin) {
+  const TriangleMesh m = shapes::capped_cylinder(1.0, 4.0, 10, 9);
+  DeformableModel model;
+  model.V = m.V;
+  model.F = m.F;
+  model.clusters = round_robin_clusters(m.V.rows(), rot);
+  model.linear = linear_proxies_fps(m.V, m.F, lin);
+  return model;
+}
+
+// Point handles on a few vertices, targets = rest positions moved by (R, t).
+HandleTargets rigid_targets(const Vertices& V, const Handles& h, const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  HandleTargets targets;
+  targets.points.resize(static_cast<Index>(h.points.size()), 3);
+  for (size_t i = 0; i < h.points.size(); ++i)
+    targets.points.row(i) = (R * V.row(h.points[i].vertices[0]).transpose() + t).transpose();
+  return targets;
+}
+
+}  // namespace
+
+TEST_CASE("deformer: the rest pose is a fixed point", "[deformer]") {
+  const DeformableModel model = cylinder_model(6, 12);
+  Deformer deformer;
+  const PrecomputeSummary ps = deformer.precompute(model);
+  INFO(ps.message << " / " << ps.subspace.report());
+  REQUIRE(ps.ok());
+  Handles h;
+  for (Index v : {0, 37, 85}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  Vertices out;
+  deformer.frame(rigid_targets(model.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()), &out);
+  const double scale = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
+  CHECK((out - model.V).cwiseAbs().maxCoeff() <= 1e-5 * scale);  // float reconstruction
+}
+
+TEST_CASE("deformer: a rigid motion of all handles moves the mesh rigidly", "[deformer]") {
+  const bool global = GENERATE(true, false);
+  CAPTURE(global);
+  const DeformableModel model = cylinder_model(6, 12);
+  DeformerOptions opts;
+  opts.global_rotation = global;
+  opts.iterations = 30;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, opts).ok());
+  Handles h;
+  for (Index v : {0, 37, 85, 91}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  const Eigen::Matrix3d R = rotation(global ? 2.0 : 0.6, Eigen::Vector3d(1, 1, 0));
+  const Eigen::Vector3d t(0.5, -1.0, 2.0);
+  Vertices out;
+  // Several frames towards the pose (warm start), then the check.
+  for (int f = 1; f <= 4; ++f) {
+    const double a = f / 4.0;
+    const Eigen::Matrix3d Rf = rotation(a * (global ? 2.0 : 0.6), Eigen::Vector3d(1, 1, 0));
+    deformer.frame(rigid_targets(model.V, h, Rf, a * t), &out);
+  }
+  const Vertices expected = (model.V * R.transpose()).rowwise() + t.transpose();
+  const double scale = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
+  CHECK((out - expected).cwiseAbs().maxCoeff() <= 1e-4 * scale);
+  // Every cluster rotation equals R.
+  for (Index i = 0; i < deformer.rotational_proxies(); ++i) {
+    const Eigen::Map<const Eigen::Matrix3d> s(deformer.rotations().data() + 9 * i);
+    CHECK((s - R).norm() < 1e-5);
+  }
+}
+
+TEST_CASE("deformer: Botsch–Sorkine style patches hold their transforms", "[deformer]") {
+  DeformableModel model = cylinder_model(5, 10);
+  std::vector<int> sel(static_cast<size_t>(model.V.rows()), 1);
+  for (Index v = 0; v < model.V.rows(); ++v) {
+    if (model.V(v, 2) < 0.6) sel[v] = 0;
+    if (model.V(v, 2) > 3.4) sel[v] = 2;
+  }
+  Eigen::Matrix4d def = Eigen::Matrix4d::Identity();
+  def.topLeftCorner<3, 3>() = rotation(0.8, Eigen::Vector3d(1, 0, 0));
+  def.block<3, 1>(0, 3) = Eigen::Vector3d(0.0, 1.0, -0.5);
+  const SelDefScenario sc = apply_sel_def(sel, def, &model);
+  Deformer deformer;
+  const PrecomputeSummary ps = deformer.precompute(model);
+  INFO(ps.message);
+  REQUIRE(ps.ok());
+  CHECK(ps.patches == 2);
+  REQUIRE(deformer.set_handles(sc.handles).status == Status::Success);
+  Vertices out;
+  deformer.frame(sc.targets, &out);
+  double fixed_err = 0.0, handle_err = 0.0, moved = 0.0;
+  for (Index v = 0; v < model.V.rows(); ++v) {
+    const Eigen::Vector3d p = model.V.row(v).transpose();
+    if (sel[v] == 0) fixed_err = std::max(fixed_err, (out.row(v).transpose() - p).norm());
+    if (sel[v] == 2) {
+      const Eigen::Vector3d target = def.topLeftCorner<3, 3>() * p + def.block<3, 1>(0, 3);
+      handle_err = std::max(handle_err, (out.row(v).transpose() - target).norm());
+    }
+    if (sel[v] == 1) moved = std::max(moved, (out.row(v).transpose() - p).norm());
+  }
+  CHECK(fixed_err < 1e-5);
+  CHECK(handle_err < 1e-5);
+  CHECK(moved > 0.1);  // the free region follows
+  CHECK(out.allFinite());
+}
+
+TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is the full-space minimiser of E′",
+          "[deformer]") {
+  const TriangleMesh m = shapes::capped_cylinder(1.0, 2.0, 6, 4);
+  DeformableModel model;
+  model.V = m.V;
+  model.F = m.F;
+  const Index n = m.V.rows(), d = 3;
+  model.clusters = round_robin_clusters(n, d);
+  std::vector<std::vector<Index>> all(static_cast<size_t>(n));
+  for (Index v = 0; v < n; ++v) all[v] = {v};
+  model.linear = linear_proxies_from_groups(all, n);
+  DeformerOptions opts;
+  opts.iterations = 1;
+  opts.global_rotation = false;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, opts).ok());
+  Handles h;
+  const std::vector<Index> hv = {0, 7, 13, 20};
+  for (Index v : hv) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  HandleTargets targets;
+  targets.points.resize(4, 3);
+  for (int i = 0; i < 4; ++i) targets.points.row(i) = m.V.row(hv[i]) + Eigen::RowVector3d(0.1 * i, -0.2, 0.3 * (i % 2));
+  Vertices out;
+  deformer.frame(targets, &out);
+
+  // Full space: Phase 1 (S = I) then Phase 2 then Phase 1, by dense solves of
+  // E′ over (V′, Q) with the handle vertices fixed.
+  const RotationElements el = spokes_and_rims_elements(m.V, m.F);
+  const ModifiedArapSystem sys = assemble_modified_arap(m.V, el, model.clusters, d, opts.energy);
+  const Matrix<double> L(sys.L);
+  const Matrix<double> D(sys.D);
+  const Index nu = L.rows(), k = 3 * static_cast<Index>(hv.size());
+  Matrix<double> K = Matrix<double>::Zero(nu + k, nu + k);
+  K.topLeftCorner(nu, nu) = L;
+  Eigen::VectorXd b(k);
+  for (size_t i = 0; i < hv.size(); ++i)
+    for (int a = 0; a < 3; ++a) {
+      K(3 * hv[i] + a, nu + 3 * static_cast<Index>(i) + a) = 1.0;
+      K(nu + 3 * static_cast<Index>(i) + a, 3 * hv[i] + a) = 1.0;
+      b(3 * static_cast<Index>(i) + a) = targets.points(static_cast<Index>(i), a);
+    }
+  const auto lu = K.fullPivLu();
+  Eigen::VectorXd S(9 * d);
+  for (Index i = 0; i < d; ++i) Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i).setIdentity();
+  auto phase1 = [&](const Eigen::VectorXd& Sv) {
+    Eigen::VectorXd rhs(nu + k);
+    rhs << D * Sv, b;
+    return Eigen::VectorXd(lu.solve(rhs).head(3 * n));
+  };
+  Eigen::VectorXd V1 = phase1(S);
+  const Eigen::VectorXd G = D.topRows(3 * n).transpose() * V1;
+  for (Index i = 0; i < d; ++i)
+    Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i) = fit_rotation(Eigen::Map<const Eigen::Matrix3d>(G.data() + 9 * i));
+  const Eigen::VectorXd V2 = phase1(S);
+  double err = 0.0;
+  for (Index v = 0; v < n; ++v) err = std::max(err, (out.row(v).transpose() - V2.segment<3>(3 * v)).norm());
+  CHECK(err < 1e-5);  // float reconstruction
+}
+
+TEST_CASE("deformer: tet meshes deform and keep handles", "[deformer]") {
+  const TetMesh m = small_box();
+  DeformableModel model;
+  model.V = m.V;
+  model.T = m.T;
+  model.clusters = round_robin_clusters(m.T.rows(), 4);
+  model.linear = linear_proxies_fps(m.V, m.T, 8);
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model).ok());
+  Handles h;
+  const Index top = m.V.rows() - 1;
+  for (Index v : {Index(0), Index(1), top}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  HandleTargets targets = rigid_targets(m.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  targets.points.row(2) += Eigen::RowVector3d(0.5, 0.0, 0.0);
+  Vertices out;
+  deformer.frame(targets, &out);
+  CHECK((out.row(top) - targets.points.row(2)).norm() < 1e-5);
+  CHECK((out.row(0) - targets.points.row(0)).norm() < 1e-5);
+  CHECK(out.allFinite());
+}
+
+TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]") {
+  // 30 clusters: 9d = 270, so F_y is large enough for the factored form and
+  // the parallel rounds (alternating.h).
+  const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 12, 10);
+  DeformableModel model;
+  model.V = m.V;
+  model.F = m.F;
+  const Index n = m.V.rows();
+  model.clusters = round_robin_clusters(n, 30);
+  model.linear = linear_proxies_fps(m.V, m.F, 12);
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model).ok());
+  Handles h;
+  for (Index v : {Index(0), Index(5), n - 1}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  HandleTargets targets = rigid_targets(m.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  targets.points.row(2) += Eigen::RowVector3d(0.8, 0.0, -0.3);
+  auto frames = [&](int threads) {
+    deformer.reset_pose();
+    deformer.set_round_threads(threads);
+    Vertices out;
+    for (int f = 0; f < 3; ++f) deformer.frame(targets, &out);
+    return out;
+  };
+  const Vertices serial = frames(1), parallel = frames(2);
+  CHECK((parallel - serial).cwiseAbs().maxCoeff() <= 1e-5);
+  CHECK((serial.row(n - 1) - targets.points.row(2)).norm() < 1e-5);
+  CHECK_THROWS_WITH(deformer.set_round_threads(-1), Catch::Contains("threads"));
+  DeformerOptions o;
+  o.round_threads = -2;
+  std::string why;
+  CHECK_FALSE(o.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("round_threads"));
+}
+
+TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
+  DeformableModel model = cylinder_model(4, 6);
+  Deformer deformer;
+  SECTION("handles before precompute") {
+    CHECK_THROWS_WITH(deformer.set_handles({}), Catch::Contains("precompute"));
+  }
+  SECTION("cluster labels of the wrong size") {
+    model.clusters.pop_back();
+    CHECK_THROWS_WITH(deformer.precompute(model), Catch::Contains("clusters size"));
+  }
+  SECTION("both a surface and tets") {
+    model.T = small_box().T;
+    CHECK_THROWS_WITH(deformer.precompute(model), Catch::Contains("exactly one"));
+  }
+  SECTION("handle vertex out of range") {
+    REQUIRE(deformer.precompute(model).ok());
+    Handles h;
+    h.points.push_back({{100000}, {}});
+    CHECK_THROWS_WITH(deformer.set_handles(h), Catch::Contains("outside"));
+  }
+  SECTION("NaN target") {
+    REQUIRE(deformer.precompute(model).ok());
+    Handles h;
+    h.points.push_back({{0}, {}});
+    REQUIRE(deformer.set_handles(h).ok());
+    HandleTargets t;
+    t.points = Vertices::Constant(1, 3, std::numeric_limits<double>::quiet_NaN());
+    Vertices out;
+    CHECK_THROWS_WITH(deformer.frame(t, &out), Catch::Contains("NaN"));
+  }
+  SECTION("invalid energy parameters") {
+    DeformerOptions o;
+    o.energy.alpha = -1;
+    CHECK_THROWS_WITH(deformer.precompute(model, o), Catch::Contains("alpha"));
+  }
+}
+
+TEST_CASE("deformer: vertices used by no element stay at rest and change nothing else", "[deformer]") {
+  const DeformableModel base = cylinder_model(6, 12);
+  DeformableModel loose = base;
+  // Two unreferenced vertices, one in the middle of the numbering.
+  const Index n = base.V.rows();
+  loose.V.conservativeResize(n + 2, 3);
+  loose.V.row(n) = Eigen::RowVector3d(5.0, 5.0, 5.0);
+  loose.V.row(n + 1) = Eigen::RowVector3d(-5.0, 0.0, 1.0);
+  if (!loose.clusters.empty()) loose.clusters.resize(static_cast<size_t>(n + 2), 0);  // elements without edges
+  Deformer a, b;
+  REQUIRE(a.precompute(base).ok());
+  const PrecomputeSummary pb = b.precompute(loose);
+  INFO(pb.message);
+  REQUIRE(pb.ok());
+  CHECK(pb.patches == 1);  // the internal Fixed patch
+  Handles h;
+  for (Index v : {0, 37, 85}) h.points.push_back({{v}, {}});
+  REQUIRE(a.set_handles(h).ok());
+  REQUIRE(b.set_handles(h).ok());
+  HandleTargets t = rigid_targets(base.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  t.points(0, 0) += 0.5;
+  Vertices va, vb;
+  for (int f = 0; f < 3; ++f) {
+    a.frame(t, &va);
+    b.frame(t, &vb);
+  }
+  const double moved = (va - base.V).cwiseAbs().maxCoeff();
+  CHECK(moved > 0.05);
+  CHECK((vb.topRows(n) - va).cwiseAbs().maxCoeff() <= 1e-6 * (1 + moved));
+  CHECK((vb.bottomRows(2) - loose.V.bottomRows(2)).cwiseAbs().maxCoeff() <= 1e-6);
+}

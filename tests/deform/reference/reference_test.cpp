@@ -1,0 +1,317 @@
+// Full-space references (reference.h): Ceres and local-global agree, the
+// reduced deformer approaches the full E′ solution as proxies increase and
+// coincides with it when the proxies cover every vertex, bad scenarios throw.
+#include <catch2/catch.hpp>
+
+#include "qpreduce/deform/mesh/geometry.h"
+#include "qpreduce/deform/reference/reference.h"
+#include "qpreduce/deform/io/scenario.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
+#include <Eigen/Geometry>
+
+#include <cmath>
+#include <limits>
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+namespace {
+
+// A small mesh with its bottom layer Fixed and its top layer an Affine patch
+// prescribed to rotate by `angle` about x and move sideways (a .sel/.def).
+struct Case {
+  DeformableModel model;
+  Handles handles;
+  HandleTargets targets;
+};
+
+Case bend_case(bool tet, double angle) {
+  Case c;
+  std::vector<int> roles;
+  if (tet) {
+    const TetMesh m = shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 4);
+    c.model.V = m.V;
+    c.model.T = m.T;
+  } else {
+    const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 8, 6);
+    c.model.V = m.V;
+    c.model.F = m.F;
+  }
+  const double zmax = c.model.V.col(2).maxCoeff();
+  for (Index v = 0; v < c.model.V.rows(); ++v) {
+    const double z = c.model.V(v, 2);
+    roles.push_back(z < 1e-9 ? 0 : z > zmax - 1e-9 ? 2 : 1);
+  }
+  Eigen::Matrix4d def = Eigen::Matrix4d::Identity();
+  def.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  def.block<3, 1>(0, 3) = Eigen::Vector3d(0.3, -0.8, -0.4);
+  const SelDefScenario sd = apply_sel_def(roles, def, &c.model);
+  c.handles = sd.handles;
+  c.targets = sd.targets;
+  // Rotational clusters for E′: slabs along z.
+  const Index r = tet ? c.model.T.rows() : c.model.V.rows();
+  c.model.clusters.resize(static_cast<size_t>(r));
+  for (Index k = 0; k < r; ++k) {
+    double z = 0.0;
+    if (tet) {
+      for (int i = 0; i < 4; ++i) z += 0.25 * c.model.V(c.model.T(k, i), 2);
+    } else {
+      z = c.model.V(k, 2);
+    }
+    c.model.clusters[k] = std::min(3, static_cast<int>(4.0 * z / zmax));
+  }
+  return c;
+}
+
+double max_distance(const Vertices& A, const Vertices& B) { return (A - B).rowwise().norm().maxCoeff(); }
+double rms_distance(const Vertices& A, const Vertices& B) {
+  return std::sqrt((A - B).rowwise().squaredNorm().mean());
+}
+
+void check_rotations(const Eigen::VectorXd& R) {
+  for (Index i = 0; i < R.size() / 9; ++i) {
+    const Eigen::Map<const Eigen::Matrix3d> Ri(R.data() + 9 * i);
+    CHECK((Ri.transpose() * Ri - Eigen::Matrix3d::Identity()).norm() < 1e-9);
+    CHECK(Ri.determinant() == Approx(1.0).margin(1e-9));
+  }
+}
+
+}  // namespace
+
+TEST_CASE("Ceres and local-global references agree at convergence", "[reference]") {
+  const bool tet = GENERATE(false, true);
+  const ReferenceEnergy kind = GENERATE(ReferenceEnergy::ClassicArap, ReferenceEnergy::ModifiedArap);
+  CAPTURE(tet, to_string(kind));
+  const Case c = bend_case(tet, 1.0);
+  ReferenceOptions opt;
+  opt.energy = kind;
+  ReferenceSolution lg, ce;
+  const ReferenceSummary slg = solve_local_global(c.model, c.handles, c.targets, opt, &lg);
+  const ReferenceSummary sce = solve_ceres_reference(c.model, c.handles, c.targets, opt, &ce);
+  INFO(slg.solver_report);
+  INFO(sce.message);
+  REQUIRE(slg.ok());
+  REQUIRE(sce.ok());
+  CHECK(slg.converged);
+  CHECK(sce.converged);
+  const double diag = bounding_box_diagonal(c.model.V);
+  CHECK(slg.handle_residual < 1e-10 * diag);
+  CHECK(sce.handle_residual < 1e-10 * diag);
+  CHECK(std::abs(slg.energy - sce.energy) <= 1e-6 * sce.energy);
+  CHECK(max_distance(lg.V, ce.V) < 1e-4 * diag);
+  check_rotations(lg.rotations);
+  check_rotations(ce.rotations);
+  // The reported energy is the energy of the returned pose.
+  if (kind == ReferenceEnergy::ClassicArap) {
+    const RotationElements el = tet ? tet_elements(c.model.V, c.model.T) : spokes_and_rims_elements(c.model.V, c.model.F);
+    CHECK(arap_energy(c.model.V, el, lg.V) == Approx(slg.energy).epsilon(1e-12));
+    CHECK(arap_energy(c.model.V, el, ce.V) == Approx(sce.energy).epsilon(1e-12));
+  }
+}
+
+TEST_CASE("local-global: monotone energy, warm start, frame rotation", "[reference]") {
+  const Case c = bend_case(false, 0.8);
+  const ReferenceEnergy kind = GENERATE(ReferenceEnergy::ClassicArap, ReferenceEnergy::ModifiedArap);
+  CAPTURE(to_string(kind));
+  ReferenceOptions opt;
+  opt.energy = kind;
+  LocalGlobalArap lg;
+  lg.precompute(c.model, opt);
+  REQUIRE(lg.set_handles(c.handles) == Status::Success);
+  // Block-coordinate descent: the energy after k rounds never rises with k.
+  ReferenceSolution a, b;
+  double previous = std::numeric_limits<double>::infinity();
+  for (int rounds = 1; rounds <= 20; ++rounds) {
+    ReferenceOptions few = opt;
+    few.max_iterations = rounds;
+    const ReferenceSummary s = solve_local_global(c.model, c.handles, c.targets, few, &a);
+    CHECK(s.energy <= previous * (1 + 1e-12));
+    previous = s.energy;
+  }
+  const ReferenceSummary full = lg.solve(c.targets, &a);
+  REQUIRE(full.converged);
+  CHECK(full.energy <= previous);
+  if (kind == ReferenceEnergy::ClassicArap) {
+    // Started at its own converged answer, the alternation stops at once
+    // (E′ would restart with Q = 0, so only the classic energy is checked).
+    const ReferenceSummary again = lg.solve(c.targets, &b, a.V);
+    CHECK(again.converged);
+    CHECK(again.iterations <= 3);
+    CHECK(max_distance(a.V, b.V) < 1e-8);
+    return;
+  }
+  // frame = F minimises E′(FᵀV′, Q, FᵀS): the same as the plain problem with
+  // every constraint rotated by Fᵀ (the Fixed patch becomes a patch
+  // prescribed to Fᵀ·rest), rotated back by F.
+  const Eigen::Matrix3d F = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  ReferenceOptions framed = opt;
+  framed.frame = F;
+  ReferenceSolution rs, plain;
+  REQUIRE(solve_local_global(c.model, c.handles, c.targets, framed, &rs).converged);
+  Case rc = c;
+  rc.model.patch_types[0] = PatchType::Affine;
+  rc.handles.patches = {0, 1};
+  Eigen::Matrix<double, 3, 4> fixed = Eigen::Matrix<double, 3, 4>::Zero();
+  fixed.leftCols<3>() = F.transpose();
+  rc.targets.patch_transforms = {fixed, F.transpose() * c.targets.patch_transforms[0]};
+  framed.frame.setIdentity();
+  REQUIRE(solve_local_global(rc.model, rc.handles, rc.targets, framed, &plain).converged);
+  CHECK(max_distance(rs.V, plain.V * F.transpose()) < 1e-7);
+  CHECK(max_distance(rs.V, a.V) > 1e-4);  // E′ is not rotation invariant
+}
+
+TEST_CASE("reduced E' solutions approach the full-space one as linear proxies increase", "[reference]") {
+  // Point handles on single vertices: unlike patches (whose 12 parameters are
+  // linear proxies themselves, so that a .sel/.def pose lies in the subspace
+  // for any proxy count), their rows are not in Span(C) when the proxies are
+  // group averages, so the subspace error is real and shrinks with m.
+  Case c = bend_case(false, 0.0);
+  c.model.patch_types = {PatchType::Fixed};
+  for (int& p : c.model.patch_of_vertex)
+    if (p == 1) p = -1;
+  c.handles = {};
+  c.targets = {};
+  const Index n = c.model.V.rows();
+  const std::vector<Index> picked = {n - 1, 40, 44, 28};  // top centre, two top-ring vertices, one mid-ring
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.9, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  c.targets.points.resize(static_cast<Index>(picked.size()), 3);
+  for (size_t h = 0; h < picked.size(); ++h) {
+    c.handles.points.push_back({{picked[h]}, {}});
+    c.targets.points.row(static_cast<Index>(h)) =
+        (R * c.model.V.row(picked[h]).transpose() + Eigen::Vector3d(0.3, -0.8, -0.4)).transpose();
+  }
+  const double diag = bounding_box_diagonal(c.model.V);
+  // The reduced alternation's Phase 2 drops Q (Eq. 19), so its limit is the
+  // fixed point of the same alternation in full space (PaperPhase2); the
+  // global rotation adaptation is off so that both minimise plain E′.
+  ReferenceOptions opt;
+  opt.energy = ReferenceEnergy::ModifiedArap;
+  opt.cluster_fit = ClusterRotationFit::PaperPhase2;
+  ReferenceSolution full;
+  REQUIRE(solve_local_global(c.model, c.handles, c.targets, opt, &full).converged);
+  opt.cluster_fit = ClusterRotationFit::Exact;
+  ReferenceSolution exact;
+  REQUIRE(solve_local_global(c.model, c.handles, c.targets, opt, &exact).converged);
+
+  auto reduced = [&](Index proxies) {
+    DeformableModel model = c.model;
+    if (proxies < n) {
+      ClusterOptions copt;
+      REQUIRE(linear_proxies_groups(model.V, model.F, proxies, GroupSpace::Positions, copt, &model.linear).ok());
+    } else {
+      std::vector<std::vector<Index>> singles;
+      for (Index v = 0; v < n; ++v) singles.push_back({v});
+      model.linear = linear_proxies_from_groups(singles, n);
+    }
+    DeformerOptions dopt;
+    dopt.global_rotation = false;
+    dopt.iterations = 50;
+    Deformer deformer;
+    REQUIRE(deformer.precompute(model, dopt).ok());
+    REQUIRE(deformer.set_handles(c.handles).ok());
+    Vertices out;
+    for (int frame = 0; frame < 400; ++frame)
+      if (deformer.frame(c.targets, &out).last_change < 1e-12) break;
+    return out;
+  };
+  std::vector<double> rms;
+  for (Index m : {5, 9, 17, 32}) {
+    rms.push_back(rms_distance(reduced(m), full.V) / diag);
+    CAPTURE(m, rms.back());
+    if (rms.size() > 1) CHECK(rms.back() <= rms[rms.size() - 2] * 1.1 + 1e-6);
+  }
+  CHECK(rms.back() < 0.5 * rms.front());
+  // A proxy at every vertex: the subspace is the whole space; the reduced
+  // answer (reconstructed in float) coincides with the full one.
+  const Vertices all = reduced(n);
+  CHECK(max_distance(all, full.V) < 1e-5 * diag);
+  // The two E′ fixed points (Eq. 19 vs the exact S-step) differ, by little.
+  CHECK(max_distance(full.V, exact.V) < 0.05 * diag);
+}
+
+TEST_CASE("references reject bad scenarios with clear errors", "[reference]") {
+  const Case c = bend_case(false, 0.5);
+  ReferenceOptions opt;
+  ReferenceSolution out;
+  SECTION("conflicting targets") {
+    Case bad = c;
+    Index fixed_vertex = 0;
+    while (bad.model.patch_of_vertex[fixed_vertex] != 0) ++fixed_vertex;
+    bad.handles.points.push_back({{fixed_vertex}, {}});
+    bad.targets.points.resize(1, 3);
+    bad.targets.points.row(0) = bad.model.V.row(fixed_vertex) + Eigen::RowVector3d(0.5, 0, 0);
+    CHECK_THROWS_WITH(solve_local_global(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("conflicting targets") && Catch::Contains("Fixed patch 0"));
+    CHECK_THROWS_WITH(solve_ceres_reference(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("conflicting targets"));
+    // The same vertex held where its patch holds it is not a conflict.
+    bad.targets.points.row(0) = bad.model.V.row(fixed_vertex);
+    CHECK(solve_local_global(bad.model, bad.handles, bad.targets, opt, &out).ok());
+  }
+  SECTION("a component without anchors") {
+    Case bad = c;
+    const Index n = c.model.V.rows();
+    bad.model.V.resize(2 * n, 3);
+    bad.model.V << c.model.V, c.model.V.rowwise() + Eigen::RowVector3d(5, 0, 0);
+    bad.model.F.resize(2 * c.model.F.rows(), 3);
+    bad.model.F << c.model.F, c.model.F.array() + static_cast<int>(n);
+    bad.model.patch_of_vertex.resize(static_cast<size_t>(2 * n), -1);
+    CHECK_THROWS_WITH(solve_local_global(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("connected component 1") && Catch::Contains("no handle"));
+    CHECK_THROWS_WITH(solve_ceres_reference(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("connected component 1"));
+    // One pinned vertex anchors it.
+    bad.handles.points.push_back({{n + 3}, {}});
+    bad.targets.points.resize(1, 3);
+    bad.targets.points.row(0) = bad.model.V.row(n + 3);
+    const ReferenceSummary s = solve_local_global(bad.model, bad.handles, bad.targets, opt, &out);
+    CHECK(s.ok());
+    CHECK(s.handle_residual < 1e-10);
+  }
+  SECTION("dependent weighted handles, unsupported constraints for Ceres") {
+    Case bad = c;
+    bad.handles.points.push_back({{10, 11}, {0.5, 0.5}});
+    bad.handles.points.push_back({{10, 11}, {1.0, 1.0}});
+    bad.targets.points = Vertices::Zero(2, 3);
+    LocalGlobalArap lg;
+    lg.precompute(bad.model, opt);
+    CHECK_THROWS_WITH(lg.set_handles(bad.handles), Catch::Contains("linearly dependent"));
+    CHECK_THROWS_WITH(solve_ceres_reference(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("weighted group"));
+  }
+  SECTION("E' without clusters, wrong target sizes") {
+    Case bad = c;
+    bad.model.clusters.clear();
+    opt.energy = ReferenceEnergy::ModifiedArap;
+    CHECK_THROWS_WITH(solve_local_global(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("clusters"));
+    opt.energy = ReferenceEnergy::ClassicArap;
+    bad = c;
+    bad.targets.patch_transforms.clear();
+    CHECK_THROWS_WITH(solve_local_global(bad.model, bad.handles, bad.targets, opt, &out),
+                      Catch::Contains("patch transforms"));
+  }
+}
+
+TEST_CASE("local-global with weighted point handles matches pinned vertices", "[reference]") {
+  // A weighted handle with all weight on one vertex is the same constraint as
+  // pinning it: both paths of the global step give the same answer.
+  Case c = bend_case(false, 0.6);
+  const Index v = 20;
+  Case pinned = c, weighted = c;
+  pinned.handles.points.push_back({{v}, {}});
+  weighted.handles.points.push_back({{v, v + 1}, {1.0, 0.0}});
+  const Eigen::RowVector3d target = c.model.V.row(v) + Eigen::RowVector3d(0.2, 0.1, 0.0);
+  pinned.targets.points = target;
+  weighted.targets.points = target;
+  ReferenceOptions opt;
+  ReferenceSolution a, b;
+  const ReferenceSummary sa = solve_local_global(pinned.model, pinned.handles, pinned.targets, opt, &a);
+  const ReferenceSummary sb = solve_local_global(weighted.model, weighted.handles, weighted.targets, opt, &b);
+  REQUIRE(sa.converged);
+  REQUIRE(sb.converged);
+  CHECK(sb.handle_residual < 1e-9);
+  CHECK(max_distance(a.V, b.V) < 1e-7);
+  CHECK(sa.energy == Approx(sb.energy).epsilon(1e-9));
+}
