@@ -107,7 +107,7 @@ constexpr Index kHandles = 8;
 constexpr int kPrecomputeRepetitions = 3;
 
 struct Session {
-  DeformableModel model;
+  DeformableMesh model;
   DeformerOptions options;
   Deformer deformer;
   PrecomputeSummary pre;
@@ -176,7 +176,7 @@ Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   }
   s->diagonal = bounding_box_diagonal(s->model.V);
   const ConstraintSummary cs = s->deformer.set_handles(s->handles);
-  if (!cs.ok()) throw std::runtime_error(spec.name + std::string(": handles: ") + cs.message);
+  if (!cs.usable()) throw std::runtime_error(spec.name + std::string(": handles: ") + cs.message);
   Session& ref = *s;
   all[spec.name] = std::move(s);
   return ref;

@@ -61,7 +61,7 @@ void BM_BuildSubspace(benchmark::State& state) {
     summary = build_subspace(g.H, g.C, g.D, opts, &out);
     benchmark::DoNotOptimize(out.N.data());
   }
-  if (!summary.ok()) state.SkipWithError(summary.report().c_str());
+  if (!summary.ok()) state.SkipWithError(summary.brief_report().c_str());
   set_counters(state, summary, mem);
   state.SetLabel(std::string(to_string(summary.backend_used)) + "/" + bench::to_string(kind) + psd_label(opts));
 }
@@ -85,7 +85,7 @@ void BM_SolverPrecompute(benchmark::State& state) {
     state.counters["peak_MiB"] = peak;
     state.ResumeTiming();
   }
-  if (!summary.ok()) state.SkipWithError(summary.report().c_str());
+  if (!summary.ok()) state.SkipWithError(summary.brief_report().c_str());
   const double peak = state.counters["peak_MiB"];
   set_counters(state, summary, mem);
   state.counters["peak_MiB"] = peak;

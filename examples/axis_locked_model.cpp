@@ -110,7 +110,7 @@ int main() {
   ok &= report("projection valid, idempotent, descending", testing::check_projection(*projection, 9 * d));
 
   // 2. Twist the top ring by 60° about z with the bottom ring fixed.
-  DeformableModel dm;
+  DeformableMesh dm;
   dm.V = mesh.V;
   dm.F = mesh.F;
   dm.patch_types = {PatchType::Fixed, PatchType::Rigid};

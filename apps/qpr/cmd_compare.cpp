@@ -62,7 +62,7 @@ int run_compare(const CompareArgs& a) {
   // The references, on the last frame's targets, from the rest pose.
   ReferenceOptions ro;
   ro.max_iterations = a.reference_iterations;
-  DeformableModel model = sc.model;
+  DeformableMesh model = sc.model;
   if (a.energy == "modified") {
     // E′ with the reduced run's clusters, α, β and last global rotation r₀.
     ro.energy = ReferenceEnergy::ModifiedArap;

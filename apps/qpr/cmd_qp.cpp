@@ -261,7 +261,7 @@ int run_qp(const Options& opt) {
   sopt.augment = !opt.no_augment;
   qpreduce::SubspaceSolver<double> solver;
   const qpreduce::SubspaceSummary pre = solver.precompute(H, C, D, sopt);
-  fmt::print("precompute: {}\n", pre.report());
+  fmt::print("precompute: {}\n", pre.brief_report());
   if (!pre.ok()) {
     fmt::print(stderr, "qpr qp: precompute failed: {}\n", pre.message);
     return 3;
@@ -316,7 +316,7 @@ int run_qp(const Options& opt) {
     const double t_op = seconds_since(t0);
     r["status"] = qpreduce::to_string(cs.status);
     r["message"] = cs.message;
-    if (!cs.ok()) {
+    if (!cs.usable()) {
       ++failures;
       fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
       records.push_back(r);

@@ -143,7 +143,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   if (!a.rotational_clusters.empty()) {
     const VertexIds ids = read_id(a.rotational_clusters);
     ids.validate(n);
-    const VertexGroups g = rotational_clusters(ids);
+    const VertexGroups g = rotation_groups_from_ids(ids);
     if (tet) {
       sc.model.clusters.resize(static_cast<size_t>(sc.model.T.rows()));
       for (Index t = 0; t < sc.model.T.rows(); ++t) sc.model.clusters[t] = g.group_of[sc.model.T(t, 0)];
@@ -154,7 +154,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   if (!a.affine_patches.empty()) {
     const VertexIds ids = read_id(a.affine_patches);
     ids.validate(n);
-    const VertexGroups g = affine_patches(ids);
+    const VertexGroups g = affine_patches_from_ids(ids);
     if (sc.model.patch_of_vertex.empty()) sc.model.patch_of_vertex.assign(static_cast<size_t>(n), -1);
     for (const auto& members : g.members) {
       const int id = static_cast<int>(sc.model.patch_types.size());

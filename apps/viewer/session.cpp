@@ -50,7 +50,7 @@ Session::~Session() {
 namespace {
 // Linear proxies are sampled here (as precompute would) so that the viewer can
 // colour them; precompute then uses exactly these.
-void ensure_linear_proxies(DeformableModel* model, Index count) {
+void ensure_linear_proxies(DeformableMesh* model, Index count) {
   if (model->linear.count() == count && count > 0) return;
   const bool tet = model->is_tet();
   model->linear = tet ? linear_proxies_fps(model->V, model->T, count) : linear_proxies_fps(model->V, model->F, count);
@@ -86,7 +86,7 @@ void Session::precompute_async(const DeformerOptions& options) {
   pending_options_ = options;
   // Proxy sampling is cheap next to the subspace build; done here so that the
   // worker only reads the model.
-  DeformableModel model = input_.scenario.model;
+  DeformableMesh model = input_.scenario.model;
   if (model.linear.count() != options.linear_proxies) {
     try {
       ensure_linear_proxies(&model, options.linear_proxies);

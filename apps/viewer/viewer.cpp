@@ -47,7 +47,7 @@ std::vector<Eigen::Vector3f> vertex_colors(ColorMode mode, const Session& sessio
   const Vertices& V = session.rest();
   const Index n = V.rows();
   std::vector<Eigen::Vector3f> colors(static_cast<size_t>(n), Eigen::Vector3f::Constant(0.8f));
-  const DeformableModel& model = session.input().scenario.model;
+  const DeformableMesh& model = session.input().scenario.model;
   if (mode == ColorMode::Clusters && session.deformer().ready()) {
     const std::vector<int>& cl = session.deformer().clusters();
     if (model.is_tet()) {

@@ -208,6 +208,7 @@ AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2
   }
   phase1.solve(b, y, z);
   summary.last_change = change;
+  summary.status = Status::Success;
   return summary;
 }
 
@@ -449,6 +450,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
       Fy_.size() >= options.parallel_min_entries && Fy_.rows() / block >= 2) {
     summary = run_parallel(projection, options, std::min<Index>(threads, Fy_.rows() / block), block, y);
     phase1.solve(b, y, z);
+    summary.status = Status::Success;
     return summary;
   }
   for (int it = 0; it < options.iterations; ++it) {
@@ -461,6 +463,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
       break;
   }
   phase1.solve(b, y, z);
+  summary.status = Status::Success;
   return summary;
 }
 

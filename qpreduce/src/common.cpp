@@ -17,4 +17,8 @@ const char* to_string(Status status) {
   return "unknown";
 }
 
+std::string Outcome::brief_report() const {
+  return message.empty() ? std::string(to_string(status)) : std::string(to_string(status)) + ": " + message;
+}
+
 }  // namespace qpreduce

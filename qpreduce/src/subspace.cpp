@@ -38,7 +38,7 @@ bool SubspaceOptions::is_valid(std::string* why) const {
   return true;
 }
 
-std::string SubspaceSummary::report() const {
+std::string SubspaceSummary::brief_report() const {
   return fmt::format("{}: {} (n={}, d={}, k={}, backend={}, rho={:.3g}, kkt_residual={:.2e}, {:.3f} s)",
                      to_string(status), message, n, d, k, to_string(backend_used), rho,
                      kkt_residual, total_seconds);

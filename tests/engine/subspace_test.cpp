@@ -76,7 +76,7 @@ TEMPLATE_TEST_CASE("reduced solve reproduces the full solution when the demand l
   opts.backend = backend;
   SubspaceSolver<S> solver;
   const SubspaceSummary sub = solver.precompute(p.H.cast<S>(), p.C.cast<S>(), p.D.cast<S>(), opts);
-  INFO(sub.report());
+  INFO(sub.brief_report());
   REQUIRE(sub.ok());
   REQUIRE(sub.backend_used == (backend == Backend::SparseLU ? Backend::SparseLU : backend));
   CHECK(sub.kkt_residual < 50 * std::numeric_limits<S>::epsilon());
@@ -167,7 +167,7 @@ TEST_CASE("random PSD H with a null space: reduced equals full on in-span demand
     opts.backend = seed % 2 ? Backend::Cholmod : Backend::SparseLU;
     SubspaceSolver<double> solver;
     const SubspaceSummary sub = solver.precompute(H, C, D, opts);
-    INFO(sub.report());
+    INFO(sub.brief_report());
     REQUIRE(sub.ok());
     const SparseMatrix<double> A = (C * gen::gaussian_matrix(d, m, seed + 300)).sparseView();
     REQUIRE(solver.set_constraints(A).status == Status::Success);
@@ -582,13 +582,13 @@ TEST_CASE("the PSD certificate decides like the factorization check", "[subspace
   VariationalSubspace<double> s;
   // PSD with a null space: accepted.
   const SubspaceSummary ok = build_subspace(L, C, D, opts, &s);
-  INFO(ok.report());
+  INFO(ok.brief_report());
   CHECK(ok.ok());
   // Slightly indefinite (λ_min = −10⁻³) while H + ρCCᵀ still factors: only a
   // PSD check can tell.
   const SparseMatrix<double> Hneg = L - 1e-3 * I;
   const SubspaceSummary bad = build_subspace(Hneg, C, D, opts, &s);
-  INFO(bad.report());
+  INFO(bad.brief_report());
   CHECK(bad.status == Status::IndefiniteH);
   CHECK(s.N.size() == 0);
   // Without the check the same H builds (H_ρ is positive definite).

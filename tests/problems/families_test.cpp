@@ -43,7 +43,7 @@ families::QpFamily small_family(Family f, std::uint64_t seed) {
 SubspaceSolver<double> precomputed_solver(const families::QpFamily& fam) {
   SubspaceSolver<double> solver;
   const SubspaceSummary s = solver.precompute(fam.H, fam.C, fam.D, families::recommended_options(fam));
-  INFO(s.report());
+  INFO(s.brief_report());
   REQUIRE(s.ok());
   return solver;
 }

@@ -151,7 +151,7 @@ struct AlternatingOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct AlternatingSummary {
+struct AlternatingSummary : Outcome {  // Success after a run
   int iterations = 0;
   double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
 };

@@ -54,4 +54,21 @@ inline bool usable(Status status) {
   return status == Status::Success || status == Status::ConstraintsLeastSquares;
 }
 
+// What every summary starts with (SubspaceSummary, ConstraintSummary,
+// PrecomputeSummary, ...): the status of the step, which starts at NotRun,
+// and a message for a person. Every stateful solver reports a failed
+// numerical step this way, never by throwing.
+struct Outcome {
+  Status status = Status::NotRun;
+  std::string message;
+
+  // Status::Success alone.
+  bool ok() const { return status == Status::Success; }
+  // Success, or an answer that holds with a qualification the message states
+  // (Status::ConstraintsLeastSquares).
+  bool usable() const { return qpreduce::usable(status); }
+  // "<status>" or "<status>: <message>", one line.
+  std::string brief_report() const;
+};
+
 }  // namespace qpreduce

@@ -14,14 +14,10 @@
 
 namespace qpreduce {
 
-struct FullSolveSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct FullSolveSummary : Outcome {
   Backend backend_used = Backend::Auto;
   double kkt_residual = -1.0;  // as SubspaceSummary::kkt_residual, for [X]
   double seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
 };
 
 // Throws std::invalid_argument on wrong sizes or NaN input. `X` is resized to n

@@ -135,17 +135,13 @@ struct PsdFactor {
   double distance(const Vector<double>& x, const Vector<double>& y) const;
 };
 
-struct FactorSummary {
-  Status status = Status::NotRun;  // Success or IndefiniteH
-  std::string message;
+struct FactorSummary : Outcome {  // status: Success or IndefiniteH
   Index n = 0, rank = 0, nullity = 0;
   double lambda_max = 0.0;       // largest eigenvalue
   double lambda_min = 0.0;       // smallest eigenvalue (may be a tiny negative)
   double lambda_min_kept = 0.0;  // smallest eigenvalue kept in L (0 when r = 0)
   double residual = -1.0;        // ‖H − LᵀL‖_F / ‖H‖_F
   double seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
 };
 
 // Rank-revealing factor of a symmetric PSD H. Throws std::invalid_argument on
@@ -273,15 +269,11 @@ struct TheoremSolutions {
   CompanionDemand demand;
 };
 
-struct TheoremSetupSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct TheoremSetupSummary : Outcome {
   FactorSummary factor;
   SubspaceSummary subspace;
   Index design_rank = 0;  // dim(Span(Ĉ) + Span(D̂))
   double seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
 };
 
 // Precompute once per (H, C, D), then check many demands.

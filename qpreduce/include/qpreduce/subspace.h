@@ -111,9 +111,7 @@ struct SubspaceOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct SubspaceSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct SubspaceSummary : Outcome {
   Backend backend_used = Backend::Auto;
   Index n = 0, d = 0, k = 0;
   double rho = 0.0;                // augmentation weight (0 on the KKT route)
@@ -126,9 +124,7 @@ struct SubspaceSummary {
   double ud_condition = 0.0;       // λ_max/λ_min of Dᵀ·UD (0 when k = 0)
   double check_psd_seconds = 0.0, factorize_seconds = 0.0, solve_seconds = 0.0,
          total_seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
-  std::string report() const;  // one-line human summary
+  std::string brief_report() const;  // one-line human summary
 };
 
 // The subspace X = N·Z + UD·Y. Columns are in the order of C's and D's columns.

@@ -168,9 +168,7 @@ struct ConstraintOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct ConstraintSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct ConstraintSummary : Outcome {
   Index m = 0;            // number of constraints
   Index rank = 0;         // numerical rank of Ā = AᵀB·D_s (= rank of A_r)
   double condition = 0.0; // σ_max/σ_min(Ā) over its rank
@@ -178,8 +176,6 @@ struct ConstraintSummary {
   bool factored = false;  // ... with M_q kept factored (no p×p operator formed)
   Index dropped = 0;      // entries of A_r zeroed by drop_tolerance (set_constraints)
   double seconds = 0.0;
-
-  bool ok() const { return usable(status); }
 };
 
 template <typename Scalar>

@@ -25,7 +25,7 @@ namespace fs = std::filesystem;
 
 // A patch-handled cylinder (fixed bottom, affine top) bent by its top patch.
 struct Case {
-  DeformableModel model;
+  DeformableMesh model;
   SelDefScenario scenario;
 };
 

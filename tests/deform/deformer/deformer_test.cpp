@@ -206,9 +206,9 @@ TEST_CASE("classic ARAP energy is zero at rest and invariant under rigid motion"
 
 namespace {
 
-DeformableModel cylinder_model(Index rot, Index lin) {
+DeformableMesh cylinder_model(Index rot, Index lin) {
   const TriangleMesh m = shapes::capped_cylinder(1.0, 4.0, 10, 9);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   model.clusters = round_robin_clusters(m.V.rows(), rot);
@@ -228,10 +228,10 @@ HandleTargets rigid_targets(const Vertices& V, const Handles& h, const Eigen::Ma
 }  // namespace
 
 TEST_CASE("deformer: the rest pose is a fixed point", "[deformer]") {
-  const DeformableModel model = cylinder_model(6, 12);
+  const DeformableMesh model = cylinder_model(6, 12);
   Deformer deformer;
   const PrecomputeSummary ps = deformer.precompute(model);
-  INFO(ps.message << " / " << ps.subspace.report());
+  INFO(ps.message << " / " << ps.subspace.brief_report());
   REQUIRE(ps.ok());
   Handles h;
   for (Index v : {0, 37, 85}) h.points.push_back({{v}, {}});
@@ -245,7 +245,7 @@ TEST_CASE("deformer: the rest pose is a fixed point", "[deformer]") {
 TEST_CASE("deformer: a rigid motion of all handles moves the mesh rigidly", "[deformer]") {
   const bool global = GENERATE(true, false);
   CAPTURE(global);
-  const DeformableModel model = cylinder_model(6, 12);
+  const DeformableMesh model = cylinder_model(6, 12);
   DeformerOptions opts;
   opts.global_rotation = global;
   opts.iterations = 30;
@@ -274,7 +274,7 @@ TEST_CASE("deformer: a rigid motion of all handles moves the mesh rigidly", "[de
 }
 
 TEST_CASE("deformer: Botsch–Sorkine style patches hold their transforms", "[deformer]") {
-  DeformableModel model = cylinder_model(5, 10);
+  DeformableMesh model = cylinder_model(5, 10);
   std::vector<int> sel(static_cast<size_t>(model.V.rows()), 1);
   for (Index v = 0; v < model.V.rows(); ++v) {
     if (model.V(v, 2) < 0.6) sel[v] = 0;
@@ -311,7 +311,7 @@ TEST_CASE("deformer: Botsch–Sorkine style patches hold their transforms", "[de
 TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is the full-space minimiser of E′",
           "[deformer]") {
   const TriangleMesh m = shapes::capped_cylinder(1.0, 2.0, 6, 4);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   const Index n = m.V.rows(), d = 3;
@@ -370,7 +370,7 @@ TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is 
 
 TEST_CASE("deformer: tet meshes deform and keep handles", "[deformer]") {
   const TetMesh m = small_box();
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.T = m.T;
   model.clusters = round_robin_clusters(m.T.rows(), 4);
@@ -394,7 +394,7 @@ TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]"
   // 30 clusters: 9d = 270, so F_y is large enough for the factored form and
   // the parallel rounds (alternating.h).
   const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 12, 10);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   const Index n = m.V.rows();
@@ -426,7 +426,7 @@ TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]"
 }
 
 TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
-  DeformableModel model = cylinder_model(4, 6);
+  DeformableMesh model = cylinder_model(4, 6);
   Deformer deformer;
   SECTION("handles before precompute") {
     CHECK_THROWS_WITH(deformer.set_handles({}), Catch::Contains("precompute"));
@@ -463,8 +463,8 @@ TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
 }
 
 TEST_CASE("deformer: vertices used by no element stay at rest and change nothing else", "[deformer]") {
-  const DeformableModel base = cylinder_model(6, 12);
-  DeformableModel loose = base;
+  const DeformableMesh base = cylinder_model(6, 12);
+  DeformableMesh loose = base;
   // Two unreferenced vertices, one in the middle of the numbering.
   const Index n = base.V.rows();
   loose.V.conservativeResize(n + 2, 3);

@@ -86,9 +86,9 @@ std::vector<ModelCase> built_in_models() {
           {"conformal + gamma", make_conformal_model(moving, 1.5)}};
 }
 
-DeformableModel bar_model() {
+DeformableMesh bar_model() {
   const TriangleMesh m = shapes::capped_cylinder(0.5, 4.0, 10, 13);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   return model;
@@ -96,7 +96,7 @@ DeformableModel bar_model() {
 
 // The end rings as two patches (bottom first) prescribed by handles; a
 // Fixed bottom patch is always held at rest and is not a handle.
-Handles end_patches(DeformableModel* model, Index around, Index rings, PatchType bottom) {
+Handles end_patches(DeformableMesh* model, Index around, Index rings, PatchType bottom) {
   model->patch_types = {bottom, PatchType::Affine};
   model->patch_of_vertex.assign(static_cast<size_t>(model->V.rows()), -1);
   for (Index v = 0; v < around; ++v) {
@@ -218,7 +218,7 @@ TEST_CASE("the kit catches broken energies and projections", "[model][kit]") {
 TEST_CASE("conformal: uniform scaling of the handles scales the mesh uniformly; ARAP stays near-isometric",
           "[model][conformal]") {
   const Index around = 10, rings = 13;
-  DeformableModel model = bar_model();
+  DeformableMesh model = bar_model();
   const Handles h = end_patches(&model, around, rings, PatchType::Affine);
   const double lambda = 1.3;
   const HandleTargets targets = scaled_targets(lambda);
@@ -267,7 +267,7 @@ TEST_CASE("conformal: uniform scaling of the handles scales the mesh uniformly; 
 
 TEST_CASE("conformal: the scale factors clamp at the bounds", "[model][conformal]") {
   const Index around = 10, rings = 13;
-  DeformableModel model = bar_model();
+  DeformableMesh model = bar_model();
   const Handles h = end_patches(&model, around, rings, PatchType::Affine);
   DeformerOptions opts;
   opts.rotational_proxies = 8;
@@ -294,7 +294,7 @@ TEST_CASE("conformal: the scale factors clamp at the bounds", "[model][conformal
 TEST_CASE("gamma > 0 reduces the rotation differences between neighbouring clusters on the bending cylinder",
           "[model][gamma]") {
   const TriangleMesh m = shapes::capped_cylinder(0.5, 4.0, 10, 17);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   const Index around = 10, rings = 17;
@@ -363,7 +363,7 @@ TEST_CASE("a custom model plugs in without touching the engine", "[model][custom
       return std::make_unique<Keep>();
     }
   };
-  DeformableModel model = bar_model();
+  DeformableMesh model = bar_model();
   const Handles h = end_patches(&model, 10, 13, PatchType::Affine);
   DeformerOptions opts;
   opts.rotational_proxies = 6;
@@ -381,7 +381,7 @@ TEST_CASE("a custom model plugs in without touching the engine", "[model][custom
 
 TEST_CASE("conformal and gamma sessions round-trip through the cache, and a model change is refused",
           "[model][cache]") {
-  DeformableModel model = bar_model();
+  DeformableMesh model = bar_model();
   const Handles h = end_patches(&model, 10, 13, PatchType::Affine);
   DeformerOptions opts;
   opts.rotational_proxies = 6;
@@ -437,7 +437,7 @@ TEST_CASE("rigid patches stay rigid and fixed patches do not move, under every m
   CAPTURE(kind == ModelKind::Conformal);
   const Index around = 10, rings = 17;
   const TriangleMesh m = shapes::capped_cylinder(0.5, 4.0, around, rings);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = m.V;
   model.F = m.F;
   Handles h = end_patches(&model, around, rings, PatchType::Fixed);

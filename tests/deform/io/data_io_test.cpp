@@ -221,9 +221,9 @@ TEST_CASE("paper-example .id files load, fit their meshes and give the README's 
     INFO(c.path);
     const VertexIds ids = read_id(data + "/" + c.path);
     CHECK_NOTHROW(ids.validate(c.n));
-    const VertexGroups g = c.kind == Linear       ? linear_groups(ids)
-                           : c.kind == Rotational ? rotational_clusters(ids)
-                                                  : affine_patches(ids);
+    const VertexGroups g = c.kind == Linear       ? linear_groups_from_ids(ids)
+                           : c.kind == Rotational ? rotation_groups_from_ids(ids)
+                                                  : affine_patches_from_ids(ids);
     CHECK(g.size() == c.groups);
     Index members = 0, painted = 0;
     for (Index k = 0; k < g.size(); ++k) {
@@ -238,7 +238,7 @@ TEST_CASE("paper-example .id files load, fit their meshes and give the README's 
     if (c.kind == Affine) CHECK(unassigned > 0);
   }
   const VertexIds rot = read_id(data + "/paper-examples/cylinder/cylinder_rotation25.id");
-  CHECK_THROWS_WITH(linear_groups(rot), Catch::Contains("cylinder_rotation25.id: vertex 0 has id -1; linear-group ids must be >= 0"));
+  CHECK_THROWS_WITH(linear_groups_from_ids(rot), Catch::Contains("cylinder_rotation25.id: vertex 0 has id -1; linear-group ids must be >= 0"));
   CHECK_THROWS_WITH(rot.validate(4801), Catch::Contains("expected 4801 entries (one per mesh vertex), got 4802"));
 }
 

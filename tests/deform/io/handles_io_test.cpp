@@ -55,20 +55,20 @@ TEST_CASE(".def: 4 x 4 row-major affine matrix, errors", "[io][handles]") {
 TEST_CASE(".id: groups for linear proxies, rotational clusters and affine patches", "[io][handles]") {
   const TempDir dir;
   const VertexIds lin = read_id(dir.write("lin.id", "2\n0\n2\n5\n0\n"));
-  const VertexGroups g = linear_groups(lin);
+  const VertexGroups g = linear_groups_from_ids(lin);
   CHECK(g.label == std::vector<int>{0, 2, 5});
   CHECK(g.members[0] == std::vector<int>{1, 4});
   CHECK(g.members[1] == std::vector<int>{0, 2});
   CHECK(g.group_of == std::vector<int>{1, 0, 1, 2, 0});
 
   const VertexIds rot = read_id(dir.write("rot.id", "1\n-2\n0\n-1\n-2\n1\n"));
-  const VertexGroups r = rotational_clusters(rot);
+  const VertexGroups r = rotation_groups_from_ids(rot);
   CHECK(r.label == std::vector<int>{0, 1, -1, -2});
   CHECK(r.group_of == std::vector<int>{1, 3, 0, 2, 3, 1});
-  CHECK_THROWS_WITH(linear_groups(rot), Contains("rot.id: vertex 1 has id -2; linear-group ids must be >= 0"));
-  CHECK_THROWS_WITH(affine_patches(rot), Contains("affine-patch ids must be >= 0"));
+  CHECK_THROWS_WITH(linear_groups_from_ids(rot), Contains("rot.id: vertex 1 has id -2; linear-group ids must be >= 0"));
+  CHECK_THROWS_WITH(affine_patches_from_ids(rot), Contains("affine-patch ids must be >= 0"));
 
-  const VertexGroups a = affine_patches(read_id(dir.write("aff.id", "0\n3\n1\n0\n3\n")));
+  const VertexGroups a = affine_patches_from_ids(read_id(dir.write("aff.id", "0\n3\n1\n0\n3\n")));
   CHECK(a.label == std::vector<int>{1, 3});
   CHECK(a.group_of == std::vector<int>{-1, 1, 0, -1, 1});
 

@@ -474,7 +474,7 @@ TEST_CASE("Laplace–Beltrami eigenpairs: Spectra shift-invert agrees with the d
   o.backend = backend;
   Eigenpairs sparse, dense;
   const SpectralSummary ss = laplacian_eigenpairs(L, m, 10, -0.01, o, &sparse);
-  INFO(ss.report());
+  INFO(ss.brief_report());
   REQUIRE(ss.ok());
   CHECK(ss.lanczos_operations > 0);
   CHECK(ss.max_relative_residual < 1e-10);
@@ -513,7 +513,7 @@ TEST_CASE("laplacian_eigenpairs reports non-convergence as a status, not silentl
   ClusterOptions co;
   co.spectral = o;
   Clustering clusters;
-  const ClusterSummary cs = rotation_clusters(s.V, s.F, ClusterElement::Vertex, 8, co, &clusters);
+  const ClusterSummary cs = compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, 8, co, &clusters);
   CHECK(cs.status == Status::NumericalFailure);
   CHECK_FALSE(cs.message.empty());
   CHECK(clusters.labels.empty());
@@ -529,10 +529,10 @@ TEST_CASE("spectral rotation clusters: exact count, non-empty, deterministic, ne
   CAPTURE(d);
   ClusterOptions o;
   Clustering a, b;
-  const ClusterSummary sa = rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &a);
-  INFO(sa.report());
+  const ClusterSummary sa = compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &a);
+  INFO(sa.brief_report());
   REQUIRE(sa.ok());
-  REQUIRE(rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &b).ok());
+  REQUIRE(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &b).ok());
   CHECK(a.labels == b.labels);
   CHECK(a.count == d);
   REQUIRE(a.labels.size() == static_cast<std::size_t>(s.V.rows()));
@@ -561,7 +561,7 @@ TEST_CASE("spectral rotation clusters: exact count, non-empty, deterministic, ne
   // Another seed: still a valid partition of the same size.
   o.kmeans.seed = 7;
   Clustering c;
-  REQUIRE(rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &c).ok());
+  REQUIRE(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, d, o, &c).ok());
   check_partition(c.labels, d);
 }
 
@@ -572,16 +572,16 @@ TEST_CASE("rotation clusters: count errors and unreferenced vertices", "[cluster
   s.V.row(n0) << 3.5, 0, 0;  // nearest referenced vertex is on the second sphere
   ClusterOptions o;
   Clustering out;
-  CHECK_THROWS_WITH(rotation_clusters(s.V, s.F, ClusterElement::Vertex, 1, o, &out),
+  CHECK_THROWS_WITH(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, 1, o, &out),
                     Catch::Contains("cannot cover 2 connected components"));
-  CHECK_THROWS_WITH(rotation_clusters(s.V, s.F, ClusterElement::Vertex, n0 + 1, o, &out),
+  CHECK_THROWS_WITH(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, n0 + 1, o, &out),
                     Catch::Contains("[1, 84]"));
-  CHECK_THROWS_AS(rotation_clusters(s.V, s.F, ClusterElement::Element, 161, o, &out), std::invalid_argument);
-  REQUIRE(rotation_clusters(s.V, s.F, ClusterElement::Vertex, 6, o, &out).ok());
+  CHECK_THROWS_AS(compute_rotation_clusters(s.V, s.F, ClusterElement::Element, 161, o, &out), std::invalid_argument);
+  REQUIRE(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, 6, o, &out).ok());
   check_partition(out.labels, 6);
   CHECK(out.component_of_cluster[out.labels[n0]] == 1);
   // d = number of elements: singletons.
-  REQUIRE(rotation_clusters(s.V, s.F, ClusterElement::Vertex, n0, o, &out).ok());
+  REQUIRE(compute_rotation_clusters(s.V, s.F, ClusterElement::Vertex, n0, o, &out).ok());
   check_partition(out.labels, n0);
 }
 
@@ -597,15 +597,15 @@ TEST_CASE("rotation clusters of tets: one label per tet (barycentre embeddings) 
   REQUIRE(comps.count == 2);
   ClusterOptions o;
   Clustering per_tet, per_vertex;
-  const ClusterSummary st = rotation_clusters(s.V, s.T, ClusterElement::Element, 12, o, &per_tet);
-  INFO(st.report());
+  const ClusterSummary st = compute_rotation_clusters(s.V, s.T, ClusterElement::Element, 12, o, &per_tet);
+  INFO(st.brief_report());
   REQUIRE(st.ok());
   REQUIRE(per_tet.labels.size() == static_cast<std::size_t>(s.T.rows()));
   check_partition(per_tet.labels, 12);
   for (Index t = 0; t < s.T.rows(); ++t) {
     CHECK(per_tet.component_of_cluster[per_tet.labels[t]] == comps.element_component[t]);
   }
-  REQUIRE(rotation_clusters(s.V, s.T, ClusterElement::Vertex, 12, o, &per_vertex).ok());
+  REQUIRE(compute_rotation_clusters(s.V, s.T, ClusterElement::Vertex, 12, o, &per_vertex).ok());
   REQUIRE(per_vertex.labels.size() == static_cast<std::size_t>(s.V.rows()));
   check_partition(per_vertex.labels, 12);
 }
@@ -685,7 +685,7 @@ TEST_CASE("vertex groups: exact count, non-empty, within components, rows of W s
   LinearProxies a, b;
   CHECK_THROWS_WITH(linear_proxies_groups(s.V, s.F, 2, space, o, &a), Catch::Contains("cannot cover 3"));
   const ClusterSummary sa = linear_proxies_groups(s.V, s.F, 30, space, o, &a);
-  INFO(sa.report());
+  INFO(sa.brief_report());
   REQUIRE(sa.ok());
   REQUIRE(linear_proxies_groups(s.V, s.F, 30, space, o, &b).ok());
   CHECK(a.groups == b.groups);
@@ -729,8 +729,8 @@ TEST_CASE("shared data: bunny spectral clusters and the paper's cactus .id file"
   }
   ClusterOptions o;
   Clustering c;
-  const ClusterSummary summary = rotation_clusters(bunny.V, bunny.F, ClusterElement::Vertex, 27, o, &c);
-  INFO(summary.report());
+  const ClusterSummary summary = compute_rotation_clusters(bunny.V, bunny.F, ClusterElement::Vertex, 27, o, &c);
+  INFO(summary.brief_report());
   REQUIRE(summary.ok());
   check_partition(c.labels, 27);
   CHECK(summary.spectral.max_relative_residual < 1e-8);
@@ -767,12 +767,12 @@ TEST_CASE("perf: bumpy plane (40k vertices) into 27 rotation clusters", "[.][per
   ClusterOptions o;
   Clustering c;
   const auto start = std::chrono::steady_clock::now();
-  const ClusterSummary summary = rotation_clusters(plane.V, plane.F, ClusterElement::Vertex, 27, o, &c);
+  const ClusterSummary summary = compute_rotation_clusters(plane.V, plane.F, ClusterElement::Vertex, 27, o, &c);
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  INFO(summary.report());
+  INFO(summary.brief_report());
   INFO("wall " << seconds << " s");
   REQUIRE(summary.ok());
   check_partition(c.labels, 27);
   // Timing is reported, not asserted (shared machines make wall time noisy).
-  WARN(summary.report() << " | wall " << seconds << " s");
+  WARN(summary.brief_report() << " | wall " << seconds << " s");
 }

@@ -21,7 +21,7 @@ namespace {
 // A small mesh with its bottom layer Fixed and its top layer an Affine patch
 // prescribed to rotate by `angle` about x and move sideways (a .sel/.def).
 struct Case {
-  DeformableModel model;
+  DeformableMesh model;
   Handles handles;
   HandleTargets targets;
 };
@@ -118,7 +118,7 @@ TEST_CASE("local-global: monotone energy, warm start, frame rotation", "[referen
   opt.energy = kind;
   LocalGlobalArap lg;
   lg.precompute(c.model, opt);
-  REQUIRE(lg.set_handles(c.handles) == Status::Success);
+  REQUIRE(lg.set_handles(c.handles).ok());
   // Block-coordinate descent: the energy after k rounds never rises with k.
   ReferenceSolution a, b;
   double previous = std::numeric_limits<double>::infinity();
@@ -195,7 +195,7 @@ TEST_CASE("reduced E' solutions approach the full-space one as linear proxies in
   REQUIRE(solve_local_global(c.model, c.handles, c.targets, opt, &exact).converged);
 
   auto reduced = [&](Index proxies) {
-    DeformableModel model = c.model;
+    DeformableMesh model = c.model;
     if (proxies < n) {
       ClusterOptions copt;
       REQUIRE(linear_proxies_groups(model.V, model.F, proxies, GroupSpace::Positions, copt, &model.linear).ok());

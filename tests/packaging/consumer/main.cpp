@@ -18,7 +18,7 @@ int engine_demand() {
   SubspaceSolver<double> solver;
   const SubspaceSummary s = solver.precompute(H, C, D);
   if (!s.ok()) {
-    std::fprintf(stderr, "consumer: %s\n", s.report().c_str());
+    std::fprintf(stderr, "consumer: %s\n", s.brief_report().c_str());
     return 1;
   }
   if (!solver.set_constraints(C).ok()) return 1;
@@ -36,7 +36,7 @@ int engine_demand() {
 int deformer_frame() {
   using namespace qpreduce::deform;
   const TriangleMesh mesh = shapes::capped_cylinder(0.5, 2.0, 12, 8);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = mesh.V;
   model.F = mesh.F;
   DeformerOptions options;

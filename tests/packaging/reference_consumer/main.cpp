@@ -8,7 +8,7 @@
 int main() {
   using namespace qpreduce::deform;
   const TriangleMesh mesh = shapes::capped_cylinder(0.5, 2.0, 12, 8);
-  DeformableModel model;
+  DeformableMesh model;
   model.V = mesh.V;
   model.F = mesh.F;
   Handles handles;

@@ -309,7 +309,7 @@ void Deformer::save(const std::string& path) const {
   }
 }
 
-PrecomputeSummary Deformer::load(const std::string& path, const DeformableModel& model,
+PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& model,
                                  const DeformerOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);

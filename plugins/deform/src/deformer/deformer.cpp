@@ -69,26 +69,26 @@ CompactMesh detail_deformer::compact_mesh(const Vertices& V, const ElementsRef& 
   return cm;
 }
 
-void Deformer::State::set_topology(const DeformableModel& model) {
+void Deformer::State::set_topology(const DeformableMesh& model) {
   const bool tet = model.is_tet();
   if (tet == (model.F.rows() > 0)) {
-    throw std::invalid_argument("DeformableModel: give exactly one of F (surface) and T (tetrahedra)");
+    throw std::invalid_argument("DeformableMesh: give exactly one of F (surface) and T (tetrahedra)");
   }
   if (tet) {
-    check_mesh("DeformableModel", TetMesh{model.V, model.T, {}});
+    check_mesh("DeformableMesh", TetMesh{model.V, model.T, {}});
   } else {
-    check_mesh("DeformableModel", TriangleMesh{model.V, model.F});
+    check_mesh("DeformableMesh", TriangleMesh{model.V, model.F});
   }
   rest = model.V;
   n = model.V.rows();
   patch_of_vertex = model.patch_of_vertex;
   patch_types = model.patch_types;
   if (!patch_of_vertex.empty()) {
-    check_size("DeformableModel::patch_of_vertex size", n, static_cast<Index>(patch_of_vertex.size()));
+    check_size("DeformableMesh::patch_of_vertex size", n, static_cast<Index>(patch_of_vertex.size()));
     for (Index v = 0; v < n; ++v) {
       const int p = patch_of_vertex[v];
       if (p < -1 || p >= static_cast<int>(patch_types.size())) {
-        throw std::invalid_argument(fmt::format("DeformableModel::patch_of_vertex: vertex {} has patch {} outside "
+        throw std::invalid_argument(fmt::format("DeformableMesh::patch_of_vertex: vertex {} has patch {} outside "
                                                 "[-1, {})",
                                                 v, p, patch_types.size()));
       }
@@ -113,7 +113,7 @@ void Deformer::State::set_topology(const DeformableModel& model) {
     if (p >= 0) ++patch_size[static_cast<size_t>(p)];
   fixed_patches.clear();
   for (Index p = 0; p < s; ++p) {
-    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableModel: patch {} has no vertex", p));
+    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableMesh: patch {} has no vertex", p));
     if (patch_types[p] == PatchType::Fixed) fixed_patches.push_back(p);
   }
   control_of_free.assign(static_cast<size_t>(n), -1);
@@ -320,7 +320,7 @@ const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Def
 }
 const Eigen::VectorXf& Deformer::reduced_coordinates() const { return state_->wf; }
 
-PrecomputeSummary Deformer::precompute(const DeformableModel& model, const DeformerOptions& options,
+PrecomputeSummary Deformer::precompute(const DeformableMesh& model, const DeformerOptions& options,
                                        const ProgressFn& progress) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
@@ -352,10 +352,10 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
   Timer t;
   const Index r = S.elements.size();
   if (!model.clusters.empty()) {
-    check_size("DeformableModel::clusters size", r, static_cast<Index>(model.clusters.size()));
+    check_size("DeformableMesh::clusters size", r, static_cast<Index>(model.clusters.size()));
     for (Index k = 0; k < r; ++k) {
       if (model.clusters[k] < 0) {
-        throw std::invalid_argument(fmt::format("DeformableModel::clusters: element {} has negative label {}", k,
+        throw std::invalid_argument(fmt::format("DeformableMesh::clusters: element {} has negative label {}", k,
                                                 model.clusters[k]));
       }
     }
@@ -364,7 +364,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     // Clusters of the referenced part (surfaces: one label per vertex; an
     // unreferenced vertex is an element without edges, labelled 0).
     Clustering clustering;
-    const ClusterSummary cs = rotation_clusters(PV, PE, tet ? ClusterElement::Element : ClusterElement::Vertex,
+    const ClusterSummary cs = compute_rotation_clusters(PV, PE, tet ? ClusterElement::Element : ClusterElement::Vertex,
                                                 options.rotational_proxies, options.clustering, &clustering);
     if (!cs.ok()) {
       summary.status = cs.status;
@@ -415,7 +415,7 @@ PrecomputeSummary Deformer::precompute(const DeformableModel& model, const Defor
     for (Index c = 0; c < comps.count; ++c) {
       if (!pinned[c]) {
         throw std::invalid_argument(fmt::format(
-            "DeformableModel: connected component {} of {} has no linear proxy and no patch; the KKT system (Eq. 14) "
+            "DeformableMesh: connected component {} of {} has no linear proxy and no patch; the KKT system (Eq. 14) "
             "would be singular (use at least {} linear proxies, or patch that component)",
             c, comps.count, comps.count));
       }
@@ -739,6 +739,11 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   if (!S.tied_patches.empty()) S.x.noalias() += S.tie_map * S.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
+  summary.status = as.status;
+  if (!S.x.allFinite() || !S.s_local.allFinite()) {
+    summary.status = Status::NumericalFailure;
+    summary.message = "the alternating rounds produced NaN or infinite reduced coordinates";
+  }
   for (Index i = 0; i < S.d; ++i) {
     Eigen::Map<Eigen::Matrix3d>(S.S.data() + 9 * i) = S.r0 * Eigen::Map<const Eigen::Matrix3d>(S.s_local.data() + 9 * i);
   }
@@ -758,7 +763,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   return summary;
 }
 
-SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableModel* model) {
+SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableMesh* model) {
   const Index n = model->V.rows();
   check_size("apply_sel_def: .sel entries", n, static_cast<Index>(sel.size()));
   check_finite("apply_sel_def: .def matrix", def);

@@ -6,7 +6,7 @@
 
 namespace qpreduce::deform {
 
-double handle_residual(const DeformableModel& m, const Handles& handles, const HandleTargets& targets,
+double handle_residual(const DeformableMesh& m, const Handles& handles, const HandleTargets& targets,
                        const Vertices& deformed) {
   check_size("handle_residual: deformed vertex count", m.V.rows(), deformed.rows());
   double worst = 0.0;

@@ -117,7 +117,7 @@ struct Deformer::State {
   // Validates the mesh and the patches of `model`, and sets rest, n, the
   // patches, control_of_free, nu (without Q) and the rotation elements.
   // Throws std::invalid_argument naming the problem.
-  void set_topology(const DeformableModel& model);
+  void set_topology(const DeformableMesh& model);
   // Appends the 4r Q unknowns to the control layer (keep_q = true).
   void keep_rotation_corrections();
   // Gives every Rigid patch its own cluster (its elements: the patch's

@@ -144,11 +144,11 @@ VertexIds read_id(const std::string& path) {
   return ids;
 }
 
-VertexGroups linear_groups(const VertexIds& ids) {
+VertexGroups linear_groups_from_ids(const VertexIds& ids) {
   return build_groups(ids.ids, distinct_ids(ids, 0, "linear-group"));
 }
 
-VertexGroups rotational_clusters(const VertexIds& ids) {
+VertexGroups rotation_groups_from_ids(const VertexIds& ids) {
   const std::vector<int> all = distinct_ids(ids, std::numeric_limits<int>::min(), nullptr);
   const auto zero = std::lower_bound(all.begin(), all.end(), 0);
   std::vector<int> labels(zero, all.end());
@@ -156,7 +156,7 @@ VertexGroups rotational_clusters(const VertexIds& ids) {
   return build_groups(ids.ids, std::move(labels));
 }
 
-VertexGroups affine_patches(const VertexIds& ids) {
+VertexGroups affine_patches_from_ids(const VertexIds& ids) {
   return build_groups(ids.ids, distinct_ids(ids, 1, "affine-patch"));
 }
 

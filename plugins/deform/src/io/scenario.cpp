@@ -10,7 +10,7 @@ namespace qpreduce::deform {
 
 namespace {
 
-void add_patch(DeformableModel* model, PatchType type, const std::vector<int>& vertices, const std::string& what) {
+void add_patch(DeformableMesh* model, PatchType type, const std::vector<int>& vertices, const std::string& what) {
   const Index n = model->V.rows();
   if (model->patch_of_vertex.empty()) model->patch_of_vertex.assign(static_cast<size_t>(n), -1);
   const int id = static_cast<int>(model->patch_types.size());

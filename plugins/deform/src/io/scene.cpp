@@ -216,9 +216,9 @@ class SceneParser {
       }
       spec->id_file = file(v, where);
       const VertexIds& ids = id_file(spec->id_file);
-      spec->groups = std::string(key) == "linear"       ? linear_groups(ids)
-                     : std::string(key) == "rotational" ? rotational_clusters(ids)
-                                                        : affine_patches(ids);
+      spec->groups = std::string(key) == "linear"       ? linear_groups_from_ids(ids)
+                     : std::string(key) == "rotational" ? rotation_groups_from_ids(ids)
+                                                        : affine_patches_from_ids(ids);
       spec->count = spec->groups.size();
     }
   }

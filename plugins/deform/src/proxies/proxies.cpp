@@ -178,22 +178,22 @@ bool embed_component(const VerticesRef& V, const SparseMatrix<double>& L, const 
 
 bool ClusterOptions::is_valid(std::string* why) const { return spectral.is_valid(why) && kmeans.is_valid(why); }
 
-std::string ClusterSummary::report() const {
+std::string ClusterSummary::brief_report() const {
   return fmt::format("clusters: {}{}{} | {} elements, {} clusters, {} components | k-means objective {:.3e}, "
                      "{} iterations{} | k-means {:.3f}s, total {:.3f}s | {}",
                      to_string(status), message.empty() ? "" : " — ", message, elements, clusters, components,
                      kmeans_objective, kmeans_iterations, kmeans_converged ? "" : " (not converged)", kmeans_seconds,
-                     total_seconds, spectral.report());
+                     total_seconds, spectral.brief_report());
 }
 
-ClusterSummary rotation_clusters(const VerticesRef& V, const ElementsRef& E, ClusterElement element, Index d,
+ClusterSummary compute_rotation_clusters(const VerticesRef& V, const ElementsRef& E, ClusterElement element, Index d,
                                  const ClusterOptions& options, Clustering* out) {
   qpreduce::Timer total;
-  const char* what = "rotation_clusters";
+  const char* what = "compute_rotation_clusters";
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument(std::string(what) + ": " + why);
-  if (!out) throw std::invalid_argument("rotation_clusters: out is null");
-  if (E.rows() == 0) throw std::invalid_argument("rotation_clusters: the mesh has no elements");
+  if (!out) throw std::invalid_argument("compute_rotation_clusters: out is null");
+  if (E.rows() == 0) throw std::invalid_argument("compute_rotation_clusters: the mesh has no elements");
   SparseMatrix<double> L;
   Eigen::VectorXd mass;
   laplacian_and_mass(V, E, &L, &mass);  // checks V and E

@@ -201,7 +201,7 @@ bool SpectralOptions::is_valid(std::string* why) const {
   return true;
 }
 
-std::string SpectralSummary::report() const {
+std::string SpectralSummary::brief_report() const {
   return fmt::format("spectral: {}{}{} | {} components, {} eigenpairs, {} Lanczos products, {} deflation rounds, "
                      "residual {:.2e} | "
                      "factorize {:.3f}s, eigen {:.3f}s, total {:.3f}s",

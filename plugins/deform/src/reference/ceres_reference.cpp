@@ -13,7 +13,7 @@ namespace qpreduce::deform {
 
 bool has_ceres_reference() { return false; }
 
-ReferenceSummary solve_ceres_reference(const DeformableModel&, const Handles&, const HandleTargets&,
+ReferenceSummary solve_ceres_reference(const DeformableMesh&, const Handles&, const HandleTargets&,
                                        const ReferenceOptions&, ReferenceSolution*, const Vertices&) {
   throw std::runtime_error(
       "solve_ceres_reference: qpreduce was built without Ceres (QPREDUCE_NO_CERES); "
@@ -163,7 +163,7 @@ void add_element_residuals(ceres::Problem* problem, const PreparedModel& m, bool
 
 bool has_ceres_reference() { return true; }
 
-ReferenceSummary solve_ceres_reference(const DeformableModel& model, const Handles& handles,
+ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
                                        const HandleTargets& targets, const ReferenceOptions& options,
                                        ReferenceSolution* out, const Vertices& initial) {
   const Timer setup;
@@ -194,7 +194,7 @@ ReferenceSummary solve_ceres_reference(const DeformableModel& model, const Handl
     ::qpreduce::check_size("solve_ceres_reference: initial guess rows", n, initial.rows());
     ::qpreduce::check_finite("solve_ceres_reference: initial guess", initial);
   }
-  DeformableModel targets_model;
+  DeformableMesh targets_model;
   targets_model.V = m.V;
   targets_model.patch_of_vertex = m.patch_of_vertex;
   targets_model.patch_types = m.patch_types;

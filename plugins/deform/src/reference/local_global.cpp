@@ -65,7 +65,7 @@ LocalGlobalArap& LocalGlobalArap::operator=(LocalGlobalArap&&) noexcept = defaul
 
 const RotationElements& LocalGlobalArap::elements() const { return state_->m.elements; }
 
-void LocalGlobalArap::precompute(const DeformableModel& model, const ReferenceOptions& options) {
+void LocalGlobalArap::precompute(const DeformableMesh& model, const ReferenceOptions& options) {
   auto st = std::make_unique<State>();
   State& S = *st;
   S.options = options;
@@ -121,8 +121,10 @@ void LocalGlobalArap::precompute(const DeformableModel& model, const ReferenceOp
   state_ = std::move(st);
 }
 
-Status LocalGlobalArap::set_handles(const Handles& handles, std::string* message) {
+HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
+  const Timer timer;
   State& S = *state_;
+  HandleSetSummary summary;
   if (S.n == 0) throw std::invalid_argument("LocalGlobalArap::set_handles: call precompute first");
   detail_reference::check_handles(S.m, handles);
   detail_reference::check_anchored(S.m, handles);
@@ -203,9 +205,14 @@ Status LocalGlobalArap::set_handles(const Handles& handles, std::string* message
   }
   S.factor = make_factorization(S.options.backend);
   S.factor->compute(K);
+  summary.free_coordinates = nf;
+  summary.pinned_coordinates = np;
+  summary.point_rows = mg;
   if (S.factor->info() != Eigen::Success) {
-    if (message) *message = "global step matrix: " + S.factor->message();
-    return Status::NumericalFailure;
+    summary.status = Status::NumericalFailure;
+    summary.message = "global step matrix: " + S.factor->message();
+    summary.seconds = timer.seconds();
+    return summary;
   }
   if (mg > 0) {
     S.G = Matrix<double>(S.Af.transpose());
@@ -220,8 +227,10 @@ Status LocalGlobalArap::set_handles(const Handles& handles, std::string* message
     }
   }
   S.has_handles = true;
-  if (message) *message = fmt::format("{} free coordinates, {} pinned, {} weighted-point rows", nf, np, mg);
-  return Status::Success;
+  summary.status = Status::Success;
+  summary.message = fmt::format("{} free coordinates, {} pinned, {} weighted-point rows", nf, np, mg);
+  summary.seconds = timer.seconds();
+  return summary;
 }
 
 ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial) {
@@ -237,7 +246,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   const bool classic = S.options.energy == ReferenceEnergy::ClassicArap;
   const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : S.options.frame;
   const Eigen::Matrix3d Ft = frame.transpose();
-  DeformableModel targets_model;  // vertex_targets only reads V and the patches
+  DeformableMesh targets_model;  // vertex_targets only reads V and the patches
   targets_model.V = m.V;
   targets_model.patch_of_vertex = m.patch_of_vertex;
   targets_model.patch_types = m.patch_types;
@@ -395,18 +404,17 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   return summary;
 }
 
-ReferenceSummary solve_local_global(const DeformableModel& model, const Handles& handles,
+ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial) {
   const Timer setup;
   LocalGlobalArap lg;
   lg.precompute(model, options);
-  std::string message;
-  const Status st = lg.set_handles(handles, &message);
+  const HandleSetSummary hs = lg.set_handles(handles);
   ReferenceSummary summary;
-  if (st != Status::Success) {
-    summary.status = st;
-    summary.message = message;
+  if (!hs.ok()) {
+    summary.status = hs.status;
+    summary.message = hs.message;
     summary.setup_seconds = setup.seconds();
     return summary;
   }

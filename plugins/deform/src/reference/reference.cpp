@@ -47,7 +47,7 @@ bool ReferenceOptions::is_valid(std::string* why) const {
 
 namespace detail_reference {
 
-PreparedModel prepare_model(const DeformableModel& model, const ReferenceOptions& options) {
+PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ReferenceOptions: " + why);
   PreparedModel m;
@@ -67,7 +67,7 @@ PreparedModel prepare_model(const DeformableModel& model, const ReferenceOptions
   if (m.tet) m.parameters.beta = 0.0;
   if (options.energy == ReferenceEnergy::ModifiedArap) {
     if (model.clusters.empty()) {
-      throw std::invalid_argument("reference: the modified energy E' needs DeformableModel::clusters (one per element)");
+      throw std::invalid_argument("reference: the modified energy E' needs DeformableMesh::clusters (one per element)");
     }
     ::qpreduce::check_size("reference: clusters", m.elements.size(), static_cast<Index>(model.clusters.size()));
     m.clusters = model.clusters;
@@ -179,7 +179,7 @@ double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& V
 
 }  // namespace detail_reference
 
-VertexTargets vertex_targets(const DeformableModel& model, const Handles& handles, const HandleTargets& targets,
+VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                              double tolerance) {
   const Index n = model.V.rows();
   if (!model.patch_of_vertex.empty()) {

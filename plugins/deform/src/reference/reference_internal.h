@@ -24,7 +24,7 @@ struct PreparedModel {
 };
 
 // Throws std::invalid_argument on an invalid model or options.
-PreparedModel prepare_model(const DeformableModel& model, const ReferenceOptions& options);
+PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions& options);
 
 // Range checks of a handle set (vertices, weights, patch indices).
 void check_handles(const PreparedModel& m, const Handles& handles);

@@ -34,12 +34,9 @@ struct SchurBaselineOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct SchurBaselineSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct SchurBaselineSummary : Outcome {
   Index factor_nonzeros = 0;
   double seconds = 0.0;
-  bool ok() const { return status == Status::Success; }
 };
 
 class CachedCholeskySchur {

@@ -97,19 +97,15 @@ struct DeformerOptions {
 // Called during precompute with a stage name and the overall fraction done.
 using ProgressFn = std::function<void(const std::string& stage, double fraction)>;
 
-struct PrecomputeSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct PrecomputeSummary : Outcome {
   Index vertices = 0, elements = 0, rotational_proxies = 0, linear_proxies = 0, patches = 0;
   Index reduced_size = 0;  // 3m + 12s + 9d
   SubspaceSummary subspace;
   double clustering_seconds = 0.0, assembly_seconds = 0.0, subspace_seconds = 0.0, reduction_seconds = 0.0,
          total_seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
 };
 
-struct FrameSummary {
+struct FrameSummary : Outcome {  // Success after a frame
   int iterations = 0;
   double last_change = 0.0;        // ‖ΔS‖ of the last Phase 2
   double solve_seconds = 0.0;      // the alternating rounds
@@ -127,7 +123,7 @@ class Deformer {
   // Throws std::invalid_argument on an invalid model or options (sizes,
   // labels out of range, degenerate elements, a component without a linear
   // proxy or patch). Numerical failures come back in the summary.
-  PrecomputeSummary precompute(const DeformableModel& model, const DeformerOptions& options = {},
+  PrecomputeSummary precompute(const DeformableMesh& model, const DeformerOptions& options = {},
                                const ProgressFn& progress = {});
 
   // Writes the precomputed model to `path` (binary, versioned, CRC-32
@@ -143,7 +139,7 @@ class Deformer {
   // are taken from `options`. Throws IoError naming the file and the problem
   // for a missing, truncated or corrupted file, another format version, or a
   // cache made from other inputs; the session is then left as it was.
-  PrecomputeSummary load(const std::string& path, const DeformableModel& model, const DeformerOptions& options = {});
+  PrecomputeSummary load(const std::string& path, const DeformableMesh& model, const DeformerOptions& options = {});
 
   // The on-site step: forms the reduced constraint operators for this handle
   // set. Fixed patches are always included. Cost independent of n (a few rows
@@ -202,6 +198,6 @@ struct SelDefScenario {
   Handles handles;
   HandleTargets targets;
 };
-SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableModel* model);
+SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableMesh* model);
 
 }  // namespace qpreduce::deform

@@ -17,12 +17,12 @@ namespace qpreduce::deform {
 enum class PatchType { Fixed, Rigid, Affine };
 
 // What precompute needs. Exactly one of F (surface) and T (solid) is set.
-struct DeformableModel {
+struct DeformableMesh {
   Vertices V;    // n × 3 rest positions
   Triangles F;   // surface triangles, or empty
   Tetrahedra T;  // tetrahedra, or empty
   // Rotational cluster per rotation element (vertices for surfaces, tets for
-  // solids). Empty: computed (rotation_clusters, DeformerOptions::rotational_proxies).
+  // solids). Empty: computed (compute_rotation_clusters, DeformerOptions::rotational_proxies).
   std::vector<int> clusters;
   // Linear proxies. Empty (count() == 0): farthest-point samples
   // (DeformerOptions::linear_proxies). Vertices inside patches are dropped
@@ -63,7 +63,7 @@ struct HandleTargets {
 // Largest distance between where the handles are in `deformed` (n × 3) and
 // where `targets` put them: point handles by their weighted point, patch
 // handles by every vertex of the patch, Fixed patches by every vertex at rest.
-double handle_residual(const DeformableModel& model, const Handles& handles, const HandleTargets& targets,
+double handle_residual(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                        const Vertices& deformed);
 
 }  // namespace qpreduce::deform

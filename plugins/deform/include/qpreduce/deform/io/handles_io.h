@@ -80,14 +80,14 @@ struct VertexGroups {
 // Linear proxies (`*_cluster*.id`, `*_lin*.id`): every vertex is in the group
 // of its id. Groups are the distinct ids in ascending order (so ids 0..m−1
 // give groups 0..m−1). A negative id is an error.
-VertexGroups linear_groups(const VertexIds& ids);
+VertexGroups linear_groups_from_ids(const VertexIds& ids);
 // Rotational clusters (`*_rotation*.id`, `*_c60.id`, `*_rot*_cluster.id`):
 // the distinct ids ≥ 0 in ascending order, then one more cluster per
 // distinct negative id (a region the user painted), in the order −1, −2, ….
-VertexGroups rotational_clusters(const VertexIds& ids);
+VertexGroups rotation_groups_from_ids(const VertexIds& ids);
 // Affine patches (`*affine.id`): 0 = free (group_of = −1), k > 0 = patch k;
 // patches are the distinct k in ascending order. A negative id is an error.
-VertexGroups affine_patches(const VertexIds& ids);
+VertexGroups affine_patches_from_ids(const VertexIds& ids);
 
 // ---- the paper demo's .anim ----
 

@@ -15,7 +15,7 @@
 namespace qpreduce::deform {
 
 struct Scenario {
-  DeformableModel model;
+  DeformableMesh model;
   Handles handles;
   std::vector<HandleTargets> frames;  // at least one
   ConstraintOptions constraints;      // hard by default

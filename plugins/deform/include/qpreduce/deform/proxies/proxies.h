@@ -127,9 +127,7 @@ struct Eigenpairs {
 };
 
 // Summary of an eigen-solve or a clustering. Starts at NotRun.
-struct SpectralSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct SpectralSummary : Outcome {
   Index components = 0;     // components solved
   Index eigenpairs = 0;     // eigenpairs computed, summed over components
   Index lanczos_operations = 0;  // applications of (L − σM)⁻¹M (Spectra), summed
@@ -137,9 +135,7 @@ struct SpectralSummary {
   // max over components and pairs of ‖Lφ − λMφ‖ / (‖L‖_∞‖φ‖ + |λ|‖M‖_∞‖φ‖)
   double max_relative_residual = 0.0;
   double factorize_seconds = 0.0, eigen_seconds = 0.0, total_seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
-  std::string report() const;
+  std::string brief_report() const;
 };
 
 // The `count` smallest eigenpairs (zeros included) of L φ = λ M φ, with L
@@ -182,18 +178,14 @@ struct Clustering {
   std::vector<int> component_of_cluster;  // count entries (mesh component of each cluster)
 };
 
-struct ClusterSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct ClusterSummary : Outcome {
   SpectralSummary spectral;
   Index elements = 0, clusters = 0, components = 0;
   double kmeans_objective = 0.0;   // Σ over components
   int kmeans_iterations = 0;       // max over components
   bool kmeans_converged = true;    // all components
   double kmeans_seconds = 0.0, total_seconds = 0.0;
-
-  bool ok() const { return status == Status::Success; }
-  std::string report() const;
+  std::string brief_report() const;
 };
 
 // d rotational clusters of a triangle (E m × 3) or tet (E m × 4) mesh.
@@ -206,7 +198,7 @@ struct ClusterSummary {
 // than the number of clustered elements, d smaller than the number of
 // components (of the elements: unreferenced vertices do not count), or invalid
 // options. Spectral failures: Status::NumericalFailure, `out` left untouched.
-ClusterSummary rotation_clusters(const VerticesRef& V, const ElementsRef& E, ClusterElement element, Index d,
+ClusterSummary compute_rotation_clusters(const VerticesRef& V, const ElementsRef& E, ClusterElement element, Index d,
                                  const ClusterOptions& options, Clustering* out);
 
 // Clusters from an `.id` vector (one integer per element, README of

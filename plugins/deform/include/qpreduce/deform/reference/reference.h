@@ -7,7 +7,7 @@
 //         E(V′, R) = ½ Σ_k Σ_{(i,j)∈G_k} c_ijk ‖e′_ij − r_k e_ij‖²,
 //     what libigl and CGAL users run; the energy reported is arap_energy(V′).
 //   * ModifiedArap (Eq. 8–10): one rotation s_i ∈ SO(3) per rotational cluster
-//     (DeformableModel::clusters, required) plus the linearised corrections
+//     (DeformableMesh::clusters, required) plus the linearised corrections
 //     q_k, i.e. E′(V′, Q, S) = ½ uᵀLu − SᵀDᵀu + ½ Σ c ‖s e‖² with u = [V′; Q]
 //     (arap_energy.h). The reduced model minimises E′ with V′ restricted to
 //     the variational subspace, so the full-space minimiser isolates the
@@ -98,9 +98,7 @@ struct ReferenceOptions {
   bool is_valid(std::string* why) const;
 };
 
-struct ReferenceSummary {
-  Status status = Status::NotRun;
-  std::string message;
+struct ReferenceSummary : Outcome {
   ReferenceEnergy energy_kind = ReferenceEnergy::ClassicArap;
   bool converged = false;    // a convergence test held (not the iteration limit)
   int iterations = 0;
@@ -111,8 +109,6 @@ struct ReferenceSummary {
   double setup_seconds = 0.0;    // elements, assembly, factorization (local-global: per handle set)
   double solve_seconds = 0.0;    // the iterations
   std::string solver_report;     // Ceres: Solver::Summary::FullReport(); local-global: a line
-
-  bool ok() const { return status == Status::Success; }
 };
 
 // The result: deformed positions V′ (n × 3) and the rotations.
@@ -122,6 +118,13 @@ struct ReferenceSolution {
   // ModifiedArap: S, 9d (as Deformer::rotations), and Q, 4r (arap_energy.h).
   Eigen::VectorXd rotations;
   Eigen::VectorXd Q;
+};
+
+// The outcome of LocalGlobalArap::set_handles.
+struct HandleSetSummary : Outcome {
+  Index free_coordinates = 0, pinned_coordinates = 0;
+  Index point_rows = 0;  // weighted-point constraint rows
+  double seconds = 0.0;
 };
 
 // Sorkine–Alexa local-global ARAP in full space, one cached factorization per
@@ -146,13 +149,13 @@ class LocalGlobalArap {
 
   // Throws std::invalid_argument on a bad model (as Deformer::precompute), on
   // ModifiedArap without clusters, or on invalid options.
-  void precompute(const DeformableModel& model, const ReferenceOptions& options = {});
+  void precompute(const DeformableMesh& model, const ReferenceOptions& options = {});
 
   // Throws std::invalid_argument on handles out of range, on a connected
   // component that nothing anchors (no Fixed/prescribed patch, no handle: its
   // position would be undetermined), or on linearly dependent weighted
-  // handles. Factorization failures come back as the status.
-  Status set_handles(const Handles& handles, std::string* message = nullptr);
+  // handles. Factorization failures come back in the summary.
+  HandleSetSummary set_handles(const Handles& handles);
 
   // Runs the alternation from `initial` (n × 3; empty: the rest pose) to the
   // targets. Throws std::invalid_argument on target sizes, NaN, or conflicting
@@ -167,7 +170,7 @@ class LocalGlobalArap {
 };
 
 // One-off local-global solve (precompute, set_handles, solve).
-ReferenceSummary solve_local_global(const DeformableModel& model, const Handles& handles,
+ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial = {});
 
@@ -181,7 +184,7 @@ ReferenceSummary solve_local_global(const DeformableModel& model, const Handles&
 // the unsupported constraints named above, bad input, or conflicting targets.
 // Throws std::runtime_error when qpreduce was built without Ceres
 // (QPREDUCE_NO_CERES; has_ceres_reference() tells).
-ReferenceSummary solve_ceres_reference(const DeformableModel& model, const Handles& handles,
+ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
                                        const HandleTargets& targets, const ReferenceOptions& options,
                                        ReferenceSolution* out, const Vertices& initial = {});
 
@@ -198,7 +201,7 @@ struct VertexTargets {
   std::vector<char> pinned;
   Vertices position;  // n × 3, meaningful where pinned
 };
-VertexTargets vertex_targets(const DeformableModel& model, const Handles& handles, const HandleTargets& targets,
+VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                              double tolerance);
 
 }  // namespace qpreduce::deform
