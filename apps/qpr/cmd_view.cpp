@@ -6,6 +6,8 @@
 
 #include <viewer.h>
 
+#include <qpreduce/deform/mesh/tet_boundary.h>
+
 #include <CLI/CLI.hpp>
 
 #include <map>
@@ -36,7 +38,7 @@ int run_view(ViewArgs& a) {
   input.name = ls.name;
   input.options = ls.options;
   qpreduce::deform::apply_scenario_options(ls.scenario, &input.options);
-  input.faces = !ls.tet ? ls.surface.F : ls.solid.F.rows() > 0 ? ls.solid.F : viewer::boundary_faces(ls.solid.T);
+  input.faces = !ls.tet ? ls.surface.F : ls.solid.F.rows() > 0 ? ls.solid.F : qpreduce::deform::boundary_faces(ls.solid.T);
   input.scenario = std::move(ls.scenario);
   const auto save = [&ls](const std::string& path, const qpreduce::deform::Vertices& V) {
     write_pose(path, V, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr);

@@ -1,15 +1,13 @@
 #include "session.h"
 
+#include <qpreduce/deform/deformer/selection_handles.h>
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/proxies/proxies.h>
 #include <qpreduce/support.h>
 
-#include <Eigen/Eigenvalues>
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <array>
-#include <map>
 #include <stdexcept>
 
 namespace qpr::viewer {
@@ -190,35 +188,9 @@ void Session::add_handle(const std::vector<int>& vertices, const std::string& na
     if (v < 0 || v >= V.rows()) throw std::invalid_argument(fmt::format("add_handle: vertex {} outside [0, {})", v, V.rows()));
   ViewHandle h;
   h.name = name;
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  for (int v : vertices) c += V.row(v).transpose();
-  c /= static_cast<double>(vertices.size());
-  h.pivot = c;
-  constexpr size_t kMaxPoints = 4;  // quadrants along two main axes: ≤ 12 rows, still a rigid frame
-  std::vector<std::vector<int>> groups;
-  if (vertices.size() <= kMaxPoints) {
-    for (int v : vertices) groups.push_back({v});
-  } else {
-    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (int v : vertices) {
-      const Eigen::Vector3d d = V.row(v).transpose() - c;
-      cov += d * d.transpose();
-    }
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-    const Eigen::Vector3d a1 = eig.eigenvectors().col(2), a2 = eig.eigenvectors().col(1);
-    groups.assign(kMaxPoints, {});
-    for (int v : vertices) {
-      const Eigen::Vector3d d = V.row(v).transpose() - c;
-      groups[(d.dot(a1) >= 0 ? 1 : 0) + (d.dot(a2) >= 0 ? 2 : 0)].push_back(v);
-    }
-    groups.erase(std::remove_if(groups.begin(), groups.end(), [](const auto& g) { return g.empty(); }), groups.end());
-  }
-  for (const auto& g : groups) {
-    PointHandle p;
-    p.vertices.assign(g.begin(), g.end());
-    if (g.size() > 1) p.weights.assign(g.size(), 1.0 / static_cast<double>(g.size()));
-    h.points.push_back(std::move(p));
-  }
+  SelectionHandles grab = selection_handles(V, vertices);
+  h.pivot = grab.centroid;
+  h.points = std::move(grab.points);
   h.rest.resize(static_cast<Index>(h.points.size()), 3);
   for (size_t j = 0; j < h.points.size(); ++j) h.rest.row(static_cast<Index>(j)) = point_rest(h.points[j], V).transpose();
   for (int v : vertices) h.vertices.push_back(static_cast<unsigned>(v));
@@ -327,32 +299,6 @@ Vertices Session::cpu_reconstruction() const {
   Vertices V(B.rows() / 3, 3);
   for (Index v = 0; v < V.rows(); ++v) V.row(v) = (deformer_->global_rotation() * flat.segment<3>(3 * v)).transpose();
   return V;
-}
-
-}  // namespace qpr::viewer
-
-namespace qpr::viewer {
-
-Triangles boundary_faces(const Tetrahedra& T) {
-  // Outward faces of a positive tet (a, b, c, d): (a, c, b), (a, b, d), (a, d, c), (b, c, d).
-  static constexpr int kFaces[4][3] = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
-  std::map<std::array<int, 3>, std::pair<int, std::array<int, 3>>> faces;  // sorted corners → (count, oriented)
-  for (Index t = 0; t < T.rows(); ++t)
-    for (const auto& f : kFaces) {
-      const std::array<int, 3> oriented{T(t, f[0]), T(t, f[1]), T(t, f[2])};
-      std::array<int, 3> key = oriented;
-      std::sort(key.begin(), key.end());
-      auto& entry = faces[key];
-      ++entry.first;
-      entry.second = oriented;
-    }
-  std::vector<std::array<int, 3>> boundary;
-  for (const auto& [key, entry] : faces)
-    if (entry.first == 1) boundary.push_back(entry.second);
-  Triangles F(static_cast<Index>(boundary.size()), 3);
-  for (size_t i = 0; i < boundary.size(); ++i)
-    for (int c = 0; c < 3; ++c) F(static_cast<Index>(i), c) = boundary[i][c];
-  return F;
 }
 
 }  // namespace qpr::viewer

@@ -146,11 +146,3 @@ class Session {
 };
 
 }  // namespace qpr::viewer
-
-namespace qpr::viewer {
-
-// The triangles a tet mesh shows: faces used by exactly one tet, oriented
-// outwards for positively oriented tets (mesh.h). k × 3.
-qpreduce::deform::Triangles boundary_faces(const qpreduce::deform::Tetrahedra& T);
-
-}  // namespace qpr::viewer

@@ -11,6 +11,7 @@
 
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/mesh/shapes.h>
+#include <qpreduce/deform/mesh/tet_boundary.h>
 
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
