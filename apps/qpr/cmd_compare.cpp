@@ -1,6 +1,7 @@
 // `qpr compare MESH …`: the reduced deformation against full-space references
 // (Ceres and/or local-global ARAP, reference.h) on the last frame of a
 // scenario. No math here: the plugin solves, this file measures and reports.
+#include "app_support.h"
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
@@ -13,7 +14,6 @@
 
 #include <cmath>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 namespace qpr {
@@ -36,17 +36,92 @@ nlohmann::json deviation(const Vertices& a, const Vertices& b, double diag) {
           {"max_deviation", d.maxCoeff() / diag}};
 }
 
+// Where the meshes of the comparison go: <out_dir>/<what>.<ext>, with an
+// extension the loaded mesh can be written as.
+struct OutputPaths {
+  std::string dir, ext;
+  std::string operator()(const std::string& what) const {
+    return (std::filesystem::path(dir) / (what + "." + ext)).string();
+  }
+};
+
+// The reduced run's part of the report: its energy and residual on the last
+// frame, and the run's settings and times.
+nlohmann::json reduced_json(const Scenario& sc, const RotationElements& elements, const RunOutputs& reduced,
+                            const nlohmann::json& rep, double diag) {
+  nlohmann::json red;
+  red["arap_energy"] = arap_energy(sc.model.V, elements, reduced.last);
+  red["handle_residual"] = handle_residual(sc, sc.frames.back(), reduced.last) / diag;
+  red["frame_ms"] = rep["frame_ms"];
+  red["precompute_s"] = rep["precompute_s"];
+  red["linear_proxies"] = rep["linear_proxies"];
+  red["rotational_proxies"] = rep["rotational_proxies"];
+  red["iterations"] = rep["iterations"];
+  red["frames"] = rep["frames"];
+  red["alpha"] = rep["alpha"];
+  red["beta"] = rep["beta"];
+  return red;
+}
+
+// One reference solve of the last frame (`which`: "ceres" or "local-global"),
+// reported; its pose is written and compared with the reduced one when it succeeds.
+nlohmann::json reference_json(const std::string& which, const DeformableMesh& model, const LoadedScenario& ls,
+                              const ReferenceOptions& ro, const RotationElements& elements, const RunOutputs& reduced,
+                              const OutputPaths& path, double diag) {
+  const Scenario& sc = ls.scenario;
+  ReferenceSolution sol;
+  const ReferenceSummary s = which == "ceres" ? solve_ceres_reference(model, sc.handles, sc.frames.back(), ro, &sol)
+                                              : solve_local_global(model, sc.handles, sc.frames.back(), ro, &sol);
+  nlohmann::json r;
+  r["status"] = to_string(s.status);
+  r["message"] = s.message;
+  r["converged"] = s.converged;
+  r["iterations"] = s.iterations;
+  r["energy_kind"] = to_string(s.energy_kind);
+  r["energy"] = s.energy;
+  r["arap_energy"] = arap_energy(sc.model.V, elements, sol.V);
+  r["handle_residual"] = s.handle_residual / diag;
+  r["setup_ms"] = 1e3 * s.setup_seconds;
+  r["solve_ms"] = 1e3 * s.solve_seconds;
+  if (!s.ok()) {
+    std::fprintf(stderr, "  %s reference failed: %s\n", which.c_str(), s.message.c_str());
+    return r;
+  }
+  const std::string file = path("reference_" + which);
+  write_pose(file, sol.V, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr);
+  r["mesh"] = file;
+  r.update(deviation(reduced.last, sol.V, diag));
+  return r;
+}
+
+// The comparison table (stdout).
+void print_comparison(const CompareArgs& a, const std::string& primary, const nlohmann::json& report,
+                      const nlohmann::json& refs, int reduced_iterations) {
+  const nlohmann::json& red = report["reduced"];
+  fmt::print("compare ({} energy), reference = {}:\n", a.energy, primary);
+  fmt::print("  {:<14}{:>14}{:>14}{:>12}{:>12}{:>14}{:>12}\n", "", "ARAP energy", "handle res.", "RMS dev.", "max dev.",
+             "time ms", "iterations");
+  fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>12}{:>12}{:>14.3f}{:>12}\n", "reduced", red["arap_energy"].get<double>(),
+             red["handle_residual"].get<double>(), "", "", red["frame_ms"].get<double>(), reduced_iterations);
+  for (const auto& [which, r] : refs.items()) {
+    if (!r.contains("rms_deviation")) continue;
+    fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>11.2f}%{:>11.2f}%{:>14.1f}{:>12}{}\n", which, r["arap_energy"].get<double>(),
+               r["handle_residual"].get<double>(), 100 * r["rms_deviation"].get<double>(),
+               100 * r["max_deviation"].get<double>(), r["solve_ms"].get<double>(), r["iterations"].get<int>(),
+               r["converged"].get<bool>() ? "" : "  (not converged)");
+  }
+  fmt::print("  energy ratio {:.3f}, speedup {:.0f}x (one reference solve / one reduced frame); meshes in {}\n",
+             report["energy_ratio"].get<double>(), report["speedup"].get<double>(), a.out_dir);
+}
+
 int run_compare(const CompareArgs& a) {
   if (a.reference != "ceres" && a.reference != "local-global" && a.reference != "both")
     throw std::invalid_argument("--reference must be ceres, local-global or both, got " + a.reference);
   if (a.energy != "classic" && a.energy != "modified")
     throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
   LoadedScenario ls = load_scenario(a);
-  const TriangleMesh* surface = ls.tet ? nullptr : &ls.surface;
-  const TetMesh* solid = ls.tet ? &ls.solid : nullptr;
-  const std::string ext = ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off";
+  const OutputPaths path{a.out_dir, ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off"};
   std::filesystem::create_directories(a.out_dir);
-  auto path = [&](const std::string& what) { return (std::filesystem::path(a.out_dir) / (what + "." + ext)).string(); };
 
   // The reduced run (every frame, as `qpr deform`), keeping the last pose.
   RunSettings settings;
@@ -54,9 +129,9 @@ int run_compare(const CompareArgs& a) {
   settings.options = ls.options;
   settings.out_path = path("reduced");
   RunOutputs reduced;
-  const nlohmann::json rep = run_scenario(ls.scenario, surface, solid, settings, &reduced);
+  const nlohmann::json rep = run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr,
+                                          settings, &reduced);
   const Scenario& sc = ls.scenario;
-  const HandleTargets& targets = sc.frames.back();
   const double diag = bounding_box_diagonal(sc.model.V);
 
   // The references, on the last frame's targets, from the rest pose.
@@ -77,47 +152,14 @@ int run_compare(const CompareArgs& a) {
   report["vertices"] = sc.model.V.rows();
   report["bounding_box_diagonal"] = diag;
   report["energy"] = a.energy;
-  nlohmann::json red;
-  red["arap_energy"] = arap_energy(sc.model.V, elements, reduced.last);
-  red["handle_residual"] = handle_residual(sc, targets, reduced.last) / diag;
-  red["frame_ms"] = rep["frame_ms"];
-  red["precompute_s"] = rep["precompute_s"];
-  red["linear_proxies"] = rep["linear_proxies"];
-  red["rotational_proxies"] = rep["rotational_proxies"];
-  red["iterations"] = rep["iterations"];
-  red["frames"] = rep["frames"];
-  red["alpha"] = rep["alpha"];
-  red["beta"] = rep["beta"];
-  report["reduced"] = red;
+  report["reduced"] = reduced_json(sc, elements, reduced, rep, diag);
 
   nlohmann::json refs = nlohmann::json::object();
   std::string primary;
   for (const std::string which : {"ceres", "local-global"}) {
     if (a.reference != "both" && a.reference != which) continue;
-    ReferenceSolution sol;
-    const ReferenceSummary s = which == "ceres" ? solve_ceres_reference(model, sc.handles, targets, ro, &sol)
-                                                : solve_local_global(model, sc.handles, targets, ro, &sol);
-    nlohmann::json r;
-    r["status"] = to_string(s.status);
-    r["message"] = s.message;
-    r["converged"] = s.converged;
-    r["iterations"] = s.iterations;
-    r["energy_kind"] = to_string(s.energy_kind);
-    r["energy"] = s.energy;
-    r["arap_energy"] = arap_energy(sc.model.V, elements, sol.V);
-    r["handle_residual"] = s.handle_residual / diag;
-    r["setup_ms"] = 1e3 * s.setup_seconds;
-    r["solve_ms"] = 1e3 * s.solve_seconds;
-    if (!s.ok()) {
-      std::fprintf(stderr, "  %s reference failed: %s\n", which.c_str(), s.message.c_str());
-      refs[which] = r;
-      continue;
-    }
-    const std::string file = path("reference_" + which);
-    write_pose(file, sol.V, surface, solid);
-    r["mesh"] = file;
-    r.update(deviation(reduced.last, sol.V, diag));
-    refs[which] = r;
+    refs[which] = reference_json(which, model, ls, ro, elements, reduced, path, diag);
+    if (!refs[which].contains("mesh")) continue;  // failed
     // The primary reference: Ceres when it converged, else local-global.
     if (primary.empty() || (which == "local-global" && !refs[primary]["converged"].get<bool>())) primary = which;
   }
@@ -131,34 +173,15 @@ int run_compare(const CompareArgs& a) {
   report["max_deviation"] = ref["max_deviation"];
   report["speedup"] = ref["solve_ms"].get<double>() / report["reduced"]["frame_ms"].get<double>();
 
-  fmt::print("compare ({} energy), reference = {}:\n", a.energy, primary);
-  fmt::print("  {:<14}{:>14}{:>14}{:>12}{:>12}{:>14}{:>12}\n", "", "ARAP energy", "handle res.", "RMS dev.", "max dev.",
-             "time ms", "iterations");
-  fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>12}{:>12}{:>14.3f}{:>12}\n", "reduced", red["arap_energy"].get<double>(),
-             red["handle_residual"].get<double>(), "", "", red["frame_ms"].get<double>(),
-             rep["iterations"].get<int>());
-  for (const auto& [which, r] : refs.items()) {
-    if (!r.contains("rms_deviation")) continue;
-    fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>11.2f}%{:>11.2f}%{:>14.1f}{:>12}{}\n", which, r["arap_energy"].get<double>(),
-               r["handle_residual"].get<double>(), 100 * r["rms_deviation"].get<double>(),
-               100 * r["max_deviation"].get<double>(), r["solve_ms"].get<double>(), r["iterations"].get<int>(),
-               r["converged"].get<bool>() ? "" : "  (not converged)");
-  }
-  fmt::print("  energy ratio {:.3f}, speedup {:.0f}x (one reference solve / one reduced frame); meshes in {}\n",
-             report["energy_ratio"].get<double>(), report["speedup"].get<double>(), a.out_dir);
-  if (!a.report.empty()) {
-    std::ofstream f(a.report);
-    if (!f) throw std::runtime_error(a.report + ": cannot write the report");
-    f << report.dump(2) << "\n";
-  }
+  print_comparison(a, primary, report, refs, rep["iterations"].get<int>());
+  if (!a.report.empty()) write_json(a.report, report);
   return 0;
 }
 
 }  // namespace
 
 void register_compare(CLI::App& app) {
-  auto a = std::make_shared<CompareArgs>();
-  CLI::App* cmd = app.add_subcommand("compare", "Reduced ARAP against full-space references (Ceres, local-global)");
+  auto [cmd, a] = add_command<CompareArgs>(app, "compare", "Reduced ARAP against full-space references (Ceres, local-global)");
   add_scenario_options(cmd, a.get());
   cmd->add_option("--reference", a->reference, "ceres, local-global or both (default both)");
   cmd->add_option("--energy", a->energy,
@@ -168,7 +191,7 @@ void register_compare(CLI::App& app) {
       ->check(CLI::Range(1, 10000000));
   cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
   cmd->add_option("--report", a->report, "JSON report");
-  cmd->callback([a]() { run_guarded("compare", [&] { return run_compare(*a); }); });
+  cmd->callback([a = a]() { run_guarded("compare", [&] { return run_compare(*a); }); });
 }
 
 }  // namespace qpr

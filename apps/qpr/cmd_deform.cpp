@@ -30,14 +30,13 @@ int run_deform(const DeformArgs& a) {
 }  // namespace
 
 void register_deform(CLI::App& app) {
-  auto a = std::make_shared<DeformArgs>();
-  CLI::App* cmd = app.add_subcommand("deform", "Reduced ARAP deformation of a triangle or tet mesh");
+  auto [cmd, a] = add_command<DeformArgs>(app, "deform", "Reduced ARAP deformation of a triangle or tet mesh");
   add_scenario_options(cmd, a.get());
   cmd->add_option("--out", a->out, "Deformed mesh of the last frame ({frame} in the name writes every frame)");
   cmd->add_option("--report", a->report, "JSON report");
   cmd->add_option("--cache", a->cache,
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
-  cmd->callback([a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
+  cmd->callback([a = a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 
 }  // namespace qpr

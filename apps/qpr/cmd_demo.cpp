@@ -81,15 +81,14 @@ int run_demo(const DemoArgs& a) {
 }  // namespace
 
 void register_demo(CLI::App& app) {
-  auto args = std::make_shared<DemoArgs>();
-  CLI::App* cmd = app.add_subcommand("demo", "Bend and twist a built-in cylinder with reduced ARAP (no files needed)");
+  auto [cmd, args] = add_command<DemoArgs>(app, "demo", "Bend and twist a built-in cylinder with reduced ARAP (no files needed)");
   cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(CLI::Range(1, 10000));
   cmd->add_option("--out", args->out_dir, "Output folder for the meshes and the report");
   cmd->add_option("--report", args->report, "JSON report path (default OUT/report.json)");
   cmd->add_option("--iterations", args->iterations, "Phase 1/Phase 2 rounds per frame")->check(CLI::Range(1, 1000));
   cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")->check(CLI::Range(1, 100000));
   cmd->add_option("--linear-proxies", args->linear, "Linear proxies (farthest-point samples)")->check(CLI::Range(1, 100000));
-  cmd->callback([args]() { run_guarded("demo", [&] { return run_demo(*args); }); });
+  cmd->callback([args = args]() { run_guarded("demo", [&] { return run_demo(*args); }); });
 }
 
 }  // namespace qpr

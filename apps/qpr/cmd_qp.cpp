@@ -21,6 +21,7 @@
 //
 // Exit codes: 0 success; 1 a bound was violated; 2 bad input (the message
 // names the file and line); 3 a numerical failure (precompute or a demand).
+#include "app_support.h"
 #include "commands.h"
 #include "guard.h"
 
@@ -29,13 +30,13 @@
 #include <qpreduce/quotient.h>
 #include <qpreduce/problems/schur_baseline.h>
 #include <qpreduce/subspace_solver.h>
+#include <qpreduce/support.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -75,10 +76,6 @@ struct Demand {
   Vec b, q, Y;
   bool in_D = false;  // q = D·Y
 };
-
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
 
 std::vector<DemandFiles> list_directory(const fs::path& dir) {
   std::map<std::string, DemandFiles> by_name;
@@ -203,8 +200,6 @@ Demand load_demand(const DemandFiles& f, const SpMat& C, Index k) {
   return d;
 }
 
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
-
 json bound_json(const qpreduce::TheoremCheck& c) {
   const qpreduce::TheoremBound& b = c.bound;
   return {{"status", qpreduce::to_string(c.status)},
@@ -235,195 +230,245 @@ SpMat bordering_columns(const SpMat& H, const SpMat& C) {
   return std::sqrt(mean_diag / std::max(mean_col, 1e-300)) * C;
 }
 
-int run_qp(const Options& opt) {
-  // ---- inputs: read and check everything before any expensive step ----
+// The QP (H, C, D) and its demands, read and checked before any expensive step.
+struct Problem {
+  SpMat H, C, D;
+  std::vector<Demand> demands;
+  Index n() const { return H.rows(); }
+};
+
+Problem read_problem(const Options& opt) {
+  Problem p;
   qpreduce::MarketReadOptions oh;
   oh.require_symmetric = true;
-  const SpMat H = qpreduce::read_market_sparse(opt.H, oh);
-  const Index n = H.rows();
+  p.H = qpreduce::read_market_sparse(opt.H, oh);
+  const Index n = p.H.rows();
   qpreduce::MarketReadOptions on;
   on.rows = n;
-  const SpMat C = qpreduce::read_market_sparse(opt.C, on);
-  const SpMat D = opt.D.empty() ? SpMat(n, 0) : qpreduce::read_market_sparse(opt.D, on);
+  p.C = qpreduce::read_market_sparse(opt.C, on);
+  p.D = opt.D.empty() ? SpMat(n, 0) : qpreduce::read_market_sparse(opt.D, on);
   const fs::path dpath = opt.demands;
   if (!fs::exists(dpath)) throw std::invalid_argument(fmt::format("{}: no such file or directory", opt.demands));
   const std::vector<DemandFiles> files = fs::is_directory(dpath) ? list_directory(dpath) : read_manifest(dpath);
-  std::vector<Demand> demands;
-  for (const DemandFiles& f : files) demands.push_back(load_demand(f, C, D.cols()));
-  if (D.cols() == 0) {
-    for (const Demand& d : demands)
+  for (const DemandFiles& f : files) p.demands.push_back(load_demand(f, p.C, p.D.cols()));
+  if (p.D.cols() == 0) {
+    for (const Demand& d : p.demands)
       if (d.in_D) throw std::invalid_argument(fmt::format("demand '{}': Y given but no --D", d.name));
   }
+  return p;
+}
+
+// What every demand is solved with: the subspace solver, and the optional
+// Theorem 4.10 checker and Cholesky–Schur baseline.
+struct Solvers {
+  qpreduce::SubspaceOptions sopt;
+  qpreduce::SubspaceSolver<double> solver;
+  qpreduce::ConstraintOptions copt;
+  std::optional<qpreduce::TheoremChecker> checker;
+  std::string theorem_skipped;  // why there is no checker
+  qpreduce::CachedCholeskySchur baseline;
+  std::string baseline_note;
+  double baseline_precompute = 0.0;
+};
+
+// Sets up the Theorem 4.10 checker when --check-full asks for it and it applies.
+void setup_theorem(const Options& opt, const Problem& p, Solvers& s) {
+  if (!opt.check_full) s.theorem_skipped = "needs --check-full";
+  else if (s.copt.soft) s.theorem_skipped = "soft constraints (Theorem 4.10 is about hard constraints)";
+  else if (p.n() > opt.theorem_max_n)
+    s.theorem_skipped = fmt::format("n = {} > --theorem-max-n = {} (dense analysis)", p.n(), opt.theorem_max_n);
+  else {
+    s.checker.emplace();
+    const qpreduce::TheoremSetupSummary ts = s.checker->precompute(p.H, p.C, p.D);
+    if (!ts.ok()) {
+      s.theorem_skipped = "setup failed: " + ts.message;
+      s.checker.reset();
+    }
+  }
+}
+
+// Factors the baseline: H itself, or H bordered when H is not PD. False (with
+// a message on stderr) when both fail.
+bool setup_baseline(const Problem& p, Solvers& s) {
+  qpreduce::SchurBaselineSummary bs = s.baseline.precompute(p.H, SpMat(p.n(), 0));
+  s.baseline_note = "factor of H";
+  if (!bs.ok()) {
+    bs = s.baseline.precompute(p.H, bordering_columns(p.H, p.C));
+    s.baseline_note = "factor of H + ρ·CCᵀ, bordered (H is not PD)";
+  }
+  if (!bs.ok()) {
+    fmt::print(stderr, "qpr qp: baseline precompute failed: {}\n", bs.message);
+    return false;
+  }
+  s.baseline_precompute = bs.seconds;
+  return true;
+}
+
+// Vectors reused from demand to demand.
+struct Workspace {
+  Vec w, qr, X, X_full, X_base;
+};
+
+// One row of the table: the columns not computed (no --check-full,
+// --baseline, or theorem skipped) print "-".
+struct Row {
+  double reduced = 0.0, full_s = std::nan(""), base_s = std::nan(""), err = std::nan(""), bound = std::nan("");
+};
+
+struct Tally {
+  int failures = 0, violations = 0;
+};
+
+// --check-full: the full sparse KKT solve, the d_H error against it and the
+// Theorem 4.10 bound.
+void check_full(const Demand& d, const Vec& q, const Problem& p, Solvers& s, Workspace& ws, json& r, Row& row,
+                Tally& tally) {
+  const qpreduce::Timer t3;
+  const qpreduce::FullSolveSummary fsum = qpreduce::solve_full(p.H, d.A, d.b, q, &ws.X_full, s.sopt);
+  row.full_s = t3.seconds();
+  r["full_seconds"] = row.full_s;
+  r["full_status"] = qpreduce::to_string(fsum.status);
+  if (fsum.ok()) {
+    row.err = qpreduce::h_distance(p.H, ws.X, ws.X_full);
+    const double scale = std::sqrt(std::max(0.0, ws.X_full.dot(p.H * ws.X_full)));
+    r["dH_error"] = row.err;
+    r["dH_rel_error"] = scale > 0 ? row.err / scale : row.err;
+    r["rel_error"] = (ws.X - ws.X_full).norm() / std::max(1e-300, ws.X_full.norm());
+    r["speedup_vs_full"] = row.full_s / row.reduced;
+  } else {
+    ++tally.failures;
+    fmt::print(stderr, "qpr qp: demand '{}': full solve failed: {}\n", d.name, fsum.message);
+  }
+  if (s.checker) {
+    const qpreduce::TheoremCheck c = s.checker->check(d.A, d.b, q);
+    r["theorem"] = bound_json(c);
+    row.bound = c.bound.bound;
+    tally.violations += c.practical_violation();
+  } else {
+    r["theorem"] = {{"status", "skipped"}, {"message", s.theorem_skipped}};
+  }
+}
+
+// --baseline: the cached Cholesky plus Schur complement on the same demand.
+void run_baseline(const Demand& d, const Vec& q, const Problem& p, Solvers& s, Workspace& ws, json& r, Row& row) {
+  const qpreduce::SchurBaselineSummary bsum = s.baseline.solve(d.A, d.b, q, &ws.X_base);
+  row.base_s = bsum.seconds;
+  r["baseline_seconds"] = row.base_s;
+  r["baseline_status"] = qpreduce::to_string(bsum.status);
+  r["speedup_vs_baseline"] = row.base_s / row.reduced;
+  if (bsum.ok()) r["baseline_dH_error"] = qpreduce::h_distance(p.H, ws.X, ws.X_base);
+}
+
+// Solves one demand in the subspace (and in full, and by the baseline, when
+// asked), prints its row and returns its record.
+json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
+  json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
+  const qpreduce::Timer t0;
+  // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
+  const qpreduce::ConstraintSummary cs =
+      d.A_c.size() > 0 ? s.solver.set_constraints_in_design(d.A_c, s.copt) : s.solver.set_constraints(d.A, s.copt);
+  const double t_op = t0.seconds();
+  r["status"] = qpreduce::to_string(cs.status);
+  r["message"] = cs.message;
+  if (!cs.usable()) {
+    ++tally.failures;
+    fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
+    return r;
+  }
+  const qpreduce::Timer t1;
+  if (d.in_D) {
+    s.solver.solve_in_D(d.b, d.Y, ws.w);
+  } else {
+    s.solver.reduce_linear_term(d.q, ws.qr);
+    s.solver.solve(d.b, ws.qr, ws.w);
+  }
+  const double t_solve = t1.seconds();
+  const qpreduce::Timer t2;
+  s.solver.reconstruct(ws.w, ws.X);
+  const double t_recon = t2.seconds();
+  Row row;
+  row.reduced = t_op + t_solve + t_recon;
+  r["reduced_seconds"] = row.reduced;
+  r["set_constraints_seconds"] = t_op;
+  r["solve_seconds"] = t_solve;
+  r["reconstruct_seconds"] = t_recon;
+  r["fast_path"] = cs.fast_path;
+  r["factored"] = cs.factored;  // A_c demands: M_q kept factored (subspace_solver.h)
+  const Vec q = d.in_D ? Vec(p.D * d.Y) : d.q;
+  r["constraint_residual"] = (d.A.transpose() * ws.X - d.b).norm() / std::max(1.0, d.b.norm());
+  if (opt.check_full) check_full(d, q, p, s, ws, r, row, tally);
+  if (opt.baseline) run_baseline(d, q, p, s, ws, r, row);
+  if (!opt.out.empty()) qpreduce::write_market((fs::path(opt.out) / ("X_" + d.name + ".mtx")).string(), ws.X);
+  auto cell = [](double v, const char* spec) { return std::isnan(v) ? std::string("-") : fmt::format(spec, v); };
+  fmt::print("{:<12} {:>5} {:>12.3f} {:>12} {:>12} {:>12} {:>12}\n", d.name, d.A.cols(), 1e3 * row.reduced,
+             cell(1e3 * row.full_s, "{:.3f}"), cell(1e3 * row.base_s, "{:.3f}"), cell(row.err, "{:.3e}"),
+             cell(row.bound, "{:.3e}"));
+  return r;
+}
+
+json report_json(const Options& opt, const Problem& p, const Solvers& s, const qpreduce::SubspaceSummary& pre,
+                 const Tally& tally, const json& records) {
+  json doc = {{"command", "qpr qp"},
+              {"H", opt.H},
+              {"C", opt.C},
+              {"D", opt.D},
+              {"demands_source", opt.demands},
+              {"n", p.n()},
+              {"d", p.C.cols()},
+              {"k", p.D.cols()},
+              {"soft", opt.soft > 0.0},
+              {"delta", opt.soft},
+              {"precompute", {{"status", qpreduce::to_string(pre.status)},
+                              {"message", pre.message},
+                              {"seconds", pre.total_seconds},
+                              {"kkt_residual", pre.kkt_residual}}},
+              {"theorem_skipped", s.theorem_skipped.empty() ? json(nullptr) : json(s.theorem_skipped)},
+              {"failures", tally.failures},
+              {"violations", tally.violations},
+              {"demands", records}};
+  if (opt.baseline) doc["baseline"] = {{"precompute_seconds", s.baseline_precompute}, {"factor", s.baseline_note}};
+  return doc;
+}
+
+int run_qp(const Options& opt) {
+  const Problem p = read_problem(opt);
   if (!opt.out.empty()) fs::create_directories(opt.out);
 
-  // ---- precompute ----
-  qpreduce::SubspaceOptions sopt;
-  sopt.augment = !opt.no_augment;
-  qpreduce::SubspaceSolver<double> solver;
-  const qpreduce::SubspaceSummary pre = solver.precompute(H, C, D, sopt);
+  Solvers s;
+  s.sopt.augment = !opt.no_augment;
+  const qpreduce::SubspaceSummary pre = s.solver.precompute(p.H, p.C, p.D, s.sopt);
   fmt::print("precompute: {}\n", pre.brief_report());
   if (!pre.ok()) {
     fmt::print(stderr, "qpr qp: precompute failed: {}\n", pre.message);
     return 3;
   }
-  qpreduce::ConstraintOptions copt;
   if (opt.soft > 0.0) {
-    copt.soft = true;
-    copt.delta = opt.soft;
+    s.copt.soft = true;
+    s.copt.delta = opt.soft;
   }
-  std::optional<qpreduce::TheoremChecker> checker;
-  std::string theorem_skipped;
-  if (!opt.check_full) theorem_skipped = "needs --check-full";
-  else if (copt.soft) theorem_skipped = "soft constraints (Theorem 4.10 is about hard constraints)";
-  else if (n > opt.theorem_max_n) theorem_skipped = fmt::format("n = {} > --theorem-max-n = {} (dense analysis)", n, opt.theorem_max_n);
-  else {
-    checker.emplace();
-    const qpreduce::TheoremSetupSummary ts = checker->precompute(H, C, D);
-    if (!ts.ok()) {
-      theorem_skipped = "setup failed: " + ts.message;
-      checker.reset();
-    }
-  }
-  qpreduce::CachedCholeskySchur baseline;
-  std::string baseline_note;
-  double baseline_precompute = 0.0;
-  if (opt.baseline) {
-    qpreduce::SchurBaselineSummary bs = baseline.precompute(H, SpMat(n, 0));
-    baseline_note = "factor of H";
-    if (!bs.ok()) {
-      bs = baseline.precompute(H, bordering_columns(H, C));
-      baseline_note = "factor of H + ρ·CCᵀ, bordered (H is not PD)";
-    }
-    if (!bs.ok()) {
-      fmt::print(stderr, "qpr qp: baseline precompute failed: {}\n", bs.message);
-      return 3;
-    }
-    baseline_precompute = bs.seconds;
-  }
+  setup_theorem(opt, p, s);
+  if (opt.baseline && !setup_baseline(p, s)) return 3;
 
-  // ---- demands ----
   json records = json::array();
-  int failures = 0, violations = 0;
-  Vec w(solver.p()), qr(solver.p()), X(n), X_full, X_base;
+  Tally tally;
+  Workspace ws{Vec(s.solver.p()), Vec(s.solver.p()), Vec(p.n()), Vec(), Vec()};
   fmt::print("{:<12} {:>5} {:>12} {:>12} {:>12} {:>12} {:>12}\n", "demand", "m", "reduced ms", "full ms",
              "baseline ms", "d_H error", "bound");
-  for (const Demand& d : demands) {
-    json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
-    const auto t0 = std::chrono::steady_clock::now();
-    // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
-    const qpreduce::ConstraintSummary cs =
-        d.A_c.size() > 0 ? solver.set_constraints_in_design(d.A_c, copt) : solver.set_constraints(d.A, copt);
-    const double t_op = seconds_since(t0);
-    r["status"] = qpreduce::to_string(cs.status);
-    r["message"] = cs.message;
-    if (!cs.usable()) {
-      ++failures;
-      fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
-      records.push_back(r);
-      continue;
-    }
-    const auto t1 = std::chrono::steady_clock::now();
-    if (d.in_D) {
-      solver.solve_in_D(d.b, d.Y, w);
-    } else {
-      solver.reduce_linear_term(d.q, qr);
-      solver.solve(d.b, qr, w);
-    }
-    const double t_solve = seconds_since(t1);
-    const auto t2 = std::chrono::steady_clock::now();
-    solver.reconstruct(w, X);
-    const double t_recon = seconds_since(t2);
-    const double reduced = t_op + t_solve + t_recon;
-    r["reduced_seconds"] = reduced;
-    r["set_constraints_seconds"] = t_op;
-    r["solve_seconds"] = t_solve;
-    r["reconstruct_seconds"] = t_recon;
-    r["fast_path"] = cs.fast_path;
-    r["factored"] = cs.factored;  // A_c demands: M_q kept factored (subspace_solver.h)
-    const Vec q = d.in_D ? Vec(D * d.Y) : d.q;
-    r["constraint_residual"] = (d.A.transpose() * X - d.b).norm() / std::max(1.0, d.b.norm());
+  for (const Demand& d : p.demands) records.push_back(run_demand(d, opt, p, s, ws, tally));
 
-    double full_s = std::nan(""), base_s = std::nan(""), err = std::nan(""), bound = std::nan("");
-    if (opt.check_full) {
-      const auto t3 = std::chrono::steady_clock::now();
-      const qpreduce::FullSolveSummary fsum = qpreduce::solve_full(H, d.A, d.b, q, &X_full, sopt);
-      full_s = seconds_since(t3);
-      r["full_seconds"] = full_s;
-      r["full_status"] = qpreduce::to_string(fsum.status);
-      if (fsum.ok()) {
-        err = qpreduce::h_distance(H, X, X_full);
-        const double scale = std::sqrt(std::max(0.0, X_full.dot(H * X_full)));
-        r["dH_error"] = err;
-        r["dH_rel_error"] = scale > 0 ? err / scale : err;
-        r["rel_error"] = (X - X_full).norm() / std::max(1e-300, X_full.norm());
-        r["speedup_vs_full"] = full_s / reduced;
-      } else {
-        ++failures;
-        fmt::print(stderr, "qpr qp: demand '{}': full solve failed: {}\n", d.name, fsum.message);
-      }
-      if (checker) {
-        const qpreduce::TheoremCheck c = checker->check(d.A, d.b, q);
-        r["theorem"] = bound_json(c);
-        bound = c.bound.bound;
-        violations += c.practical_violation();
-      } else {
-        r["theorem"] = {{"status", "skipped"}, {"message", theorem_skipped}};
-      }
-    }
-    if (opt.baseline) {
-      const qpreduce::SchurBaselineSummary bsum = baseline.solve(d.A, d.b, q, &X_base);
-      base_s = bsum.seconds;
-      r["baseline_seconds"] = base_s;
-      r["baseline_status"] = qpreduce::to_string(bsum.status);
-      r["speedup_vs_baseline"] = base_s / reduced;
-      if (bsum.ok()) r["baseline_dH_error"] = qpreduce::h_distance(H, X, X_base);
-    }
-    if (!opt.out.empty()) qpreduce::write_market((fs::path(opt.out) / ("X_" + d.name + ".mtx")).string(), X);
-    // Columns that were not computed (no --check-full, --baseline, or theorem skipped) print "-".
-    auto cell = [](double v, const char* spec) { return std::isnan(v) ? std::string("-") : fmt::format(spec, v); };
-    fmt::print("{:<12} {:>5} {:>12.3f} {:>12} {:>12} {:>12} {:>12}\n", d.name, d.A.cols(), 1e3 * reduced,
-               cell(1e3 * full_s, "{:.3f}"), cell(1e3 * base_s, "{:.3f}"), cell(err, "{:.3e}"), cell(bound, "{:.3e}"));
-    records.push_back(r);
-  }
-
-  if (!opt.report.empty()) {
-    json doc = {{"command", "qpr qp"},
-                {"H", opt.H},
-                {"C", opt.C},
-                {"D", opt.D},
-                {"demands_source", opt.demands},
-                {"n", n},
-                {"d", C.cols()},
-                {"k", D.cols()},
-                {"soft", opt.soft > 0.0},
-                {"delta", opt.soft},
-                {"precompute", {{"status", qpreduce::to_string(pre.status)},
-                                {"message", pre.message},
-                                {"seconds", pre.total_seconds},
-                                {"kkt_residual", pre.kkt_residual}}},
-                {"theorem_skipped", theorem_skipped.empty() ? json(nullptr) : json(theorem_skipped)},
-                {"failures", failures},
-                {"violations", violations},
-                {"demands", records}};
-    if (opt.baseline) doc["baseline"] = {{"precompute_seconds", baseline_precompute}, {"factor", baseline_note}};
-    std::ofstream out(opt.report, std::ios::binary);
-    out << doc.dump(2) << "\n";
-    out.close();
-    if (!out) throw std::invalid_argument(fmt::format("{}: cannot write the report", opt.report));
-  }
-  if (violations > 0) {
-    fmt::print(stderr, "qpr qp: Theorem 4.10 bound violated on {} demand(s)\n", violations);
+  if (!opt.report.empty()) write_json(opt.report, report_json(opt, p, s, pre, tally, records));
+  if (tally.violations > 0) {
+    fmt::print(stderr, "qpr qp: Theorem 4.10 bound violated on {} demand(s)\n", tally.violations);
     return 1;
   }
-  return failures > 0 ? 3 : 0;
+  return tally.failures > 0 ? 3 : 0;
 }
 
 }  // namespace
 
 void register_qp(CLI::App& app) {
-  auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand(
-      "qp",
+  auto [cmd, opt] = add_command<Options>(
+      app, "qp",
       "Solve many demands (A, b, q) of one QP min ½XᵀHX − qᵀX s.t. AᵀX = b from Matrix Market files through the "
       "variational subspace of (H, C, D). Exit code 1: bound violated; 2: bad input; 3: numerical failure.");
   cmd->add_option("--H", opt->H, "H.mtx: n×n symmetric PSD Hessian")->required();
@@ -443,7 +488,7 @@ void register_qp(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
   cmd->add_option("--out", opt->out, "write X_<name>.mtx for every demand into this directory");
-  cmd->callback([opt] { run_guarded("qp", [&] { return run_qp(*opt); }); });
+  cmd->callback([opt = opt] { run_guarded("qp", [&] { return run_qp(*opt); }); });
 }
 
 }  // namespace qpr

@@ -4,9 +4,12 @@
 // reduced answer X* (SubspaceSolver), the true error d_H(X*, X_min), the
 // bound of Eq. 39 and η = bound / error. Trials run in groups that share
 // (family, size, seed) and sweep ε, so H is factored once per group.
+#include "app_support.h"
 #include "commands.h"
+#include "guard.h"
 #include "svg_plot.h"
 
+#include <qpreduce/support.h>
 #include <qpreduce/problems/generators.h>
 #include <qpreduce/quotient.h>
 
@@ -15,7 +18,6 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
@@ -108,7 +110,6 @@ std::uint64_t group_seed(std::uint64_t seed, std::uint64_t group) {
 }
 
 nlohmann::json stats_json(const Stats& s) {
-  auto finite_or_null = [](double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); };
   return {{"trials", s.trials},
           {"applies", s.applies},
           {"not_applicable", s.not_applicable},
@@ -215,13 +216,12 @@ std::string plot_svg(const std::vector<Record>& records, const std::vector<gen::
   return svg::render({scatter, hist});
 }
 
-int run_theorem(const Options& opt) {
-  const auto start = std::chrono::steady_clock::now();
-  const std::vector<gen::TheoremFamily> families = gen::theorem_families();
+// The trials: groups over (family, size, seed), each sweeping kEpsilons with
+// one checker (H factored once). `first_failure` names the first failed trial.
+std::vector<Record> run_trials(const Options& opt, const std::vector<gen::TheoremFamily>& families,
+                               std::string* first_failure) {
   std::vector<Record> records;
   records.reserve(static_cast<size_t>(opt.trials));
-  std::string first_failure;
-
   const int per_group = static_cast<int>(kEpsilons.size());
   for (int g = 0; static_cast<int>(records.size()) < opt.trials; ++g) {
     const gen::TheoremFamily family = families[static_cast<size_t>(g) % families.size()];
@@ -245,25 +245,21 @@ int run_theorem(const Options& opt) {
         t.set_epsilon(r.epsilon);
         r.check = checker.check(t.A, t.b, t.q);
       }
-      if (first_failure.empty() && (r.check.status == TheoremStatus::SolveFailed ||
-                                    r.check.status == TheoremStatus::RankDeficientA ||
-                                    r.check.status == TheoremStatus::IndefiniteH)) {
-        first_failure = fmt::format("theorem_problem({}, {}, {}, {}): {}", gen::to_string(family), size, r.epsilon,
-                                    seed, r.check.message);
+      if (first_failure->empty() && (r.check.status == TheoremStatus::SolveFailed ||
+                                     r.check.status == TheoremStatus::RankDeficientA ||
+                                     r.check.status == TheoremStatus::IndefiniteH)) {
+        *first_failure = fmt::format("theorem_problem({}, {}, {}, {}): {}", gen::to_string(family), size, r.epsilon,
+                                     seed, r.check.message);
       }
       records.push_back(std::move(r));
     }
   }
+  return records;
+}
 
-  Stats all;
-  std::map<gen::TheoremFamily, Stats> by_family;
-  for (const Record& r : records) {
-    all.add(r);
-    by_family[r.family].add(r);
-  }
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-
-  // ---- table ----
+// The summary table per family and overall (stdout).
+void print_table(const Options& opt, const std::vector<gen::TheoremFamily>& families,
+                 std::map<gen::TheoremFamily, Stats>& by_family, const Stats& all, double seconds) {
   std::string eps_list;
   for (double e : kEpsilons) eps_list += (eps_list.empty() ? "" : ", ") + fmt::format("{:g}", e);
   fmt::print("Theorem 4.10 on {} seeded trials (seed {}), ε ∈ {{{}}}, {:.1f} s\n\n", all.trials, opt.seed, eps_list,
@@ -287,9 +283,12 @@ int run_theorem(const Options& opt) {
       "holding for X* is only an observation. The theorem's own reduced solution (Eq. 35) violated the bound\n"
       "{} times, our a-posteriori bound {} times.\n",
       all.galerkin_violations, all.theorem_violations, all.refined_violations);
-  if (!first_failure.empty()) fmt::print(stderr, "first failed trial: {}\n", first_failure);
+}
 
-  // ---- files ----
+// --json, --csv, --plot; false when one could not be written.
+bool write_files(const Options& opt, const std::vector<Record>& records,
+                 const std::vector<gen::TheoremFamily>& families, std::map<gen::TheoremFamily, Stats>& by_family,
+                 const Stats& all, double seconds) {
   bool written = true;
   if (!opt.json.empty()) {
     nlohmann::json j = stats_json(all);
@@ -307,8 +306,26 @@ int run_theorem(const Options& opt) {
   }
   if (!opt.csv.empty()) written = write_text(opt.csv, csv_table(records)) && written;
   if (!opt.plot.empty()) written = write_text(opt.plot, plot_svg(records, families, all)) && written;
+  return written;
+}
 
-  if (!written) return 3;
+int run_theorem(const Options& opt) {
+  const qpreduce::Timer timer;
+  const std::vector<gen::TheoremFamily> families = gen::theorem_families();
+  std::string first_failure;
+  const std::vector<Record> records = run_trials(opt, families, &first_failure);
+
+  Stats all;
+  std::map<gen::TheoremFamily, Stats> by_family;
+  for (const Record& r : records) {
+    all.add(r);
+    by_family[r.family].add(r);
+  }
+  const double seconds = timer.seconds();
+
+  print_table(opt, families, by_family, all, seconds);
+  if (!first_failure.empty()) fmt::print(stderr, "first failed trial: {}\n", first_failure);
+  if (!write_files(opt, records, families, by_family, all, seconds)) return 3;
   if (all.violations > 0 || all.theorem_violations > 0) {
     fmt::print(stderr, "qpr theorem: {} violation(s) of the bound (see --csv for the trials)\n",
                all.violations + all.theorem_violations);
@@ -324,9 +341,8 @@ int run_theorem(const Options& opt) {
 }  // namespace
 
 void register_theorem(CLI::App& app) {
-  auto opt = std::make_shared<Options>();
-  CLI::App* cmd = app.add_subcommand(
-      "theorem",
+  auto [cmd, opt] = add_command<Options>(
+      app, "theorem",
       "Check the error bound of Theorem 4.10 on seeded trials (families × ε). Exit code 1 if the bound is violated, "
       "2 if a trial failed, 3 if an output file cannot be written.");
   cmd->add_option("--trials", opt->trials, "number of trials (groups of 10 values of ε share H, C, D)")
@@ -336,7 +352,7 @@ void register_theorem(CLI::App& app) {
   cmd->add_option("--json", opt->json, "write the summary (overall and per family) as JSON");
   cmd->add_option("--csv", opt->csv, "write one row per trial as CSV");
   cmd->add_option("--plot", opt->plot, "write an SVG figure: error vs bound, and the histogram of η");
-  cmd->callback([opt] {
+  cmd->callback([opt = opt] {
     const int code = run_theorem(*opt);
     if (code != 0) throw CLI::RuntimeError(code);
   });

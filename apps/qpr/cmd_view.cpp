@@ -49,8 +49,7 @@ int run_view(ViewArgs& a) {
 }  // namespace
 
 void register_view(CLI::App& app) {
-  auto a = std::make_shared<ViewArgs>();
-  CLI::App* cmd = app.add_subcommand("view", "Interactive deformation viewer (GLFW + Dear ImGui); --screenshot renders headless");
+  auto [cmd, a] = add_command<ViewArgs>(app, "view", "Interactive deformation viewer (GLFW + Dear ImGui); --screenshot renders headless");
   add_scenario_options(cmd, a.get());
   cmd->add_option("--screenshot", a->view.screenshot, "Headless: run the scenario's frames, write this PNG and exit");
   cmd->add_option("--size", a->size, "Window / image size WIDTHxHEIGHT (default 1280x800)");
@@ -73,7 +72,7 @@ void register_view(CLI::App& app) {
   cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--window-screenshot", a->view.window_screenshot,
                   "Interactive with --max-frames: save the whole window (panels too) at the last frame");
-  cmd->callback([a]() { run_guarded("view", [&] { return run_view(*a); }); });
+  cmd->callback([a = a]() { run_guarded("view", [&] { return run_view(*a); }); });
 }
 
 }  // namespace qpr

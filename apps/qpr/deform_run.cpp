@@ -1,6 +1,9 @@
 #include "deform_run.h"
 
+#include "app_support.h"
+
 #include <qpreduce/deform/mesh/geometry.h>
+#include <qpreduce/deform/io/file_kind.h>
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/io/tet_io.h>
 #include <qpreduce/support.h>
@@ -28,13 +31,6 @@ double peak_rss_mb() {
 
 namespace {
 
-double median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  const size_t h = v.size() / 2;
-  return v.size() % 2 ? v[h] : 0.5 * (v[h - 1] + v[h]);
-}
-
 std::string frame_path(const std::string& pattern, int frame, bool many) {
   const auto pos = pattern.find("{frame}");
   if (pos != std::string::npos) {
@@ -48,12 +44,8 @@ std::string frame_path(const std::string& pattern, int frame, bool many) {
                                   : fmt::format("{}_{:03d}{}", pattern.substr(0, dot), frame, pattern.substr(dot));
 }
 
-bool is_tet_path(const std::string& path) {
-  for (const char* ext : {".mesh", ".node", ".ele"})
-    if (path.size() >= std::string(ext).size() && path.compare(path.size() - std::string(ext).size(), std::string::npos, ext) == 0)
-      return true;
-  return false;
-}
+// .mesh, .node, .ele in any case, as the plugin's readers dispatch.
+bool is_tet_path(const std::string& path) { return mesh_file_kind(path) == MeshFileKind::Tets; }
 
 }  // namespace
 
@@ -62,8 +54,7 @@ void write_pose(const std::string& path, const Vertices& V, const TriangleMesh* 
     write_triangle_mesh(path, TriangleMesh{V, surface->F});
     return;
   }
-  const std::string ext = path.substr(path.find_last_of('.') + 1);
-  if (ext == "mesh" || ext == "node" || ext == "ele") {
+  if (is_tet_path(path)) {
     write_tet_mesh(path, TetMesh{V, solid->T, solid->F});
   } else if (solid->F.rows() > 0) {
     write_triangle_mesh(path, TriangleMesh{V, solid->F});  // the boundary surface
@@ -98,42 +89,90 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   cmd->add_option("--soft", a->soft, "Soft handle constraints with weight δ (Eq. 18) instead of hard ones")->check(CLI::PositiveNumber);
 }
 
+namespace {
+
+// The mesh, the model and the handles of a JSON scene.
+void read_scene_inputs(const std::string& path, LoadedScenario* ls) {
+  const Scene scene = read_scene(path);
+  ls->tet = scene.is_tet;
+  ls->surface = scene.surface;
+  ls->solid = scene.solid;
+  ls->scenario = scenario_from_scene(scene);
+}
+
+// The mesh file and its handles from --sel/--def or --anim.
+void read_mesh_inputs(const ScenarioArgs& a, LoadedScenario* ls) {
+  if (a.mesh.empty()) throw std::invalid_argument("MESH is required with --sel/--def and --anim");
+  const bool tet = ls->tet = is_tet_path(a.mesh);
+  if (tet) ls->solid = read_tet_mesh(a.mesh); else ls->surface = read_triangle_mesh(a.mesh);
+  const Vertices& V = tet ? ls->solid.V : ls->surface.V;
+  Scenario& sc = ls->scenario;
+  if (!a.sel.empty()) {
+    Selection sel = read_sel(a.sel);
+    if (tet && sel.size() < V.rows()) {
+      // Botsch–Sorkine selections of the surface apply to a tet mesh whose
+      // first nodes are that surface (tetgen -Y); interior nodes are free.
+      std::fprintf(stderr, "  note: %s has %ld entries for %ld nodes; the remaining nodes are free\n",
+                   a.sel.c_str(), static_cast<long>(sel.size()), static_cast<long>(V.rows()));
+      sel.roles.resize(static_cast<size_t>(V.rows()), SelRole::Free);
+    }
+    sc = scenario_from_sel_def(V, sel, read_def(a.def), a.frames);
+  } else {
+    sc = scenario_from_anim(V, read_anim(a.anim));
+  }
+  if (tet) sc.model.T = ls->solid.T; else sc.model.F = ls->surface.F;
+}
+
+// Adds the groups of an --affine-patches file as Affine patches after those
+// the handles made; a vertex already in a patch is an error.
+void add_affine_patches(const VertexGroups& g, const std::string& file, DeformableMesh* model) {
+  const Index n = model->V.rows();
+  if (model->patch_of_vertex.empty()) model->patch_of_vertex.assign(static_cast<size_t>(n), -1);
+  for (const auto& members : g.members) {
+    const int id = static_cast<int>(model->patch_types.size());
+    for (int v : members) {
+      if (model->patch_of_vertex[v] >= 0) {
+        throw std::invalid_argument(fmt::format("{}: vertex {} is already in patch {} (from the handles)",
+                                                file, v, model->patch_of_vertex[v]));
+      }
+      model->patch_of_vertex[v] = id;
+    }
+    model->patch_types.push_back(PatchType::Affine);
+  }
+}
+
+// The deformer options the arguments ask for (the scene's own are applied
+// later, by apply_scenario_options).
+DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<ModelKind>& scenario_model, bool tet) {
+  DeformerOptions options;
+  if (a.linear_proxies > 0) options.linear_proxies = a.linear_proxies;
+  if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
+  options.iterations = a.iterations;
+  if (a.alpha) options.energy.alpha = *a.alpha;
+  if (a.beta) options.energy.beta = *a.beta;
+  if (a.gamma) options.energy.gamma = *a.gamma;
+  if (!a.model.empty()) options.model = a.model == "conformal" ? ModelKind::Conformal : ModelKind::Arap;
+  if (a.psi) {
+    if (options.model != ModelKind::Conformal && scenario_model != ModelKind::Conformal) {
+      throw std::invalid_argument("--psi applies to the conformal model (--model conformal)");
+    }
+    options.conformal_bound = *a.psi;
+  }
+  if (tet) options.energy.beta = 0.0;
+  return options;
+}
+
+}  // namespace
+
 LoadedScenario load_scenario(const ScenarioArgs& a) {
   const int sources = !a.sel.empty() + !a.anim.empty() + !a.scene.empty();
   if (sources != 1) throw std::invalid_argument("give exactly one of --sel/--def, --anim, --scene");
   if (!a.sel.empty() && a.def.empty()) throw std::invalid_argument("--sel needs --def");
 
   LoadedScenario ls;
-  TriangleMesh& surface = ls.surface;
-  TetMesh& solid = ls.solid;
   bool& tet = ls.tet;
   Scenario& sc = ls.scenario;
-  if (!a.scene.empty()) {
-    const Scene scene = read_scene(a.scene);
-    tet = scene.is_tet;
-    surface = scene.surface;
-    solid = scene.solid;
-    sc = scenario_from_scene(scene);
-  } else {
-    if (a.mesh.empty()) throw std::invalid_argument("MESH is required with --sel/--def and --anim");
-    tet = is_tet_path(a.mesh);
-    if (tet) solid = read_tet_mesh(a.mesh); else surface = read_triangle_mesh(a.mesh);
-    const Vertices& V = tet ? solid.V : surface.V;
-    if (!a.sel.empty()) {
-      Selection sel = read_sel(a.sel);
-      if (tet && sel.size() < V.rows()) {
-        // Botsch–Sorkine selections of the surface apply to a tet mesh whose
-        // first nodes are that surface (tetgen -Y); interior nodes are free.
-        std::fprintf(stderr, "  note: %s has %ld entries for %ld nodes; the remaining nodes are free\n",
-                     a.sel.c_str(), static_cast<long>(sel.size()), static_cast<long>(V.rows()));
-        sel.roles.resize(static_cast<size_t>(V.rows()), SelRole::Free);
-      }
-      sc = scenario_from_sel_def(V, sel, read_def(a.def), a.frames);
-    } else {
-      sc = scenario_from_anim(V, read_anim(a.anim));
-    }
-    if (tet) sc.model.T = solid.T; else sc.model.F = surface.F;
-  }
+  if (!a.scene.empty()) read_scene_inputs(a.scene, &ls); else read_mesh_inputs(a, &ls);
   const Index n = sc.model.V.rows();
   if (!a.linear_groups.empty()) {
     const VertexIds ids = read_id(a.linear_groups);
@@ -154,42 +193,14 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   if (!a.affine_patches.empty()) {
     const VertexIds ids = read_id(a.affine_patches);
     ids.validate(n);
-    const VertexGroups g = affine_patches_from_ids(ids);
-    if (sc.model.patch_of_vertex.empty()) sc.model.patch_of_vertex.assign(static_cast<size_t>(n), -1);
-    for (const auto& members : g.members) {
-      const int id = static_cast<int>(sc.model.patch_types.size());
-      for (int v : members) {
-        if (sc.model.patch_of_vertex[v] >= 0) {
-          throw std::invalid_argument(fmt::format("{}: vertex {} is already in patch {} (from the handles)",
-                                                  a.affine_patches, v, sc.model.patch_of_vertex[v]));
-        }
-        sc.model.patch_of_vertex[v] = id;
-      }
-      sc.model.patch_types.push_back(PatchType::Affine);
-    }
+    add_affine_patches(affine_patches_from_ids(ids), a.affine_patches, &sc.model);
   }
   if (a.soft) {
     sc.constraints.soft = true;
     sc.constraints.delta = *a.soft;
   }
-
-
   ls.name = !a.scene.empty() ? a.scene : a.mesh;
-  DeformerOptions& options = ls.options;
-  if (a.linear_proxies > 0) options.linear_proxies = a.linear_proxies;
-  if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
-  options.iterations = a.iterations;
-  if (a.alpha) options.energy.alpha = *a.alpha;
-  if (a.beta) options.energy.beta = *a.beta;
-  if (a.gamma) options.energy.gamma = *a.gamma;
-  if (!a.model.empty()) options.model = a.model == "conformal" ? ModelKind::Conformal : ModelKind::Arap;
-  if (a.psi) {
-    if (options.model != ModelKind::Conformal && ls.scenario.model_kind != ModelKind::Conformal) {
-      throw std::invalid_argument("--psi applies to the conformal model (--model conformal)");
-    }
-    options.conformal_bound = *a.psi;
-  }
-  if (tet) options.energy.beta = 0.0;
+  ls.options = deformer_options(a, ls.scenario.model_kind, tet);
   return ls;
 }
 
@@ -204,49 +215,48 @@ void progress_bar(const std::string& stage, double fraction) {
   std::fflush(stderr);
 }
 
-}  // namespace
+// What the frames of a run measured, and the last pose.
+struct FrameSeries {
+  std::vector<double> iter_us, recon_ms, frame_ms, residual;  // one per frame; residual / bbox diagonal
+  Vertices out;                                                // the last frame's pose
+};
 
-nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
-                            const RunSettings& settings, RunOutputs* outputs) {
-  DeformerOptions options = settings.options;
-  apply_scenario_options(scenario, &options);
-
-  Deformer deformer;
+// The deformer, from settings.cache_path when it holds a matching model, else
+// precomputed (and then saved there when set). Throws when precompute fails.
+PrecomputeSummary precompute_or_load(Deformer* deformer, const Scenario& scenario, const DeformerOptions& options,
+                                     const RunSettings& settings, bool* cache_loaded) {
   const bool tty = isatty(fileno(stderr)) != 0;
   const ProgressFn progress = settings.progress && tty ? ProgressFn(progress_bar) : ProgressFn();
   PrecomputeSummary pre;
-  bool cache_loaded = false;
+  *cache_loaded = false;
   if (!settings.cache_path.empty() && std::ifstream(settings.cache_path).good()) {
     try {
-      pre = deformer.load(settings.cache_path, scenario.model, options);
-      cache_loaded = true;
+      pre = deformer->load(settings.cache_path, scenario.model, options);
+      *cache_loaded = true;
     } catch (const IoError& e) {
       std::fprintf(stderr, "  cache not used: %s\n", e.what());
     }
   }
-  if (!cache_loaded) {
-    pre = deformer.precompute(scenario.model, options, progress);
+  if (!*cache_loaded) {
+    pre = deformer->precompute(scenario.model, options, progress);
     if (!pre.ok()) throw std::runtime_error("precompute failed: " + pre.message);
-    if (!settings.cache_path.empty()) deformer.save(settings.cache_path);
+    if (!settings.cache_path.empty()) deformer->save(settings.cache_path);
   }
-  const double peak_mb = peak_rss_mb();
+  return pre;
+}
 
-  const Timer op_timer;
-  const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
-  const double op_ms = 1e3 * op_timer.seconds();
-  if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
-  if (cs.status != Status::Success) std::fprintf(stderr, "  note: %s\n", cs.message.c_str());
-
-  const double diag = bounding_box_diagonal(scenario.model.V);
+// Runs every frame of the scenario, timing each and writing the meshes asked for.
+FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
+                       const RunSettings& settings, double diag) {
   const int frames = static_cast<int>(scenario.frames.size());
-  std::vector<double> iter_us, recon_ms, frame_ms, residual;
-  Vertices out;
+  FrameSeries s;
+  Vertices& out = s.out;
   for (int f = 0; f < frames; ++f) {
     const FrameSummary fs = deformer.frame(scenario.frames[f], &out);
-    iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
-    recon_ms.push_back(1e3 * fs.reconstruct_seconds);
-    frame_ms.push_back(1e3 * fs.total_seconds);
-    residual.push_back(handle_residual(scenario, scenario.frames[f], out) / diag);
+    s.iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
+    s.recon_ms.push_back(1e3 * fs.reconstruct_seconds);
+    s.frame_ms.push_back(1e3 * fs.total_seconds);
+    s.residual.push_back(handle_residual(scenario, scenario.frames[f], out) / diag);
     const bool write = std::find(settings.write_frames.begin(), settings.write_frames.end(), f) !=
                            settings.write_frames.end() ||
                        (f == frames - 1 && std::find(settings.write_frames.begin(), settings.write_frames.end(), -1) !=
@@ -254,17 +264,12 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
     if (write && !settings.out_path.empty())
       write_pose(frame_path(settings.out_path, f, settings.write_frames.size() > 1), out, surface, solid);
   }
-  const double energy = arap_energy(scenario.model.V, deformer.elements(), out);
-  if (outputs) {
-    outputs->last = out;
-    outputs->clusters = deformer.clusters();
-    outputs->rotations = deformer.rotations();
-    outputs->global_rotation = deformer.global_rotation();
-    outputs->options = options;
-  }
+  return s;
+}
 
-  nlohmann::json report;
-  report["name"] = settings.name;
+// What the deformer was built from and with: sizes, options, model, clusters.
+void report_model(const Deformer& deformer, const Scenario& scenario, const DeformerOptions& options,
+                  const PrecomputeSummary& pre, nlohmann::json& report) {
   report["vertices"] = pre.vertices;
   report["elements"] = pre.elements;
   report["mesh_type"] = scenario.model.is_tet() ? "tet" : "triangle";
@@ -272,7 +277,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["rotational_proxies"] = pre.rotational_proxies;
   report["patches"] = pre.patches;
   report["reduced_size"] = pre.reduced_size;
-  report["frames"] = frames;
+  report["frames"] = static_cast<int>(scenario.frames.size());
   report["iterations"] = options.iterations;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
@@ -288,6 +293,64 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
     report["psi_min"] = psi.minCoeff();
     report["psi_max"] = psi.maxCoeff();
   }
+}
+
+// The timing table of a run (stdout).
+void print_table(const std::string& name, const Scenario& scenario, const PrecomputeSummary& pre,
+                 const RunSettings& settings, bool cache_loaded, const nlohmann::json& report, int iterations,
+                 const FrameSeries& s) {
+  const double peak_mb = report["precompute_peak_mb"].get<double>(), op_ms = report["op_ms"].get<double>();
+  fmt::print("{}: {} vertices, {} {} elements, {} linear / {} rotational proxies, {} patches\n", name,
+             pre.vertices, pre.elements, scenario.model.is_tet() ? "tet" : "rotation", pre.linear_proxies,
+             pre.rotational_proxies, pre.patches);
+  if (cache_loaded) {
+    fmt::print("  {:<28}{:>12.3f} s   (loaded from {}, peak RSS {:.0f} MB)\n", "precompute", pre.total_seconds,
+               settings.cache_path, peak_mb);
+  } else {
+    fmt::print("  {:<28}{:>12.3f} s   (peak RSS {:.0f} MB, backend {})\n", "precompute", pre.total_seconds, peak_mb,
+               to_string(pre.subspace.backend_used));
+  }
+  fmt::print("  {:<28}{:>12.3f} ms\n", "OP (set handles)", op_ms);
+  fmt::print("  {:<28}{:>12.2f} µs   (median over {} frames, {} iterations each)\n", "one iteration", median(s.iter_us),
+             s.frame_ms.size(), iterations);
+  fmt::print("  {:<28}{:>12.3f} ms\n", "reconstruction", median(s.recon_ms));
+  fmt::print("  {:<28}{:>12.3f} ms\n", "frame total", median(s.frame_ms));
+  fmt::print("  {:<28}{:>12.2e}      (max over frames, / bbox diagonal)\n", "handle residual", report["handle_residual_max"].get<double>());
+  fmt::print("  {:<28}{:>12.5g}      (last frame)\n", "ARAP energy", report["arap_energy"].get<double>());
+}
+
+}  // namespace
+
+nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
+                            const RunSettings& settings, RunOutputs* outputs) {
+  DeformerOptions options = settings.options;
+  apply_scenario_options(scenario, &options);
+
+  Deformer deformer;
+  bool cache_loaded = false;
+  const PrecomputeSummary pre = precompute_or_load(&deformer, scenario, options, settings, &cache_loaded);
+  const double peak_mb = peak_rss_mb();
+
+  const Timer op_timer;
+  const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
+  const double op_ms = 1e3 * op_timer.seconds();
+  if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
+  if (cs.status != Status::Success) std::fprintf(stderr, "  note: %s\n", cs.message.c_str());
+
+  const double diag = bounding_box_diagonal(scenario.model.V);
+  const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);
+  const double energy = arap_energy(scenario.model.V, deformer.elements(), s.out);
+  if (outputs) {
+    outputs->last = s.out;
+    outputs->clusters = deformer.clusters();
+    outputs->rotations = deformer.rotations();
+    outputs->global_rotation = deformer.global_rotation();
+    outputs->options = options;
+  }
+
+  nlohmann::json report;
+  report["name"] = settings.name;
+  report_model(deformer, scenario, options, pre, report);
   report["precompute_s"] = pre.total_seconds;
   report["precompute_from_cache"] = cache_loaded;
   report["precompute_breakdown_s"] = {{"clustering", pre.clustering_seconds},
@@ -299,35 +362,15 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["kkt_residual"] = pre.subspace.kkt_residual;
   report["op_ms"] = op_ms;
   report["op_status"] = to_string(cs.status);
-  report["iteration_us"] = median(iter_us);
-  report["reconstruction_ms"] = median(recon_ms);
-  report["frame_ms"] = median(frame_ms);
-  report["handle_residual_max"] = *std::max_element(residual.begin(), residual.end());
+  report["iteration_us"] = median(s.iter_us);
+  report["reconstruction_ms"] = median(s.recon_ms);
+  report["frame_ms"] = median(s.frame_ms);
+  report["handle_residual_max"] = *std::max_element(s.residual.begin(), s.residual.end());
   report["arap_energy"] = energy;
   report["bounding_box_diagonal"] = diag;
 
-  fmt::print("{}: {} vertices, {} {} elements, {} linear / {} rotational proxies, {} patches\n", settings.name,
-             pre.vertices, pre.elements, scenario.model.is_tet() ? "tet" : "rotation", pre.linear_proxies,
-             pre.rotational_proxies, pre.patches);
-  if (cache_loaded) {
-    fmt::print("  {:<28}{:>12.3f} s   (loaded from {}, peak RSS {:.0f} MB)\n", "precompute", pre.total_seconds,
-               settings.cache_path, peak_mb);
-  } else {
-    fmt::print("  {:<28}{:>12.3f} s   (peak RSS {:.0f} MB, backend {})\n", "precompute", pre.total_seconds, peak_mb,
-               to_string(pre.subspace.backend_used));
-  }
-  fmt::print("  {:<28}{:>12.3f} ms\n", "OP (set handles)", op_ms);
-  fmt::print("  {:<28}{:>12.2f} µs   (median over {} frames, {} iterations each)\n", "one iteration", median(iter_us),
-             frames, options.iterations);
-  fmt::print("  {:<28}{:>12.3f} ms\n", "reconstruction", median(recon_ms));
-  fmt::print("  {:<28}{:>12.3f} ms\n", "frame total", median(frame_ms));
-  fmt::print("  {:<28}{:>12.2e}      (max over frames, / bbox diagonal)\n", "handle residual", report["handle_residual_max"].get<double>());
-  fmt::print("  {:<28}{:>12.5g}      (last frame)\n", "ARAP energy", energy);
-  if (!settings.report_path.empty()) {
-    std::ofstream f(settings.report_path);
-    if (!f) throw std::runtime_error(settings.report_path + ": cannot write the report");
-    f << report.dump(2) << "\n";
-  }
+  print_table(settings.name, scenario, pre, settings, cache_loaded, report, options.iterations, s);
+  if (!settings.report_path.empty()) write_json(settings.report_path, report);
   return report;
 }
 

@@ -1,5 +1,6 @@
-// qpr — run a subcommand body, turning failures into a message on stderr and
-// an exit code (CLI::RuntimeError), never an uncaught exception.
+// qpr — add a subcommand with its options, and run a subcommand body,
+// turning failures into a message on stderr and an exit code
+// (CLI::RuntimeError), never an uncaught exception.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -7,6 +8,9 @@
 #include <cstdio>
 #include <exception>
 #include <functional>
+#include <memory>
+#include <string>
+#include <utility>
 
 namespace qpr {
 
@@ -23,6 +27,15 @@ inline void run_guarded(const char* name, const std::function<int()>& body) {
     throw CLI::RuntimeError(2);
   }
   if (code != 0) throw CLI::RuntimeError(code);
+}
+
+// Adds the subcommand `name` to `app`; returns it and a fresh Options that
+// its option definitions fill and its callback reads (shared, so that the
+// callback may keep it).
+template <typename Options>
+std::pair<CLI::App*, std::shared_ptr<Options>> add_command(CLI::App& app, const std::string& name,
+                                                           const std::string& description) {
+  return {app.add_subcommand(name, description), std::make_shared<Options>()};
 }
 
 }  // namespace qpr

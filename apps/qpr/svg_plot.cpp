@@ -124,8 +124,13 @@ void tick_label(std::ostringstream& os, const Scale& s, double v, double x, doub
   os << "</text>\n";
 }
 
-void render_panel(std::ostringstream& os, const Panel& panel, int index, double ox, double width, double height) {
-  const double x0 = ox + kLeft, x1 = ox + width - kRight, y0 = kTop, y1 = height - kBottom;
+// The plot area of a panel, in SVG pixels.
+struct Box {
+  double x0, x1, y0, y1;
+};
+
+// The panel's two axes, from its ranges and data, mapped onto the box.
+void panel_scales(const Panel& panel, const Box& box, Scale* sx, Scale* sy) {
   std::vector<double> xs, ys;
   bool bars = false;
   for (const Series& s : panel.series) {
@@ -133,83 +138,84 @@ void render_panel(std::ostringstream& os, const Panel& panel, int index, double 
     ys.insert(ys.end(), s.y.begin(), s.y.end());
     bars = bars || s.mark == Mark::Bars;
   }
-  Scale sx, sy;
-  resolve_range(panel.x, xs, false, &sx);
-  resolve_range(panel.y, ys, bars, &sy);
-  sx.p0 = x0, sx.p1 = x1;
-  sy.p0 = y1, sy.p1 = y0;  // SVG y grows downwards
+  resolve_range(panel.x, xs, false, sx);
+  resolve_range(panel.y, ys, bars, sy);
+  sx->p0 = box.x0, sx->p1 = box.x1;
+  sy->p0 = box.y1, sy->p1 = box.y0;  // SVG y grows downwards
+}
 
-  const std::string clip = "plot-area-" + std::to_string(index);
-  os << "<clipPath id=\"" << clip << "\"><rect x=\"" << num(x0) << "\" y=\"" << num(y0) << "\" width=\""
-     << num(x1 - x0) << "\" height=\"" << num(y1 - y0) << "\"/></clipPath>\n";
-
-  // Grid, ticks, labels.
+// Grid lines, ticks and tick labels of both axes.
+void render_grid(std::ostringstream& os, const Scale& sx, const Scale& sy, const Box& b) {
   os << "<g font-size=\"11\" fill=\"#333\">\n";
   for (const Tick& t : ticks(sx)) {
     const double px = sx(t.value);
     if (t.major)
-      os << "<line x1=\"" << num(px) << "\" y1=\"" << num(y0) << "\" x2=\"" << num(px) << "\" y2=\"" << num(y1)
+      os << "<line x1=\"" << num(px) << "\" y1=\"" << num(b.y0) << "\" x2=\"" << num(px) << "\" y2=\"" << num(b.y1)
          << "\" stroke=\"#e6e6e6\"/>\n";
-    os << "<line x1=\"" << num(px) << "\" y1=\"" << num(y1) << "\" x2=\"" << num(px) << "\" y2=\""
-       << num(y1 + (t.major ? 5 : 3)) << "\" stroke=\"#333\"/>\n";
-    if (t.major) tick_label(os, sx, t.value, px, y1 + 18, "middle");
+    os << "<line x1=\"" << num(px) << "\" y1=\"" << num(b.y1) << "\" x2=\"" << num(px) << "\" y2=\""
+       << num(b.y1 + (t.major ? 5 : 3)) << "\" stroke=\"#333\"/>\n";
+    if (t.major) tick_label(os, sx, t.value, px, b.y1 + 18, "middle");
   }
   for (const Tick& t : ticks(sy)) {
     const double py = sy(t.value);
     if (t.major)
-      os << "<line x1=\"" << num(x0) << "\" y1=\"" << num(py) << "\" x2=\"" << num(x1) << "\" y2=\"" << num(py)
+      os << "<line x1=\"" << num(b.x0) << "\" y1=\"" << num(py) << "\" x2=\"" << num(b.x1) << "\" y2=\"" << num(py)
          << "\" stroke=\"#e6e6e6\"/>\n";
-    os << "<line x1=\"" << num(x0 - (t.major ? 5 : 3)) << "\" y1=\"" << num(py) << "\" x2=\"" << num(x0)
+    os << "<line x1=\"" << num(b.x0 - (t.major ? 5 : 3)) << "\" y1=\"" << num(py) << "\" x2=\"" << num(b.x0)
        << "\" y2=\"" << num(py) << "\" stroke=\"#333\"/>\n";
-    if (t.major) tick_label(os, sy, t.value, x0 - 8, py + 4, "end");
+    if (t.major) tick_label(os, sy, t.value, b.x0 - 8, py + 4, "end");
   }
   os << "</g>\n";
-  os << "<rect x=\"" << num(x0) << "\" y=\"" << num(y0) << "\" width=\"" << num(x1 - x0) << "\" height=\""
-     << num(y1 - y0) << "\" fill=\"none\" stroke=\"#333\"/>\n";
-  os << "<text x=\"" << num((x0 + x1) / 2) << "\" y=\"" << num(height - 14)
+}
+
+// The frame, the axis labels, the title and the note.
+void render_frame(std::ostringstream& os, const Panel& panel, const Box& b, double ox, double height) {
+  os << "<rect x=\"" << num(b.x0) << "\" y=\"" << num(b.y0) << "\" width=\"" << num(b.x1 - b.x0) << "\" height=\""
+     << num(b.y1 - b.y0) << "\" fill=\"none\" stroke=\"#333\"/>\n";
+  os << "<text x=\"" << num((b.x0 + b.x1) / 2) << "\" y=\"" << num(height - 14)
      << "\" text-anchor=\"middle\" font-size=\"13\">" << escape(panel.x.label) << "</text>\n";
-  os << "<text transform=\"translate(" << num(ox + 18) << "," << num((y0 + y1) / 2)
+  os << "<text transform=\"translate(" << num(ox + 18) << "," << num((b.y0 + b.y1) / 2)
      << ") rotate(-90)\" text-anchor=\"middle\" font-size=\"13\">" << escape(panel.y.label) << "</text>\n";
-  os << "<text x=\"" << num((x0 + x1) / 2) << "\" y=\"20\" text-anchor=\"middle\" font-size=\"15\" "
+  os << "<text x=\"" << num((b.x0 + b.x1) / 2) << "\" y=\"20\" text-anchor=\"middle\" font-size=\"15\" "
         "font-weight=\"bold\">"
      << escape(panel.title) << "</text>\n";
   if (!panel.note.empty())
-    os << "<text x=\"" << num((x0 + x1) / 2) << "\" y=\"38\" text-anchor=\"middle\" font-size=\"11\" "
+    os << "<text x=\"" << num((b.x0 + b.x1) / 2) << "\" y=\"38\" text-anchor=\"middle\" font-size=\"11\" "
           "fill=\"#666\">"
        << escape(panel.note) << "</text>\n";
+}
 
-  // Series, clipped to the plot area.
-  os << "<g clip-path=\"url(#" << clip << ")\">\n";
-  for (const Series& s : panel.series) {
-    if (s.mark == Mark::Points) {
-      os << "<g fill=\"" << s.color << "\" fill-opacity=\"0.65\" stroke=\"none\">\n";
-      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-        if (!usable(s.x[i], sx.log) || !usable(s.y[i], sy.log)) continue;
-        os << "<circle cx=\"" << num(sx(s.x[i])) << "\" cy=\"" << num(sy(s.y[i])) << "\" r=\"2.6\"/>\n";
-      }
-      os << "</g>\n";
-    } else if (s.mark == Mark::Line) {
-      os << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
-         << (s.dashed ? " stroke-dasharray=\"6,4\"" : "") << " points=\"";
-      for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
-        if (!usable(s.x[i], sx.log) || !usable(s.y[i], sy.log)) continue;
-        os << num(sx(s.x[i])) << "," << num(sy(s.y[i])) << " ";
-      }
-      os << "\"/>\n";
-    } else {  // Bars
-      os << "<g fill=\"" << s.color << "\" fill-opacity=\"0.8\" stroke=\"#fff\" stroke-width=\"0.5\">\n";
-      for (size_t i = 0; i < s.y.size() && i + 1 < s.x.size(); ++i) {
-        if (!(s.y[i] > 0.0) || !usable(s.x[i], sx.log) || !usable(s.x[i + 1], sx.log)) continue;
-        const double left = sx(s.x[i]), right = sx(s.x[i + 1]), top = sy(s.y[i]), base = sy(std::max(sy.lo, 0.0));
-        os << "<rect x=\"" << num(left) << "\" y=\"" << num(top) << "\" width=\"" << num(right - left)
-           << "\" height=\"" << num(base - top) << "\"/>\n";
-      }
-      os << "</g>\n";
+// One series as points, a polyline or bars (x holds the bar edges).
+void render_series(std::ostringstream& os, const Series& s, const Scale& sx, const Scale& sy) {
+  if (s.mark == Mark::Points) {
+    os << "<g fill=\"" << s.color << "\" fill-opacity=\"0.65\" stroke=\"none\">\n";
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!usable(s.x[i], sx.log) || !usable(s.y[i], sy.log)) continue;
+      os << "<circle cx=\"" << num(sx(s.x[i])) << "\" cy=\"" << num(sy(s.y[i])) << "\" r=\"2.6\"/>\n";
     }
+    os << "</g>\n";
+  } else if (s.mark == Mark::Line) {
+    os << "<polyline fill=\"none\" stroke=\"" << s.color << "\" stroke-width=\"1.5\""
+       << (s.dashed ? " stroke-dasharray=\"6,4\"" : "") << " points=\"";
+    for (size_t i = 0; i < s.x.size() && i < s.y.size(); ++i) {
+      if (!usable(s.x[i], sx.log) || !usable(s.y[i], sy.log)) continue;
+      os << num(sx(s.x[i])) << "," << num(sy(s.y[i])) << " ";
+    }
+    os << "\"/>\n";
+  } else {  // Bars
+    os << "<g fill=\"" << s.color << "\" fill-opacity=\"0.8\" stroke=\"#fff\" stroke-width=\"0.5\">\n";
+    for (size_t i = 0; i < s.y.size() && i + 1 < s.x.size(); ++i) {
+      if (!(s.y[i] > 0.0) || !usable(s.x[i], sx.log) || !usable(s.x[i + 1], sx.log)) continue;
+      const double left = sx(s.x[i]), right = sx(s.x[i + 1]), top = sy(s.y[i]), base = sy(std::max(sy.lo, 0.0));
+      os << "<rect x=\"" << num(left) << "\" y=\"" << num(top) << "\" width=\"" << num(right - left)
+         << "\" height=\"" << num(base - top) << "\"/>\n";
+    }
+    os << "</g>\n";
   }
-  os << "</g>\n";
+}
 
-  // Legend.
+// The legend box in the panel's corner: one row per labelled series.
+void render_legend(std::ostringstream& os, const Panel& panel, const Box& b) {
   std::vector<const Series*> entries;
   size_t longest = 0;
   for (const Series& s : panel.series)
@@ -218,7 +224,7 @@ void render_panel(std::ostringstream& os, const Panel& panel, int index, double 
   const double row = 16, box_w = 34 + 6.5 * static_cast<double>(longest), box_h = row * entries.size() + 8;
   const bool left = panel.legend == Corner::TopLeft || panel.legend == Corner::BottomLeft;
   const bool top = panel.legend == Corner::TopLeft || panel.legend == Corner::TopRight;
-  const double bx = left ? x0 + 8 : x1 - 8 - box_w, by = top ? y0 + 8 : y1 - 8 - box_h;
+  const double bx = left ? b.x0 + 8 : b.x1 - 8 - box_w, by = top ? b.y0 + 8 : b.y1 - 8 - box_h;
   os << "<g font-size=\"11\">\n<rect x=\"" << num(bx) << "\" y=\"" << num(by) << "\" width=\"" << num(box_w)
      << "\" height=\"" << num(box_h) << "\" fill=\"#fff\" fill-opacity=\"0.9\" stroke=\"#bbb\"/>\n";
   for (size_t i = 0; i < entries.size(); ++i) {
@@ -237,6 +243,22 @@ void render_panel(std::ostringstream& os, const Panel& panel, int index, double 
     os << "<text x=\"" << num(mx + 14) << "\" y=\"" << num(cy + 4) << "\">" << escape(s.label) << "</text>\n";
   }
   os << "</g>\n";
+}
+
+void render_panel(std::ostringstream& os, const Panel& panel, int index, double ox, double width, double height) {
+  const Box box{ox + kLeft, ox + width - kRight, kTop, height - kBottom};
+  Scale sx, sy;
+  panel_scales(panel, box, &sx, &sy);
+  const std::string clip = "plot-area-" + std::to_string(index);
+  os << "<clipPath id=\"" << clip << "\"><rect x=\"" << num(box.x0) << "\" y=\"" << num(box.y0) << "\" width=\""
+     << num(box.x1 - box.x0) << "\" height=\"" << num(box.y1 - box.y0) << "\"/></clipPath>\n";
+  render_grid(os, sx, sy, box);
+  render_frame(os, panel, box, ox, height);
+  // Series, clipped to the plot area.
+  os << "<g clip-path=\"url(#" << clip << ")\">\n";
+  for (const Series& s : panel.series) render_series(os, s, sx, sy);
+  os << "</g>\n";
+  render_legend(os, panel, box);
 }
 
 }  // namespace

@@ -1,0 +1,29 @@
+// qpr app support — small helpers shared by the `qpr` subcommands and the
+// viewer: medians of timing samples, JSON values and report files. No math
+// of the paper lives here.
+#pragma once
+
+#include <nlohmann/json.hpp>
+
+#include <string>
+#include <vector>
+
+namespace qpr {
+
+// The median of `samples`: the middle value, or the mean of the two middle
+// values for an even count; 0 for no sample.
+double median(std::vector<double> samples);
+
+// The upper median of `samples`: the value at index ⌊count/2⌋ once sorted
+// (the middle value, or the upper of the two middle ones); 0 for no sample.
+double upper_median(std::vector<double> samples);
+
+// `v` as a JSON number, or null when it is NaN or infinite (JSON has neither).
+nlohmann::json finite_or_null(double v);
+
+// Writes `doc` (indented by 2, then a newline) to `path`. Throws
+// std::runtime_error "<path>: cannot write the <what>" when the file cannot be
+// opened or written.
+void write_json(const std::string& path, const nlohmann::json& doc, const std::string& what = "report");
+
+}  // namespace qpr
