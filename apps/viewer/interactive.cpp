@@ -1,0 +1,200 @@
+// The interactive viewer: set-up, the main loop, handles, playback and
+// recording (mouse and keys: picking.cpp; panels: panels.cpp).
+#include "interactive.h"
+#include "modes.h"
+#include "view_support.h"
+
+#include <fmt/format.h>
+#include <imgui.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+
+#include <algorithm>
+
+namespace qpr::viewer {
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+Interactive::Interactive(Session& session, const ViewerOptions& o, const SaveMeshFn& save_mesh)
+    : session_(session), o_(o), save_mesh_(save_mesh), context_(o.width, o.height, "qpr view — " + session.input().name, true),
+      renderer_(session.rest(), session.input().faces) {
+  set_camera(&camera_, session.rest(), o);
+  style_.mode = o.color;
+  deviation_ = o.deviation_scale;
+  wanted_ = o.reconstruction;
+  const DeformerOptions& d = session.input().options;
+  ui_linear_ = static_cast<int>(d.linear_proxies);
+  ui_rotational_ = static_cast<int>(d.rotational_proxies);
+  ui_alpha_ = static_cast<float>(d.energy.alpha);
+  ui_beta_ = static_cast<float>(d.energy.beta);
+  ui_gamma_ = static_cast<float>(d.energy.gamma);
+  ui_conformal_ = d.model == ModelKind::Conformal;
+  ui_psi_ = static_cast<float>(d.conformal_bound);
+  ui_iterations_ = d.iterations;
+  ui_soft_ = session.constraint_options().soft;
+  ui_delta_ = static_cast<float>(session.constraint_options().delta);
+  // Scenes open posed: the scenario's last frame (the display loop converges
+  // to it, warm-started frame after frame).
+  session.handles_from_scenario();
+  if (session.scenario_frames() > 0) {
+    scenario_frame_ = session.scenario_frames() - 1;
+    session.pose_scenario_frame(scenario_frame_);
+  }
+  if (!o.replay.empty()) {
+    replay_ = read_motion(o.replay);
+    handles_from_motion(replay_, &session);
+    replaying_ = true;
+  }
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  ImGui::GetIO().IniFilename = nullptr;
+  ImGui::StyleColorsLight();
+  ImGui_ImplGlfw_InitForOpenGL(context_.window(), true);
+  ImGui_ImplOpenGL3_Init("#version 330 core");
+  glfwSwapInterval(1);
+  session_.precompute_async(session.input().options);
+}
+
+Interactive::~Interactive() {
+  ImGui_ImplOpenGL3_Shutdown();
+  ImGui_ImplGlfw_Shutdown();
+  ImGui::DestroyContext();
+}
+
+int Interactive::run() {
+  int frame = 0;
+  while (!glfwWindowShouldClose(context_.window())) {
+    glfwPollEvents();
+    if (session_.poll()) on_precomputed();
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    glfwGetFramebufferSize(context_.window(), &fb_w_, &fb_h_);
+    int win_w = 1, win_h = 1;
+    glfwGetWindowSize(context_.window(), &win_w, &win_h);
+    scale_ = static_cast<float>(fb_w_) / std::max(win_w, 1);
+    if (fb_w_ > 0 && fb_h_ > 0) {
+      mouse();
+      keys();
+      advance_playback();
+      if (ready_) {
+        try {
+          stats_ = session_.step(&renderer_);
+          smooth();
+        } catch (const std::exception& e) {
+          message_ = e.what();
+        }
+      }
+      target_.resize(fb_w_, fb_h_, o_.samples);
+      target_.bind();
+      style_.deviation_scale = deviation_ * static_cast<float>(session_.diagonal());
+      renderer_.draw(camera_, fb_w_, fb_h_, style_);
+      target_.resolve();
+      if (!pending_screenshot_.empty()) {
+        try {
+          write_png(pending_screenshot_, target_.read_rgb());
+          message_ = "wrote " + pending_screenshot_;
+        } catch (const std::exception& e) {
+          message_ = e.what();
+        }
+        pending_screenshot_.clear();
+      }
+      target_.blit_to_screen(fb_w_, fb_h_);
+      panels();
+      draw_box();
+    }
+    ImGui::Render();
+    glViewport(0, 0, fb_w_, fb_h_);
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    const bool last = o_.max_frames > 0 && ++frame >= o_.max_frames;
+    if (last && !o_.window_screenshot.empty()) write_png(o_.window_screenshot, read_window(fb_w_, fb_h_));
+    glfwSwapBuffers(context_.window());
+    if (last) break;
+  }
+  return 0;
+}
+
+void Interactive::on_precomputed() {
+  ready_ = true;
+  session_.set_reconstruction(wanted_, &renderer_);
+  renderer_.set_colors(vertex_colors(style_.mode, session_));
+  renderer_.set_markers(0, handle_markers(session_));
+  constraints_changed();
+}
+
+void Interactive::constraints_changed() {
+  if (!ready_) return;
+  try {
+    op_ms_ = session_.update_constraints(&op_note_);
+  } catch (const std::exception& e) {
+    message_ = e.what();
+  }
+  renderer_.set_markers(0, handle_markers(session_));
+}
+
+void Interactive::smooth() {  // exponential moving average for a readable panel
+  const double a = 0.1;
+  shown_.iteration_us += a * (stats_.iteration_us - shown_.iteration_us);
+  shown_.solve_ms += a * (stats_.solve_ms - shown_.solve_ms);
+  shown_.reconstruction_ms += a * (stats_.reconstruction_ms - shown_.reconstruction_ms);
+  shown_.frame_ms += a * (stats_.frame_ms - shown_.frame_ms);
+  shown_.handle_residual = stats_.handle_residual;
+}
+
+void Interactive::make_handle() {
+  if (selection_.empty() || !ready_) return;
+  try {
+    session_.add_handle(std::vector<int>(selection_.begin(), selection_.end()),
+                        fmt::format("h{}", session_.handles().size()));
+    active_ = static_cast<int>(session_.handles().size()) - 1;
+    selection_.clear();
+    renderer_.set_markers(1, {});
+    stop_recording_if_changed();
+    constraints_changed();
+  } catch (const std::exception& e) {
+    message_ = e.what();
+  }
+}
+
+void Interactive::delete_handle(int h) {
+  if (h < 0 || h >= static_cast<int>(session_.handles().size())) return;
+  session_.remove_handle(static_cast<size_t>(h));
+  active_ = -1;
+  stop_recording_if_changed();
+  constraints_changed();
+}
+
+void Interactive::stop_recording_if_changed() {
+  if (recording_) {
+    recording_ = false;
+    message_ = "recording stopped: the handles changed";
+  }
+}
+
+void Interactive::advance_playback() {
+  if (!ready_) return;
+  if (playing_ && session_.scenario_frames() > 0) {
+    session_.pose_scenario_frame(scenario_frame_);
+    scenario_frame_ = (scenario_frame_ + 1) % session_.scenario_frames();
+  }
+  if (replaying_ && !replay_.frames.empty()) {
+    apply_motion_frame(replay_, replay_frame_, &session_);
+    if (++replay_frame_ >= replay_.frames.size()) replaying_ = false;
+  }
+  if (recording_) {
+    try {
+      record_frame(session_.handles(), session_.rest().rows(), &recorded_);
+    } catch (const std::exception& e) {
+      recording_ = false;
+      message_ = e.what();
+    }
+  }
+}
+
+int run_interactive(Session& session, const ViewerOptions& options, const SaveMeshFn& save_mesh) {
+  Interactive app(session, options, save_mesh);
+  return app.run();
+}
+
+}  // namespace qpr::viewer
