@@ -33,6 +33,8 @@ namespace qpreduce::deform {
 
 namespace {
 
+using detail_deformer::Model;
+
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
 constexpr std::uint32_t kVersion = 2;  // 2: the model's name and parameters, Q kept or not
 constexpr std::uint32_t kByteOrder = 0x01020304u;
@@ -270,80 +272,33 @@ void compare_vector(const Reader& r, const char* what, const std::vector<T>& sto
   }
 }
 
-}  // namespace
-
-void Deformer::save(const std::string& path) const {
-  const State& S = *state_;
-  if (!S.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
-  const std::string tmp = path + ".tmp";
-  {
-    Writer w(tmp);
-    // Inputs.
-    w.put_matrix(S.rest);
-    w.put_matrix(S.inputs.F);
-    w.put_matrix(S.inputs.T);
-    w.put_vector(S.inputs.clusters);
-    w.put_vector(flatten(S.inputs.groups));
-    w.put_vector(S.patch_of_vertex);
-    w.put_vector(patch_codes(S.patch_types));
-    w.put_vector(name_codes(S.model->name()));
-    const auto opts = result_options(*S.model, S.inputs.options);
-    w.put<std::int64_t>(static_cast<std::int64_t>(opts.size()));
-    for (const auto& [name, value] : opts) w.put(value);
-    w.put<std::int64_t>(S.keep_q ? 1 : 0);
-    // What precompute made.
-    w.put_vector(S.clusters);
-    w.put<std::int64_t>(S.d);
-    w.put<std::int64_t>(S.m);
-    w.put_matrix(S.solver.subspace().N);
-    w.put_matrix(S.solver.subspace().UD);
-    w.put_matrix(S.solver.reduced_hessian());
-    w.put_matrix(S.solver.reduced_linear_map());
-    w.put_matrix(S.MN);
-    w.put_matrix(S.MU);
-    w.close();
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw IoError(path, 0, "cannot replace the file with the new cache");
-  }
-}
-
-PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& model,
-                                 const DeformerOptions& options) {
-  std::string why;
-  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
-  const Timer total;
-  Reader r(path);
-  auto st = std::make_unique<State>();
-  State& S = *st;
-  S.set_topology(model);
-  S.inputs = {model.F, model.T, model.clusters, model.linear.groups, options};
-
-  // Inputs: compare with what is given.
+// Reads the stored inputs and compares them with the given ones (as
+// set_topology made them, with the internal patch of unreferenced vertices);
+// sets the energy model and whether Q is kept.
+void read_inputs(Reader& r, const std::string& path, const DeformableMesh& mesh, const DeformerOptions& options,
+                 Model& model) {
   Vertices V;
   r.get_matrix("rest positions", &V);
-  if (V.rows() != S.n) r.mismatch(fmt::format("the cache has {} vertices, the mesh {}", V.rows(), S.n));
-  compare_matrix(r, "rest positions", V, S.rest);
+  if (V.rows() != model.n) r.mismatch(fmt::format("the cache has {} vertices, the mesh {}", V.rows(), model.n));
+  compare_matrix(r, "rest positions", V, model.rest);
   Triangles F;
   Tetrahedra T;
   r.get_matrix("triangles", &F);
   r.get_matrix("tetrahedra", &T);
-  compare_matrix(r, "triangles", F, model.F);
-  compare_matrix(r, "tetrahedra", T, model.T);
-  compare_vector(r, "given rotational clusters", r.get_vector<int>("given clusters"), model.clusters);
+  compare_matrix(r, "triangles", F, mesh.F);
+  compare_matrix(r, "tetrahedra", T, mesh.T);
+  compare_vector(r, "given rotational clusters", r.get_vector<int>("given clusters"), mesh.clusters);
   compare_vector(r, "given linear proxy groups", r.get_vector<std::int64_t>("given groups"),
-                 flatten(model.linear.groups));
-  // As set_topology made them (with the internal patch of unreferenced vertices).
-  compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), S.patch_of_vertex);
-  compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(S.patch_types));
-  S.model = options.resolve_model();
+                 flatten(mesh.linear.groups));
+  compare_vector(r, "patch of each vertex", r.get_vector<int>("patches"), model.patch_of_vertex);
+  compare_vector(r, "patch types", r.get_vector<int>("patch types"), patch_codes(model.patch_types));
+  model.energy_model = options.resolve_model();
   const std::vector<int> stored_name = r.get_vector<int>("model name");
-  if (stored_name != name_codes(S.model->name())) {
+  if (stored_name != name_codes(model.energy_model->name())) {
     r.mismatch(fmt::format("the cache was made with the model \"{}\", \"{}\" given",
-                           std::string(stored_name.begin(), stored_name.end()), S.model->name()));
+                           std::string(stored_name.begin(), stored_name.end()), model.energy_model->name()));
   }
-  const auto opts = result_options(*S.model, options);
+  const auto opts = result_options(*model.energy_model, options);
   const Index stored_opts = r.get_count("options", sizeof(double));
   if (stored_opts != static_cast<Index>(opts.size())) {
     r.mismatch(fmt::format("{} stored options, {} expected", stored_opts, opts.size()));
@@ -354,57 +309,112 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& 
   }
   const auto keep_q = r.get<std::int64_t>("Q kept");
   if (keep_q != 0 && keep_q != 1) throw IoError(path, 0, fmt::format("invalid Q-kept flag {}", keep_q));
-  if (keep_q == 1) S.keep_rotation_corrections();
+  if (keep_q == 1) model.keep_rotation_corrections();
+}
 
-  // What precompute made.
+// Reads what precompute made: the clusters, m, the subspace and the reduced
+// operators, checking their sizes; restores the solver.
+void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh, const DeformerOptions& options,
+                  Model& model) {
   std::vector<int> labels = r.get_vector<int>("cluster labels");
   const auto d = r.get<std::int64_t>("cluster count");
   const auto m = r.get<std::int64_t>("linear proxy count");
   if (d < 1 || m < 0) throw IoError(path, 0, fmt::format("invalid proxy counts d = {}, m = {}", d, m));
   try {
-    S.set_clusters(std::move(labels), d);
-    S.find_rigid_clusters(model.T);
+    model.set_clusters(std::move(labels), d);
+    model.find_rigid_clusters(mesh.T);
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }
-  S.m = m;
-  S.nx = 3 * S.m + 12 * S.s;
+  model.m = m;
+  model.nx = 3 * model.m + 12 * model.s;
   VariationalSubspace<double> B;
   Matrix<double> Hr, BtD;
   r.get_matrix("N", &B.N);
   r.get_matrix("UD", &B.UD);
   r.get_matrix("H_r", &Hr);
   r.get_matrix("BᵀD", &BtD);
-  r.get_matrix("M_N", &S.MN);
-  r.get_matrix("M_U", &S.MU);
+  r.get_matrix("M_N", &model.MN);
+  r.get_matrix("M_U", &model.MU);
   r.expect_end();
-  const Index p = S.nx + 9 * S.d;
-  if (B.N.rows() != S.nu || B.N.cols() != S.nx || B.UD.rows() != S.nu || B.UD.cols() != 9 * S.d ||
-      S.MN.rows() != 9 * S.d || S.MN.cols() != S.nx || S.MU.rows() != 9 * S.d || S.MU.cols() != 9 * S.d) {
+  const Index p = model.nx + 9 * model.d;
+  const Index nine_d = 9 * model.d;
+  if (B.N.rows() != model.nu || B.N.cols() != model.nx || B.UD.rows() != model.nu || B.UD.cols() != nine_d ||
+      model.MN.rows() != nine_d || model.MN.cols() != model.nx || model.MU.rows() != nine_d ||
+      model.MU.cols() != nine_d) {
     throw IoError(path, 0,
                   fmt::format("inconsistent sizes: N {}×{}, UD {}×{}, M_N {}×{}, M_U {}×{} for n_u = {}, p = {}",
-                              B.N.rows(), B.N.cols(), B.UD.rows(), B.UD.cols(), S.MN.rows(), S.MN.cols(),
-                              S.MU.rows(), S.MU.cols(), S.nu, p));
+                              B.N.rows(), B.N.cols(), B.UD.rows(), B.UD.cols(), model.MN.rows(), model.MN.cols(),
+                              model.MU.rows(), model.MU.cols(), model.nu, p));
   }
   try {
-    S.solver.restore(std::move(B), std::move(Hr), std::move(BtD), options.subspace);
+    model.solver.restore(std::move(B), std::move(Hr), std::move(BtD), options.subspace);
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }
-  S.make_basis(S.control_matrix());
-  S.finish(options);
+}
+
+}  // namespace
+
+void Deformer::save(const std::string& path) const {
+  const State& st = *state_;
+  if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  const Model& model = st.model;
+  const std::string tmp = path + ".tmp";
+  {
+    Writer w(tmp);
+    // Inputs.
+    w.put_matrix(model.rest);
+    w.put_matrix(st.inputs.F);
+    w.put_matrix(st.inputs.T);
+    w.put_vector(st.inputs.clusters);
+    w.put_vector(flatten(st.inputs.groups));
+    w.put_vector(model.patch_of_vertex);
+    w.put_vector(patch_codes(model.patch_types));
+    w.put_vector(name_codes(model.energy_model->name()));
+    const auto opts = result_options(*model.energy_model, st.inputs.options);
+    w.put<std::int64_t>(static_cast<std::int64_t>(opts.size()));
+    for (const auto& [name, value] : opts) w.put(value);
+    w.put<std::int64_t>(model.keep_q ? 1 : 0);
+    // What precompute made.
+    w.put_vector(model.clusters);
+    w.put<std::int64_t>(model.d);
+    w.put<std::int64_t>(model.m);
+    w.put_matrix(model.solver.subspace().N);
+    w.put_matrix(model.solver.subspace().UD);
+    w.put_matrix(model.solver.reduced_hessian());
+    w.put_matrix(model.solver.reduced_linear_map());
+    w.put_matrix(model.MN);
+    w.put_matrix(model.MU);
+    w.close();
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw IoError(path, 0, "cannot replace the file with the new cache");
+  }
+}
+
+PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& mesh,
+                                 const DeformerOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+  const Timer total;
+  Reader r(path);
+  auto st = std::make_unique<State>();
+  Model& model = st->model;
+  model.set_topology(mesh);
+  st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
+  read_inputs(r, path, mesh, options, model);
+  read_results(r, path, mesh, options, model);
+  model.make_basis(model.control_matrix());
+  st->finish(options);
   state_ = std::move(st);
   reset_pose();
 
   PrecomputeSummary summary;
   summary.status = Status::Success;
   summary.message = "loaded from " + path;
-  summary.vertices = S.n;
-  summary.elements = S.elements.size();
-  summary.rotational_proxies = S.d;
-  summary.linear_proxies = S.m;
-  summary.patches = S.s;
-  summary.reduced_size = p;
+  detail_deformer::describe(state_->model, &summary);
   summary.total_seconds = total.seconds();
   return summary;
 }

@@ -257,14 +257,112 @@ void add_moving_frame_pair(Index qk, Index qj, Index a, Index b, double w, Tripl
   }
 }
 
-}  // namespace
+// The triplets of the system: the scalar cotangent Laplacian (n × n, for
+// L_VV = Lap ⊗ I₃), L (nu × nu), D (nu × 9d) and N (9d × 9d).
+struct ArapTriplets {
+  Triplets lap, l, d, n;
+};
 
-ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& el,
-                                          const std::vector<int>& cluster, Index d,
-                                          const EnergyParameters& params) {
+// One element's contributions, first summed on its own vertices (a
+// spokes-and-rims element has about 7, a tet 4) and only then turned into
+// triplets. The vectors are scratch reused from element to element.
+struct ElementSums {
+  Eigen::Matrix4d Lqq;  // L_QQ block (with the regulariser)
+  Eigen::Matrix3d Nk;   // Σ c e eᵀ: ½Σc‖s e‖² = ½ Σ_rows s_row·Nk·s_rowᵀ
+  Eigen::Matrix<double, 4, 9> dq;                // D_Q block
+  std::vector<Index> local;                      // the element's vertices
+  std::vector<Eigen::Matrix<double, 3, 4>> vq;   // L_VQ block per local vertex
+  std::vector<Vec3> dv;                          // D_V: Σ ±c·e per local vertex
+
+  size_t slot(Index v) {
+    for (size_t t = 0; t < local.size(); ++t)
+      if (local[t] == v) return t;
+    local.push_back(v);
+    vq.push_back(Eigen::Matrix<double, 3, 4>::Zero());
+    dv.push_back(Vec3::Zero());
+    return local.size() - 1;
+  }
+};
+
+// Sums element k's edges (Eq. 9–10): ½c‖e′ − J·Q‖² and the linear term in
+// s; appends the edges' scalar Laplacian triplets to *tlap.
+void sum_element(const Vertices& V, const RotationElements& el, Index k, const EnergyParameters& params,
+                 ElementSums* s, Triplets* tlap) {
+  s->Lqq = regulariser(el.measure(k), params, el.is_surface, el.is_surface ? Vec3(row(el.normal, k)) : Vec3::Zero());
+  s->Nk.setZero();
+  s->dq.setZero();
+  s->local.clear();
+  s->vq.clear();
+  s->dv.clear();
+  for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+    const Index i = el.edge_i[e], j = el.edge_j[e];
+    const double c = el.weight[e];
+    const Vec3 ev = row(V, i) - row(V, j);
+    const Eigen::Matrix<double, 3, 4> J = J_of(ev);
+    tlap->emplace_back(i, i, c);
+    tlap->emplace_back(j, j, c);
+    tlap->emplace_back(i, j, -c);
+    tlap->emplace_back(j, i, -c);
+    const size_t si = s->slot(i), sj = s->slot(j);
+    // ½c‖e′ − J·Q‖²: L[v′_i, Q_k] = −c·J, L[v′_j, Q_k] = +c·J.
+    s->vq[si].noalias() -= c * J;
+    s->vq[sj].noalias() += c * J;
+    s->Lqq.noalias() += c * J.transpose() * J;
+    s->Nk.noalias() += c * ev * ev.transpose();
+    // Linear term: coefficient of s(rr, cc) is c·e_cc·(e′ − J·Q)_rr.
+    s->dv[si] += c * ev;
+    s->dv[sj] -= c * ev;
+    for (int cc = 0; cc < 3; ++cc)
+      for (int rr = 0; rr < 3; ++rr) s->dq.col(3 * cc + rr) -= c * ev(cc) * J.row(rr).transpose();
+  }
+}
+
+// Turns element k's sums into triplets: Q unknowns from qk, its cluster's
+// 9 columns of D and N from col0.
+void emit_element(const ElementSums& s, Index qk, Index col0, ArapTriplets* t) {
+  for (size_t i = 0; i < s.local.size(); ++i) {
+    const Index v = s.local[i];
+    for (int a = 0; a < 3; ++a) {
+      for (int b = 0; b < 4; ++b) {
+        const double x = s.vq[i](a, b);
+        if (x == 0.0) continue;
+        t->l.emplace_back(3 * v + a, qk + b, x);
+        t->l.emplace_back(qk + b, 3 * v + a, x);
+      }
+    }
+    for (int cc = 0; cc < 3; ++cc) {
+      if (s.dv[i](cc) == 0.0) continue;
+      for (int rr = 0; rr < 3; ++rr) t->d.emplace_back(3 * v + rr, col0 + 3 * cc + rr, s.dv[i](cc));
+    }
+  }
+  for (int b = 0; b < 4; ++b)
+    for (int c = 0; c < 9; ++c)
+      if (s.dq(b, c) != 0.0) t->d.emplace_back(qk + b, col0 + c, s.dq(b, c));
+  for (int a = 0; a < 4; ++a)
+    for (int b = 0; b < 4; ++b) t->l.emplace_back(qk + a, qk + b, s.Lqq(a, b));
+  // s(rr, cc) sits at col0 + 3cc + rr; the entries of one row rr couple.
+  for (int rr = 0; rr < 3; ++rr)
+    for (int c1 = 0; c1 < 3; ++c1)
+      for (int c2 = 0; c2 < 3; ++c2)
+        if (s.Nk(c1, c2) != 0.0) t->n.emplace_back(col0 + 3 * c1 + rr, col0 + 3 * c2 + rr, s.Nk(c1, c2));
+}
+
+// L_VV = Lap ⊗ I₃, appended to t->l; frees t->lap.
+void add_vertex_block(Index n, ArapTriplets* t) {
+  SparseMatrix<double> lap(n, n);
+  lap.setFromTriplets(t->lap.begin(), t->lap.end());
+  Triplets().swap(t->lap);
+  t->l.reserve(t->l.size() + 3 * static_cast<size_t>(lap.nonZeros()));
+  for (Index c = 0; c < n; ++c)
+    for (SparseMatrix<double>::InnerIterator it(lap, c); it; ++it)
+      for (int a = 0; a < 3; ++a) t->l.emplace_back(3 * it.row() + a, 3 * c + a, it.value());
+}
+
+void check_assembly_inputs(const RotationElements& el, const std::vector<int>& cluster, Index d,
+                           const EnergyParameters& params) {
   std::string why;
   if (!params.is_valid(&why)) throw std::invalid_argument("EnergyParameters: " + why);
-  const Index n = V.rows(), r = el.size();
+  const Index r = el.size();
   check_size("assemble_modified_arap: cluster labels", r, static_cast<Index>(cluster.size()));
   if (d < 1) throw std::invalid_argument("assemble_modified_arap: need at least one rotational cluster");
   for (Index k = 0; k < r; ++k) {
@@ -273,99 +371,34 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
           fmt::format("assemble_modified_arap: element {} has cluster {} outside [0, {})", k, cluster[k], d));
     }
   }
+}
+
+}  // namespace
+
+ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& el,
+                                          const std::vector<int>& cluster, Index d,
+                                          const EnergyParameters& params) {
+  check_assembly_inputs(el, cluster, d, params);
+  const Index n = V.rows(), r = el.size();
   const Index nv = 3 * n, nu = nv + 4 * r;
-  // Each element's contributions are first summed on its own vertices (a
-  // spokes-and-rims element has about 7, a tet 4) and only then become
-  // triplets; L_VV comes from the scalar cotangent Laplacian ⊗ I₃. One set
-  // of triplets per edge was 5–10× more and was the precompute's memory
-  // peak on 40k-vertex meshes (1.3 GB of triplets on the Bumpy Plane).
-  Triplets tlap, tl, td, tn;
-  tlap.reserve(static_cast<size_t>(el.weight.size()) * 4);
-  tl.reserve(static_cast<size_t>(r) * (16 + 2 * 12 * 8));
-  td.reserve(static_cast<size_t>(r) * (9 * 8 + 36));
-  tn.reserve(static_cast<size_t>(r) * 27);
-  std::vector<Index> local;                                 // the element's vertices
-  std::vector<Eigen::Matrix<double, 3, 4>> vq;              // L_VQ block per local vertex
-  std::vector<Vec3> dv;                                     // D_V: Σ ±c·e per local vertex
-  auto slot = [&](Index v) {
-    for (size_t t = 0; t < local.size(); ++t)
-      if (local[t] == v) return t;
-    local.push_back(v);
-    vq.push_back(Eigen::Matrix<double, 3, 4>::Zero());
-    dv.push_back(Vec3::Zero());
-    return local.size() - 1;
-  };
+  // Per element, then L_VV from the scalar cotangent Laplacian ⊗ I₃: far
+  // fewer triplets than one set per edge, which was the precompute's memory
+  // peak on 40k-vertex meshes.
+  ArapTriplets t;
+  t.lap.reserve(static_cast<size_t>(el.weight.size()) * 4);
+  t.l.reserve(static_cast<size_t>(r) * (16 + 2 * 12 * 8));
+  t.d.reserve(static_cast<size_t>(r) * (9 * 8 + 36));
+  t.n.reserve(static_cast<size_t>(r) * 27);
+  ElementSums sums;
   for (Index k = 0; k < r; ++k) {
-    const Index qk = nv + 4 * k;
-    const Index col0 = 9 * static_cast<Index>(cluster[k]);
-    Eigen::Matrix4d Lqq = regulariser(el.measure(k), params, el.is_surface,
-                                      el.is_surface ? Vec3(row(el.normal, k)) : Vec3::Zero());
-    Eigen::Matrix3d Nk = Eigen::Matrix3d::Zero();  // Σ c e eᵀ: ½Σc‖s e‖² = ½ Σ_rows s_row·Nk·s_rowᵀ
-    Eigen::Matrix<double, 4, 9> dq = Eigen::Matrix<double, 4, 9>::Zero();  // D_Q block of element k
-    local.clear();
-    vq.clear();
-    dv.clear();
-    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
-      const Index i = el.edge_i[e], j = el.edge_j[e];
-      const double c = el.weight[e];
-      const Vec3 ev = row(V, i) - row(V, j);
-      const Eigen::Matrix<double, 3, 4> J = J_of(ev);
-      tlap.emplace_back(i, i, c);
-      tlap.emplace_back(j, j, c);
-      tlap.emplace_back(i, j, -c);
-      tlap.emplace_back(j, i, -c);
-      const size_t si = slot(i), sj = slot(j);
-      // ½c‖e′ − J·Q‖²: L[v′_i, Q_k] = −c·J, L[v′_j, Q_k] = +c·J.
-      vq[si].noalias() -= c * J;
-      vq[sj].noalias() += c * J;
-      Lqq.noalias() += c * J.transpose() * J;
-      Nk.noalias() += c * ev * ev.transpose();
-      // Linear term: coefficient of s(rr, cc) is c·e_cc·(e′ − J·Q)_rr.
-      dv[si] += c * ev;
-      dv[sj] -= c * ev;
-      for (int cc = 0; cc < 3; ++cc)
-        for (int rr = 0; rr < 3; ++rr) dq.col(3 * cc + rr) -= c * ev(cc) * J.row(rr).transpose();
-    }
-    for (size_t t = 0; t < local.size(); ++t) {
-      const Index v = local[t];
-      for (int a = 0; a < 3; ++a) {
-        for (int b = 0; b < 4; ++b) {
-          const double x = vq[t](a, b);
-          if (x == 0.0) continue;
-          tl.emplace_back(3 * v + a, qk + b, x);
-          tl.emplace_back(qk + b, 3 * v + a, x);
-        }
-      }
-      for (int cc = 0; cc < 3; ++cc) {
-        if (dv[t](cc) == 0.0) continue;
-        for (int rr = 0; rr < 3; ++rr) td.emplace_back(3 * v + rr, col0 + 3 * cc + rr, dv[t](cc));
-      }
-    }
-    for (int b = 0; b < 4; ++b)
-      for (int c = 0; c < 9; ++c)
-        if (dq(b, c) != 0.0) td.emplace_back(qk + b, col0 + c, dq(b, c));
-    for (int a = 0; a < 4; ++a)
-      for (int b = 0; b < 4; ++b) tl.emplace_back(qk + a, qk + b, Lqq(a, b));
-    // s(rr, cc) sits at col0 + 3cc + rr; the entries of one row rr couple.
-    for (int rr = 0; rr < 3; ++rr)
-      for (int c1 = 0; c1 < 3; ++c1)
-        for (int c2 = 0; c2 < 3; ++c2)
-          if (Nk(c1, c2) != 0.0) tn.emplace_back(col0 + 3 * c1 + rr, col0 + 3 * c2 + rr, Nk(c1, c2));
+    sum_element(V, el, k, params, &sums, &t.lap);
+    emit_element(sums, nv + 4 * k, 9 * static_cast<Index>(cluster[k]), &t);
   }
-  {
-    // L_VV = Lap ⊗ I₃.
-    SparseMatrix<double> lap(n, n);
-    lap.setFromTriplets(tlap.begin(), tlap.end());
-    Triplets().swap(tlap);
-    tl.reserve(tl.size() + 3 * static_cast<size_t>(lap.nonZeros()));
-    for (Index c = 0; c < n; ++c)
-      for (SparseMatrix<double>::InnerIterator it(lap, c); it; ++it)
-        for (int a = 0; a < 3; ++a) tl.emplace_back(3 * it.row() + a, 3 * c + a, it.value());
-  }
+  add_vertex_block(n, &t);
   if (params.gamma > 0.0) {
     for (const auto& [k, j] : element_neighbours(el)) {
       const double w = params.gamma * 0.5 * (el.measure(k) + el.measure(j));
-      add_moving_frame_pair(nv + 4 * k, nv + 4 * j, cluster[k], cluster[j], w, &tl, &td, &tn);
+      add_moving_frame_pair(nv + 4 * k, nv + 4 * j, cluster[k], cluster[j], w, &t.l, &t.d, &t.n);
     }
   }
   ModifiedArapSystem sys;
@@ -374,11 +407,11 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
   sys.r = r;
   sys.d = d;
   sys.L.resize(nu, nu);
-  sys.L.setFromTriplets(tl.begin(), tl.end());
+  sys.L.setFromTriplets(t.l.begin(), t.l.end());
   sys.D.resize(nu, 9 * d);
-  sys.D.setFromTriplets(td.begin(), td.end());
+  sys.D.setFromTriplets(t.d.begin(), t.d.end());
   sys.N.resize(9 * d, 9 * d);
-  sys.N.setFromTriplets(tn.begin(), tn.end());
+  sys.N.setFromTriplets(t.n.begin(), t.n.end());
   return sys;
 }
 
@@ -480,11 +513,9 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   //   U = (−M² + (I₁² − I₂)·M + I₁I₃·I) / (I₁I₂ − I₃),
   //   U⁻¹ = (M − I₁·U + I₂·I) / I₃            (Hoger & Carlson 1984).
   // Then one Newton step X ← ½(X + X⁻ᵀ) squares the remaining orthogonality
-  // error (to ~1e-15). Forming M's eigenvectors instead took a quarter of a
-  // Bumpy Plane round (round 15.2 → 12.7 µs without them, medians of three
-  // A/B runs); the scaled Newton iteration X ← ½(γX + X⁻ᵀ/γ) (Higham) was
-  // 1.6× slower still and stays for worse-conditioned G; reflected or nearly
-  // singular G (det G ≤ 1e-6·‖G‖³) take the SVD path.
+  // error (to ~1e-15). Worse-conditioned G take the scaled Newton iteration
+  // X ← ½(γX + X⁻ᵀ/γ) (Higham); reflected or nearly singular G
+  // (det G ≤ 1e-6·‖G‖³) the SVD path. Why not eigenvectors: docs/deform.md.
   const double norm = G.norm();
   const double det = G.determinant();
   if (!(det > 1e-6 * norm * norm * norm)) return fit_rotation_svd(G);

@@ -112,6 +112,18 @@ Eigen::VectorXd spread_to_corners(Index n, const ElementsRef& E, const Eigen::Ve
   return mass;
 }
 
+// Checks V and E (`corners` columns, `kind` in messages) and returns
+// value(e) for each element e.
+template <typename PerElement>
+Eigen::VectorXd per_element(const char* what, const char* kind, int corners, const VerticesRef& V,
+                            const ElementsRef& E, PerElement value) {
+  check_vertices(what, V);
+  check_elements(what, kind, V.rows(), E, corners);
+  Eigen::VectorXd out(E.rows());
+  for (Index e = 0; e < E.rows(); ++e) out[e] = value(e);
+  return out;
+}
+
 }  // namespace
 
 SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef& F, double tolerance) {
@@ -135,11 +147,8 @@ SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef
 
 Eigen::VectorXd face_areas(const VerticesRef& V, const ElementsRef& F, double tolerance) {
   const char* what = "face_areas";
-  check_vertices(what, V);
-  check_elements(what, "face", V.rows(), F, 3);
-  Eigen::VectorXd areas(F.rows());
-  for (Index f = 0; f < F.rows(); ++f) areas[f] = 0.5 * checked_double_area(what, V, F, f, tolerance);
-  return areas;
+  return per_element(what, "face", 3, V, F,
+                     [&](Index f) { return 0.5 * checked_double_area(what, V, F, f, tolerance); });
 }
 
 Eigen::VectorXd lumped_mass(const VerticesRef& V, const ElementsRef& F, double tolerance) {
@@ -203,11 +212,8 @@ SparseMatrix<double> cotangent_laplacian_tets(const VerticesRef& V, const Elemen
 
 Eigen::VectorXd tet_volumes(const VerticesRef& V, const ElementsRef& T, double tolerance) {
   const char* what = "tet_volumes";
-  check_vertices(what, V);
-  check_elements(what, "tet", V.rows(), T, 4);
-  Eigen::VectorXd volumes(T.rows());
-  for (Index t = 0; t < T.rows(); ++t) volumes[t] = checked_six_volume(what, V, T, t, tolerance, nullptr) / 6.0;
-  return volumes;
+  return per_element(what, "tet", 4, V, T,
+                     [&](Index t) { return checked_six_volume(what, V, T, t, tolerance, nullptr) / 6.0; });
 }
 
 Eigen::VectorXd lumped_mass_tets(const VerticesRef& V, const ElementsRef& T, double tolerance) {

@@ -159,18 +159,9 @@ void add_element_residuals(ceres::Problem* problem, const PreparedModel& m, bool
   }
 }
 
-}  // namespace
-
-bool has_ceres_reference() { return true; }
-
-ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
-                                       const HandleTargets& targets, const ReferenceOptions& options,
-                                       ReferenceSolution* out, const Vertices& initial) {
-  const Timer setup;
-  const PreparedModel m = detail_reference::prepare_model(model, options);
-  detail_reference::check_handles(m, handles);
-  detail_reference::check_anchored(m, handles);
-  const Index n = m.V.rows();
+// The Ceres reference supports single-vertex handles and Fixed or prescribed
+// patches only; throws std::invalid_argument otherwise.
+void check_supported(const PreparedModel& m, const Handles& handles) {
   for (size_t h = 0; h < handles.points.size(); ++h) {
     const PointHandle& ph = handles.points[h];
     if (ph.vertices.size() != 1 || !(ph.weights.empty() || ph.weights[0] == 1.0)) {
@@ -180,7 +171,7 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
           h));
     }
   }
-  for (Index v = 0; v < n; ++v) {
+  for (Index v = 0; v < m.V.rows(); ++v) {
     const int p = m.patch_of_vertex[v];
     if (p >= 0 && m.patch_types[p] != PatchType::Fixed &&
         std::find(handles.patches.begin(), handles.patches.end(), p) == handles.patches.end()) {
@@ -190,74 +181,50 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
           p));
     }
   }
-  if (initial.size() > 0) {
-    ::qpreduce::check_size("solve_ceres_reference: initial guess rows", n, initial.rows());
-    ::qpreduce::check_finite("solve_ceres_reference: initial guess", initial);
-  }
-  DeformableMesh targets_model;
-  targets_model.V = m.V;
-  targets_model.patch_of_vertex = m.patch_of_vertex;
-  targets_model.patch_types = m.patch_types;
-  const VertexTargets pinned = vertex_targets(targets_model, handles, targets, 1e-9 * m.diagonal);
+}
 
-  const bool classic = options.energy == ReferenceEnergy::ClassicArap;
-  const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : options.frame;
+// Start rotations (4 × nrot quaternions): fitted to the start pose X (solve
+// frame) when there is an initial guess, else the identities (at rest).
+Eigen::VectorXd start_rotations(const PreparedModel& m, bool classic, Index nrot, const Vertices& X, bool fitted) {
   const RotationElements& el = m.elements;
-  const Index r = el.size();
-  // Unknowns in the solve frame (rows (Fᵀx)ᵀ = xᵀF).
-  Vertices X = initial.size() > 0 ? Vertices(initial * frame) : m.V;
-  for (Index v = 0; v < n; ++v)
-    if (pinned.pinned[v]) X.row(v) = pinned.position.row(v) * frame;
-  const Index nrot = classic ? r : m.d;
-  Eigen::VectorXd quats(4 * nrot), Q = Eigen::VectorXd::Zero(classic ? 0 : 4 * r);
-  {
-    // Start rotations: fitted to the initial pose (identities at rest).
-    std::vector<Eigen::Matrix3d> G(static_cast<size_t>(nrot), Eigen::Matrix3d::Zero());
-    for (Index k = 0; k < r; ++k)
-      for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
-        const Eigen::Vector3d ev = (m.V.row(el.edge_i[e]) - m.V.row(el.edge_j[e])).transpose();
-        const Eigen::Vector3d ep = (X.row(el.edge_i[e]) - X.row(el.edge_j[e])).transpose();
-        G[static_cast<size_t>(classic ? k : m.clusters[k])] += el.weight[e] * ep * ev.transpose();
-      }
-    for (Index i = 0; i < nrot; ++i)
-      quats.segment<4>(4 * i) = initial.size() > 0 ? to_quaternion(fit_rotation(G[static_cast<size_t>(i)]))
-                                                   : Eigen::Vector4d(1, 0, 0, 0);
-  }
-  ceres::Problem::Options popts;
-  popts.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  ceres::Problem problem(popts);
-  ceres::QuaternionManifold quaternion_manifold;
-  for (Index k = 0; k < r; ++k) {
-    if (el.offsets[k] == el.offsets[k + 1]) continue;
-    double* rot = quats.data() + 4 * (classic ? k : m.clusters[k]);
-    double* qk = classic ? nullptr : Q.data() + 4 * k;
-    if (m.tet) add_element_residuals<4>(&problem, m, classic, k, rot, qk, &X);
-    else add_element_residuals<3>(&problem, m, classic, k, rot, qk, &X);
-    if (!classic) {
-      // Hessian of α·a(3q0² + 2‖ω‖²) + β·a(q0² + ‖ω‖² − (ω·n)²) (Eq. 10).
-      const double a = el.measure(k), beta = el.is_surface ? m.parameters.beta : 0.0;
-      Eigen::Matrix4d M = Eigen::Matrix4d::Zero();
-      M(0, 0) = 2.0 * a * (3.0 * m.parameters.alpha + beta);
-      M.bottomRightCorner<3, 3>() = 2.0 * a * (2.0 * m.parameters.alpha + beta) * Eigen::Matrix3d::Identity();
-      if (beta > 0.0) {
-        const Eigen::Vector3d nk = el.normal.row(k).transpose();
-        M.bottomRightCorner<3, 3>() -= 2.0 * a * beta * nk * nk.transpose();
-      }
-      const Eigen::LLT<Eigen::Matrix4d> llt(M);
-      if (llt.info() != Eigen::Success) {
-        throw std::invalid_argument(fmt::format("solve_ceres_reference: the Eq. 10 penalty of element {} is not "
-                                                "positive definite (zero measure?)",
-                                                k));
-      }
-      problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<PenaltyResidual, 4, 4>(new PenaltyResidual{llt.matrixU()}), nullptr, qk);
+  Eigen::VectorXd quats(4 * nrot);
+  std::vector<Eigen::Matrix3d> G(static_cast<size_t>(nrot), Eigen::Matrix3d::Zero());
+  for (Index k = 0; k < el.size(); ++k)
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Eigen::Vector3d ev = (m.V.row(el.edge_i[e]) - m.V.row(el.edge_j[e])).transpose();
+      const Eigen::Vector3d ep = (X.row(el.edge_i[e]) - X.row(el.edge_j[e])).transpose();
+      G[static_cast<size_t>(classic ? k : m.clusters[k])] += el.weight[e] * ep * ev.transpose();
     }
-  }
   for (Index i = 0; i < nrot; ++i)
-    if (problem.HasParameterBlock(quats.data() + 4 * i)) problem.SetManifold(quats.data() + 4 * i, &quaternion_manifold);
-  for (Index v = 0; v < n; ++v)
-    if (pinned.pinned[v] && problem.HasParameterBlock(X.data() + 3 * v)) problem.SetParameterBlockConstant(X.data() + 3 * v);
+    quats.segment<4>(4 * i) = fitted ? to_quaternion(fit_rotation(G[static_cast<size_t>(i)])) : Eigen::Vector4d(1, 0, 0, 0);
+  return quats;
+}
 
+// E′'s penalty on Q_k: the Cholesky factor of the Hessian of
+// α·a(3q0² + 2‖ω‖²) + β·a(q0² + ‖ω‖² − (ω·n)²) (Eq. 10), as a residual block.
+void add_penalty(ceres::Problem* problem, const PreparedModel& m, Index k, double* qk) {
+  const RotationElements& el = m.elements;
+  const double a = el.measure(k), beta = el.is_surface ? m.parameters.beta : 0.0;
+  Eigen::Matrix4d M = Eigen::Matrix4d::Zero();
+  M(0, 0) = 2.0 * a * (3.0 * m.parameters.alpha + beta);
+  M.bottomRightCorner<3, 3>() = 2.0 * a * (2.0 * m.parameters.alpha + beta) * Eigen::Matrix3d::Identity();
+  if (beta > 0.0) {
+    const Eigen::Vector3d nk = el.normal.row(k).transpose();
+    M.bottomRightCorner<3, 3>() -= 2.0 * a * beta * nk * nk.transpose();
+  }
+  const Eigen::LLT<Eigen::Matrix4d> llt(M);
+  if (llt.info() != Eigen::Success) {
+    throw std::invalid_argument(fmt::format("solve_ceres_reference: the Eq. 10 penalty of element {} is not "
+                                            "positive definite (zero measure?)",
+                                            k));
+  }
+  problem->AddResidualBlock(
+      new ceres::AutoDiffCostFunction<PenaltyResidual, 4, 4>(new PenaltyResidual{llt.matrixU()}), nullptr, qk);
+}
+
+// The Ceres solver options of `options`; throws std::invalid_argument when
+// Ceres refuses them.
+ceres::Solver::Options solver_options(const ReferenceOptions& options) {
   ceres::Solver::Options so;
   so.minimizer_type = ceres::TRUST_REGION;
   so.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
@@ -270,6 +237,73 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
   so.logging_type = ceres::SILENT;
   std::string why;
   if (!so.IsValid(&why)) throw std::invalid_argument("solve_ceres_reference: Ceres options: " + why);
+  return so;
+}
+
+// Status, message and counts of a Ceres run.
+void read_ceres_summary(const ceres::Solver::Summary& cs, bool finite, ReferenceSummary* summary) {
+  summary->solver_report = cs.FullReport();
+  summary->iterations = static_cast<int>(cs.iterations.size()) - 1;
+  summary->initial_energy = cs.initial_cost;
+  summary->converged = cs.termination_type == ceres::CONVERGENCE;
+  if (cs.termination_type == ceres::FAILURE || cs.termination_type == ceres::USER_FAILURE || !finite) {
+    summary->status = Status::NumericalFailure;
+    summary->message = "Ceres: " + cs.message;
+  } else {
+    summary->status = Status::Success;
+    summary->message = fmt::format("Ceres {}: {}", ceres::TerminationTypeToString(cs.termination_type), cs.message);
+  }
+}
+
+}  // namespace
+
+bool has_ceres_reference() { return true; }
+
+ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
+                                       const HandleTargets& targets, const ReferenceOptions& options,
+                                       ReferenceSolution* out, const Vertices& initial) {
+  const Timer setup;
+  const PreparedModel m = detail_reference::prepare_model(model, options);
+  detail_reference::check_handles(m, handles);
+  detail_reference::check_anchored(m, handles);
+  check_supported(m, handles);
+  const Index n = m.V.rows();
+  if (initial.size() > 0) {
+    ::qpreduce::check_size("solve_ceres_reference: initial guess rows", n, initial.rows());
+    ::qpreduce::check_finite("solve_ceres_reference: initial guess", initial);
+  }
+  const DeformableMesh targets_model = detail_reference::targets_model(m);
+  const VertexTargets pinned = vertex_targets(targets_model, handles, targets, 1e-9 * m.diagonal);
+
+  const bool classic = options.energy == ReferenceEnergy::ClassicArap;
+  const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : options.frame;
+  const RotationElements& el = m.elements;
+  const Index r = el.size();
+  // Unknowns in the solve frame (rows (Fᵀx)ᵀ = xᵀF).
+  Vertices X = initial.size() > 0 ? Vertices(initial * frame) : m.V;
+  for (Index v = 0; v < n; ++v)
+    if (pinned.pinned[v]) X.row(v) = pinned.position.row(v) * frame;
+  const Index nrot = classic ? r : m.d;
+  Eigen::VectorXd quats = start_rotations(m, classic, nrot, X, initial.size() > 0);
+  Eigen::VectorXd Q = Eigen::VectorXd::Zero(classic ? 0 : 4 * r);
+  ceres::Problem::Options popts;
+  popts.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(popts);
+  ceres::QuaternionManifold quaternion_manifold;
+  for (Index k = 0; k < r; ++k) {
+    if (el.offsets[k] == el.offsets[k + 1]) continue;
+    double* rot = quats.data() + 4 * (classic ? k : m.clusters[k]);
+    double* qk = classic ? nullptr : Q.data() + 4 * k;
+    if (m.tet) add_element_residuals<4>(&problem, m, classic, k, rot, qk, &X);
+    else add_element_residuals<3>(&problem, m, classic, k, rot, qk, &X);
+    if (!classic) add_penalty(&problem, m, k, qk);
+  }
+  for (Index i = 0; i < nrot; ++i)
+    if (problem.HasParameterBlock(quats.data() + 4 * i)) problem.SetManifold(quats.data() + 4 * i, &quaternion_manifold);
+  for (Index v = 0; v < n; ++v)
+    if (pinned.pinned[v] && problem.HasParameterBlock(X.data() + 3 * v)) problem.SetParameterBlockConstant(X.data() + 3 * v);
+
+  const ceres::Solver::Options so = solver_options(options);
   ReferenceSummary summary;
   summary.energy_kind = options.energy;
   summary.setup_seconds = setup.seconds();
@@ -277,28 +311,14 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
   ceres::Solver::Summary cs;
   ceres::Solve(so, &problem, &cs);
   summary.solve_seconds = timer.seconds();
-  summary.solver_report = cs.FullReport();
-  summary.iterations = static_cast<int>(cs.iterations.size()) - 1;
-  summary.initial_energy = cs.initial_cost;
-  summary.converged = cs.termination_type == ceres::CONVERGENCE;
-  if (cs.termination_type == ceres::FAILURE || cs.termination_type == ceres::USER_FAILURE || !X.allFinite()) {
-    summary.status = Status::NumericalFailure;
-    summary.message = "Ceres: " + cs.message;
-  } else {
-    summary.status = Status::Success;
-    summary.message = fmt::format("Ceres {}: {}", ceres::TerminationTypeToString(cs.termination_type), cs.message);
-  }
+  read_ceres_summary(cs, X.allFinite(), &summary);
   Eigen::VectorXd R(9 * nrot);
   for (Index i = 0; i < nrot; ++i) Eigen::Map<Eigen::Matrix3d>(R.data() + 9 * i) = to_rotation(quats.data() + 4 * i);
   summary.energy = detail_reference::energy_of(m, options.energy, X, Q, R);
   out->V = X * frame.transpose();
   out->Q = Q;
   out->rotations = R;
-  if (!classic)
-    for (Index i = 0; i < nrot; ++i) {
-      Eigen::Map<Eigen::Matrix3d> Si(out->rotations.data() + 9 * i);
-      Si = frame * Si;
-    }
+  if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
   summary.handle_residual = handle_residual(targets_model, handles, targets, out->V);
   return summary;
 }

@@ -2,6 +2,8 @@
 // handle checks, per-vertex targets.
 #include "reference_internal.h"
 
+#include "deformer/handle_checks.h"
+
 #include <qpreduce/support.h>
 
 #include "qpreduce/deform/mesh/mesh.h"
@@ -51,15 +53,8 @@ PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions&
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ReferenceOptions: " + why);
   PreparedModel m;
+  detail_deformer::check_mesh_elements(model, "reference");
   m.tet = model.is_tet();
-  if (m.tet == (model.F.rows() > 0)) {
-    throw std::invalid_argument("reference: give exactly one of F (surface) and T (tetrahedra)");
-  }
-  if (m.tet) {
-    check_mesh("reference model", TetMesh{model.V, model.T, {}});
-  } else {
-    check_mesh("reference model", TriangleMesh{model.V, model.F});
-  }
   m.V = model.V;
   const Index n = m.V.rows();
   m.elements = m.tet ? tet_elements(model.V, model.T) : spokes_and_rims_elements(model.V, model.F);
@@ -76,49 +71,16 @@ PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions&
     m.d = 1 + *std::max_element(m.clusters.begin(), m.clusters.end());
   }
   m.patch_types = model.patch_types;
+  detail_deformer::check_patch_labels(model, "reference");
   m.patch_of_vertex = model.patch_of_vertex.empty() ? std::vector<int>(static_cast<size_t>(n), -1)
                                                     : model.patch_of_vertex;
-  ::qpreduce::check_size("reference: patch_of_vertex", n, static_cast<Index>(m.patch_of_vertex.size()));
-  for (Index v = 0; v < n; ++v) {
-    const int p = m.patch_of_vertex[v];
-    if (p < -1 || p >= static_cast<int>(m.patch_types.size())) {
-      throw std::invalid_argument(
-          fmt::format("reference: vertex {} has patch {} outside [-1, {})", v, p, m.patch_types.size()));
-    }
-  }
   m.components = connected_components(n, m.tet ? ElementsRef(model.T) : ElementsRef(model.F));
   m.diagonal = bounding_box_diagonal(m.V);
   return m;
 }
 
 void check_handles(const PreparedModel& m, const Handles& handles) {
-  const Index n = m.V.rows();
-  for (size_t h = 0; h < handles.points.size(); ++h) {
-    const PointHandle& ph = handles.points[h];
-    if (ph.vertices.empty()) throw std::invalid_argument(fmt::format("point handle {}: no vertex", h));
-    if (ph.weights.empty() ? ph.vertices.size() != 1 : ph.weights.size() != ph.vertices.size()) {
-      throw std::invalid_argument(fmt::format("point handle {}: {} weights for {} vertices", h, ph.weights.size(),
-                                              ph.vertices.size()));
-    }
-    for (size_t i = 0; i < ph.vertices.size(); ++i) {
-      if (ph.vertices[i] < 0 || ph.vertices[i] >= n) {
-        throw std::invalid_argument(fmt::format("point handle {}: vertex {} outside [0, {})", h, ph.vertices[i], n));
-      }
-      if (!ph.weights.empty() && !std::isfinite(ph.weights[i])) {
-        throw std::invalid_argument(fmt::format("point handle {}: weight {} is not finite", h, i));
-      }
-    }
-  }
-  const Index s = static_cast<Index>(m.patch_types.size());
-  for (Index p : handles.patches) {
-    if (p < 0 || p >= s) throw std::invalid_argument(fmt::format("handle patch {} outside [0, {})", p, s));
-    if (m.patch_types[p] == PatchType::Fixed) {
-      throw std::invalid_argument(fmt::format("patch {} is Fixed: it is always held at the rest pose", p));
-    }
-    if (std::count(handles.patches.begin(), handles.patches.end(), p) > 1) {
-      throw std::invalid_argument(fmt::format("patch {} is prescribed twice", p));
-    }
-  }
+  detail_deformer::check_handles(handles, m.V.rows(), m.patch_types);
 }
 
 void check_targets(const Handles& handles, const HandleTargets& targets) {
@@ -168,6 +130,21 @@ std::vector<PatchTarget> patch_targets(const PreparedModel& m, const Handles& ha
     out.push_back({p, frame.transpose() * targets.patch_transforms[i]});
   }
   return out;
+}
+
+DeformableMesh targets_model(const PreparedModel& m) {
+  DeformableMesh out;
+  out.V = m.V;
+  out.patch_of_vertex = m.patch_of_vertex;
+  out.patch_types = m.patch_types;
+  return out;
+}
+
+void rotations_to_world(const Eigen::Matrix3d& frame, Eigen::VectorXd* S) {
+  for (Index i = 0; i < S->size() / 9; ++i) {
+    Eigen::Map<Eigen::Matrix3d> Si(S->data() + 9 * i);
+    Si = frame * Si;
+  }
 }
 
 double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& Vp, const Eigen::VectorXd& Q,

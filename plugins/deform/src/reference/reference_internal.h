@@ -45,6 +45,14 @@ struct PatchTarget {
 std::vector<PatchTarget> patch_targets(const PreparedModel& m, const Handles& handles, const HandleTargets& targets,
                                        const Eigen::Matrix3d& frame);
 
+// The mesh and patches of `m` as a DeformableMesh (all that vertex_targets
+// and handle_residual read).
+DeformableMesh targets_model(const PreparedModel& m);
+
+// S (9d, column-major 3 × 3 per cluster) from the solve frame back to the
+// world: s_i ← frame·s_i.
+void rotations_to_world(const Eigen::Matrix3d& frame, Eigen::VectorXd* S);
+
 // Energy of a pose in the solve frame: arap_energy (classic) or E′.
 double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& Vp, const Eigen::VectorXd& Q,
                  const Eigen::VectorXd& S);

@@ -1,33 +1,14 @@
 // qpreduce::deform — the reduced ARAP deformer session (paper Section 3.2):
-// precompute → set handles (on-site preconditioning, "OP") → frames.
+// precompute → set handles (on-site step, "OP") → frames.
 //
-// Unknowns. Vertices split into free ones and affine patches (Appendix,
-// Eq. 47): a vertex of patch s moves as v′ = t_s·v + d_s. The control layer
-// is u = [V′_free (3·n_free); for each patch s: t_s row-major (9), d_s (3)],
-// and V′ = P·u with P (3n × n_u) sparse. With Q eliminated (arap_energy.h)
-// the energy in u is
-//     E(u, S) = ½ uᵀ(PᵀHP)u − Sᵀ(PᵀD_s)ᵀu + c(S).
-// The engine builds the variational subspace (Eq. 14–15) of
-//     H_u = PᵀHP (n_u × n_u),  C = [Pᵀ(Ŵ ⊗ I₃)ᵀ | patch selections] (n_u × (3m + 12s)),
-//     D = PᵀD_s (n_u × 9d),
-// so u = N·X + UD·S with X the linear proxies (3 per proxy, 12 per patch) and S
-// the rotational proxies (9 per cluster). Only V′ = P·[N UD] is kept for
-// reconstruction, in float, row-interleaved (3n × (3m + 12s + 9d)).
-//
-// The energy and the Phase 2 projection come from a DeformationModel
-// (model.h, the plugin contract): ARAP by default, conformal-like, or a
-// custom one. When the model's L_QQ is not block diagonal (γ > 0), Q is not
-// eliminated: u gets 4r more unknowns [.., Q], P has zero columns for them,
-// and the engine factors that larger system once.
-//
-// Per frame, k rounds of
-//   Phase 1 (Eq. 17): X = M_b·b + M_S·S   (engine FixedCoordinateSolver), and
-//   Phase 2 (Eq. 19): S = the model's projection of G = M_N·X + M_U·S with
-//                     M_N = D_Vᵀ·P·N, M_U = D_Vᵀ·P·UD (9d × ·, precomputed)
-//                     (ARAP: s_i = nearest rotation of G_i),
-// warm-started from the previous frame, with the global rotation adaptation
-// of the appendix: r₀ = nearest rotation of Σ_i a_i s_i is factored out before
-// the rounds (targets and S rotated by r₀ᵀ) and put back after.
+// Unknowns: the control layer u = [V′_free; t_s, d_s per affine patch s]
+// (n_u), V′ = P·u (Eq. 47); the engine's variational subspace (Eq. 14–15)
+// gives u = N·X + UD·S with X the linear proxies (3 per proxy, 12 per patch)
+// and S the rotational proxies (9 per cluster). Each frame runs k rounds of
+// Phase 1 (Eq. 17) and Phase 2 (Eq. 19, the model's projection), then
+// reconstructs V′ = r₀·(P·[N UD]·[X; S_local]) in float. The derivation, the
+// global rotation adaptation and the source layout are in docs/deform.md
+// ("Inside the deformer").
 #pragma once
 
 #include "qpreduce/deform/energy/arap_energy.h"
@@ -80,11 +61,8 @@ struct DeformerOptions {
   // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
   // split the clusters when the model's Phase 2 is cluster-separable (γ = 0)
   // and 9d ≥ 256; 0: omp_get_max_threads(). Serial by default: a round is
-  // ~10–40 µs with a barrier, and while another process held one of two
-  // cores a round took ~5 ms (a scheduler quantum); on an otherwise idle
-  // machine it still did not pay on most models (docs/performance.md, "OP
-  // after the factored Phase 1 operators …"). The reconstruction always uses
-  // all threads.
+  // too short for a barrier to pay on most models (docs/deform.md,
+  // "Defaults"). The reconstruction always uses all threads.
   int round_threads = 1;
   SubspaceOptions subspace;
 

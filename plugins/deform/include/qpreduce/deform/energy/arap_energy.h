@@ -1,53 +1,16 @@
-// qpreduce::deform — ARAP energies (paper Section 3.1, Eq. 6–10).
-//
-// Rotation elements. The ARAP energy (Eq. 6) is
-//     E(V′, R) = ½ Σ_k Σ_{(i,j)∈G_k} c_ijk ‖(v′_i − v′_j) − r_k (v_i − v_j)‖²,
-// one rotation r_k per element k with edge set G_k and weights c_ijk:
-//   * surfaces, spokes-and-rims (Chao et al. 2010): one element per VERTEX k;
-//     G_k = the three edges of every triangle incident to k, each with
-//     c = ½ cot(angle opposite the edge in that triangle);
-//   * tets, elements: one element per TET; G_k = its six edges, each with
-//     c = (1/6)·ℓ_opp·cot θ_opp (ℓ_opp the length of the opposite edge, θ_opp
-//     the dihedral angle there).
-// Weights are unclamped (as CGAL's default), so obtuse elements give negative c.
-// The element measure a_k is the barycentric vertex area (surfaces) or the
-// tet volume; the element normal n_k is the area-weighted vertex normal
-// (surfaces only).
-//
-// Modified energy E′ (Eq. 8–10). Each rotation is split r_k ≈ s_{i_k} + q_k:
-// s_i ∈ SO(3) one per rotational cluster i (the rotational proxies S), and the
-// linearised correction (Eq. 9)
-//     q_k = q0·I + [ω]_×,   ω = (q1, q2, q3),   so q_k·e = q0·e + ω × e = J(e)·Q_k,
-//     J(e) = [e, −[e]_×] (3×4), Q_k = (q0, q1, q2, q3),
-// penalised by α·a_k‖q_k‖²_F = α·a_k(3q0² + 2‖ω‖²) and
-// β·a_k‖q_k n_k‖² = β·a_k(q0² + ‖ω‖² − (ω·n_k)²) (β surfaces only).
-//
-// Moving-frame penalty (Eq. 11), optional (γ > 0):
-//     γ·Σ_{(k,j)∈H} a_kj‖s_{i_k} + q_k − s_{i_j} − q_j‖²_F,   a_kj = (a_k + a_j)/2,
-// over neighbouring elements H (element_neighbours): vertices joined by an
-// edge (surfaces), tets sharing a face (solids). With d_0 = I, d_1..3 = [e_a]×
-// (⟨d_a, d_b⟩ = diag(3, 2, 2, 2)) it couples Q_k with Q_j, S with Q, and the
-// cluster rotations s_a, s_b of neighbouring elements in different clusters.
+// qpreduce::deform — ARAP energies (paper Section 3.1, Eq. 6–11): the
+// rotation elements (spokes-and-rims on surfaces, one per tet on solids), the
+// modified energy E′ as sparse matrices, and the elimination of Q.
 //
 // Layout. Unknowns u = [V′; Q]: V′ is 3n with vertex i at rows 3i..3i+2 (x,
 // y, z interleaved), Q is 4r with element k at rows 3n + 4k..3n + 4k + 3.
 // Rotational proxies S are 9d: cluster i at 9i + 3c + r holds s_i(r, c)
 // (column-major). Then
-//     E′(u, S) = ½ uᵀ L u − Sᵀ Dᵀ u + ½ Sᵀ N S           (exactly, no constant)
-//     L: (3n + 4r)² symmetric PSD,  D: (3n + 4r) × 9d,  N: 9d × 9d,
-// i.e. the linear term is q = D·S (the engine's "D" design space), and the
-// joint Hessian [[L, −D], [−Dᵀ, N]] of (u, S) is symmetric PSD (E′ is a sum
-// of squares). N = ½Σ c‖s e‖²'s Hessian plus γ's s–s coupling; it does not
-// enter Phase 1.
-//
-// Eliminating Q. Without γ, L_QQ is block diagonal (one 4×4 SPD block per
-// element when α > 0), so Q can be minimised out element by element (DESIGN
-// choice 3); with γ > 0 it is not, and Q stays an unknown of the factored system:
-//     H = L_VV − L_VQ L_QQ⁻¹ L_QV   (3n × 3n, PSD, null space = translations),
-//     D_s = D_V − L_VQ L_QQ⁻¹ D_Q   (3n × 9d).
-// The minimum of E′ over Q for fixed (V′, S) is
-//     ½V′ᵀHV′ − SᵀD_sᵀV′ − ½(D_Q S)ᵀL_QQ⁻¹(D_Q S) + c(S),
-// where the last two terms depend on S only (they do not enter Phase 1).
+//     E′(u, S) = ½ uᵀ L u − Sᵀ Dᵀ u + ½ Sᵀ N S
+//     L: (3n + 4r)² symmetric PSD,  D: (3n + 4r) × 9d,  N: 9d × 9d.
+// The definitions (Eq. 6–11: weights, measures, the split r_k ≈ s_{i_k} + q_k,
+// the penalties, the moving-frame term) and the Q elimination are derived
+// in docs/deform.md ("The ARAP energy as matrices").
 #pragma once
 
 #include "qpreduce/deform/mesh/mesh.h"
@@ -72,10 +35,13 @@ struct RotationElements {
   Index size() const { return static_cast<Index>(offsets.size()) - 1; }
 };
 
-// Spokes-and-rims elements of a triangle mesh (one per vertex). Unreferenced
-// vertices get an element with no edges and zero measure.
+// Spokes-and-rims elements of a triangle mesh: V n × 3, F m × 3; r = n
+// elements (one per vertex), weights ½ cot of the opposite angle, measures
+// the barycentric vertex areas, normals the area-weighted vertex normals.
+// Unreferenced vertices get an element with no edges and zero measure.
 RotationElements spokes_and_rims_elements(const Vertices& V, const Triangles& F);
-// One element per tetrahedron.
+// One element per tetrahedron: V n × 3, T m × 4; r = m elements of six
+// edges, weights (1/6)·ℓ_opp·cot θ_opp, measures the volumes, no normals.
 RotationElements tet_elements(const Vertices& V, const Tetrahedra& T);
 
 struct EnergyParameters {
@@ -110,7 +76,10 @@ struct ModifiedArapSystem {
 // face. Sorted.
 std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& elements);
 
-// Assembles L and D of E′. cluster_of_element: r entries in [0, d).
+// Assembles E′ (Eq. 8–11) as L, D and N (shapes above) for the rest pose V
+// (n × 3) and its `elements` (r); cluster_of_element: r entries in [0, d),
+// d ≥ 1. q_separable is γ = 0. Throws std::invalid_argument on invalid
+// parameters or labels.
 ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationElements& elements,
                                           const std::vector<int>& cluster_of_element, Index d,
                                           const EnergyParameters& params);
@@ -122,7 +91,9 @@ struct EliminatedArapSystem {
                             // stacks the per-cluster Σ c e′ eᵀ of Phase 2 (Eq. 19)
 };
 
-// Eliminates Q. Throws std::invalid_argument when an L_QQ block is singular
+// Eliminates Q element by element (4 × 4 Schur complements):
+// H = L_VV − L_VQ L_QQ⁻¹ L_QV, D_s = D_V − L_VQ L_QQ⁻¹ D_Q. Throws
+// std::invalid_argument when an L_QQ block is singular
 // (α = 0 with an element whose edges do not determine q_k), or when L_QQ is
 // not block diagonal (γ > 0; !system.q_separable).
 EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& system);

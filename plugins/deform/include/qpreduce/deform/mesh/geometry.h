@@ -54,42 +54,41 @@ using ElementsRef = Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::D
 // digit of a double-precision factorization of L.
 inline constexpr double kDefaultDegenerateTolerance = 1e-12;
 
-// ---- triangle meshes (F m × 3) ----
+// Each quantity for triangle meshes (F m × 3) and for tetrahedral ones
+// (T m × 4).
 
-// n × n cotangent Laplacian (PSD convention above), symmetric, rows sum to 0.
+// Cotangent Laplacian, n × n, PSD convention above, symmetric, rows sum to 0:
+// triangles; tets (the P1 stiffness matrix).
 SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef& F,
                                          double degenerate_tolerance = kDefaultDegenerateTolerance);
-
-// Lumped mass, barycentric: each triangle gives area/3 to each of its corners.
-// n entries, Σ = total area; 0 for unreferenced vertices. (Barycentric, not
-// Voronoi/mixed: it is positive for every non-degenerate mesh, obtuse or not.)
-Eigen::VectorXd lumped_mass(const VerticesRef& V, const ElementsRef& F,
-                            double degenerate_tolerance = kDefaultDegenerateTolerance);
-
-// Per-face areas (m) and unit normals (m × 3, along (b − a) × (c − a)).
-Eigen::VectorXd face_areas(const VerticesRef& V, const ElementsRef& F,
-                           double degenerate_tolerance = kDefaultDegenerateTolerance);
-Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> face_normals(
-    const VerticesRef& V, const ElementsRef& F, double degenerate_tolerance = kDefaultDegenerateTolerance);
-
-// Area-weighted vertex normals: n × 3, normalize(Σ_faces∋v area_f · n_f).
-// Zero rows for unreferenced vertices and where the sum cancels exactly.
-Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> vertex_normals(
-    const VerticesRef& V, const ElementsRef& F, double degenerate_tolerance = kDefaultDegenerateTolerance);
-
-// ---- tetrahedral meshes (T m × 4) ----
-
-// n × n cotangent (P1 stiffness) Laplacian, PSD convention above.
 SparseMatrix<double> cotangent_laplacian_tets(const VerticesRef& V, const ElementsRef& T,
                                               double degenerate_tolerance = kDefaultDegenerateTolerance);
 
-// Lumped mass: each tet gives volume/4 to each corner. n entries, Σ = volume.
+// Lumped mass, n entries, 0 for unreferenced vertices. Triangles:
+// barycentric, area/3 to each corner, Σ = total area (barycentric, not
+// Voronoi/mixed: it is positive for every non-degenerate mesh, obtuse or
+// not). Tets: volume/4 to each corner, Σ = volume.
+Eigen::VectorXd lumped_mass(const VerticesRef& V, const ElementsRef& F,
+                            double degenerate_tolerance = kDefaultDegenerateTolerance);
 Eigen::VectorXd lumped_mass_tets(const VerticesRef& V, const ElementsRef& T,
                                  double degenerate_tolerance = kDefaultDegenerateTolerance);
 
-// Per-tet volumes |det[b − a, c − a, d − a]|/6 (m entries, orientation-free).
+// Per-element measures (m entries): face areas; tet volumes
+// |det[b − a, c − a, d − a]|/6 (orientation-free).
+Eigen::VectorXd face_areas(const VerticesRef& V, const ElementsRef& F,
+                           double degenerate_tolerance = kDefaultDegenerateTolerance);
 Eigen::VectorXd tet_volumes(const VerticesRef& V, const ElementsRef& T,
                             double degenerate_tolerance = kDefaultDegenerateTolerance);
+
+// Unit face normals (m × 3, along (b − a) × (c − a)) of a triangle mesh.
+Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> face_normals(
+    const VerticesRef& V, const ElementsRef& F, double degenerate_tolerance = kDefaultDegenerateTolerance);
+
+// Area-weighted vertex normals of a triangle mesh: n × 3,
+// normalize(Σ_faces∋v area_f · n_f). Zero rows for unreferenced vertices and
+// where the sum cancels exactly.
+Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> vertex_normals(
+    const VerticesRef& V, const ElementsRef& F, double degenerate_tolerance = kDefaultDegenerateTolerance);
 
 // ---- either ----
 

@@ -1,0 +1,146 @@
+// Deformer::frame (paper Section 3.2 and the appendix's global rotation
+// adaptation): the handle targets in the frame of r₀, k rounds of Phase 1
+// and Phase 2 warm-started from the last frame, and the reconstruction
+// V′ = r₀·(P·[N UD]·[X; S_local]); reset_pose and the round threads.
+#include "qpreduce/deform/deformer/deformer.h"
+
+#include "state.h"
+
+#include <qpreduce/point_reconstruction.h>
+#include <qpreduce/support.h>
+
+#include <Eigen/LU>
+
+#include <fmt/format.h>
+
+namespace qpreduce::deform {
+namespace {
+
+using detail_deformer::Model;
+using detail_deformer::OnSite;
+using detail_deformer::Pose;
+using detail_deformer::Workspace;
+
+// Sizes and finiteness of the targets; a Rigid patch's transform must be a
+// rotation. Throws std::invalid_argument.
+void check_targets(const Model& model, const Handles& handles, const HandleTargets& targets) {
+  check_size("Deformer::frame: target points", static_cast<Index>(handles.points.size()), targets.points.rows());
+  check_size("Deformer::frame: patch transforms", static_cast<Index>(handles.patches.size()),
+             static_cast<Index>(targets.patch_transforms.size()));
+  if (targets.points.size() > 0) check_finite("Deformer::frame: target points", targets.points);
+  for (size_t i = 0; i < targets.patch_transforms.size(); ++i) {
+    const auto& T = targets.patch_transforms[i];
+    check_finite("Deformer::frame: patch transform", T);
+    const Index p = handles.patches[i];
+    if (model.patch_types[p] == PatchType::Rigid) {
+      const Eigen::Matrix3d A = T.leftCols<3>();
+      const double off = (A.transpose() * A - Eigen::Matrix3d::Identity()).norm();
+      if (off > 1e-6 || A.determinant() <= 0) {
+        throw std::invalid_argument(fmt::format(
+            "Deformer::frame: patch {} is Rigid but its transform is not a rotation (‖AᵀA − I‖ = {:.3e}, det = {:.3e})",
+            p, off, A.determinant()));
+      }
+    }
+  }
+}
+
+// Global rotation adaptation: r₀ from the area-weighted mean of the cluster
+// rotations (identity when disabled).
+Eigen::Matrix3d global_rotation_of(const Model& model, const Eigen::VectorXd& S, bool enabled) {
+  if (!enabled) return Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+  for (Index i = 0; i < model.d; ++i) G += model.cluster_measure(i) * Eigen::Map<const Eigen::Matrix3d>(S.data() + 9 * i);
+  return fit_rotation(G);
+}
+
+// b in the frame rotated by r₀ᵀ: the point targets, the Fixed patches at
+// rest, then the prescribed patches' transforms (the ties' rows stay zero).
+void fill_targets(const Model& model, const HandleTargets& targets, const Eigen::Matrix3d& r0t, Eigen::VectorXd* b) {
+  Index row = 0;
+  for (Index h = 0; h < targets.points.rows(); ++h) {
+    b->segment<3>(row) = r0t * targets.points.row(h).transpose();
+    row += 3;
+  }
+  auto put_patch = [&](const Eigen::Matrix<double, 3, 4>& T) {
+    const Eigen::Matrix3d A = r0t * T.leftCols<3>();
+    const Eigen::Vector3d tr = r0t * T.col(3);
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c) (*b)(row + 3 * a + c) = A(a, c);
+    b->segment<3>(row + 9) = tr;
+    row += 12;
+  };
+  const Eigen::Matrix<double, 3, 4> identity = Eigen::Matrix<double, 3, 4>::Identity();
+  for (size_t i = 0; i < model.fixed_patches.size(); ++i) put_patch(identity);
+  for (const auto& T : targets.patch_transforms) put_patch(T);
+}
+
+// Per cluster: to = R·from (3 × 3 blocks of 9d vectors).
+void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& from, Eigen::VectorXd* to) {
+  for (Index i = 0; i < d; ++i) {
+    Eigen::Map<Eigen::Matrix3d>(to->data() + 9 * i) = R * Eigen::Map<const Eigen::Matrix3d>(from.data() + 9 * i);
+  }
+}
+
+}  // namespace
+
+FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
+  State& st = *state_;
+  const Model& model = st.model;
+  const OnSite& onsite = st.onsite;
+  Pose& pose = st.pose;
+  Workspace& work = st.work;
+  if (!st.ready || !onsite.phase1.ready()) {
+    throw std::invalid_argument("Deformer::frame: call precompute and set_handles first");
+  }
+  check_targets(model, onsite.handles, targets);
+  const Timer total;
+  FrameSummary summary;
+
+  // Solve in the frame rotated by r₀ᵀ.
+  pose.r0 = global_rotation_of(model, pose.S, st.settings.global_rotation);
+  const Eigen::Matrix3d r0t = pose.r0.transpose();
+  fill_targets(model, targets, r0t, &work.b);
+  rotate_clusters(model.d, r0t, pose.S, &work.s_local);
+  Timer t;
+  AlternatingOptions opts = st.settings.alternating;
+  const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
+  if (!onsite.tied_patches.empty()) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
+  summary.iterations = as.iterations;
+  summary.last_change = as.last_change;
+  summary.status = as.status;
+  if (!pose.x.allFinite() || !work.s_local.allFinite()) {
+    summary.status = Status::NumericalFailure;
+    summary.message = "the alternating rounds produced NaN or infinite reduced coordinates";
+  }
+  rotate_clusters(model.d, pose.r0, work.s_local, &pose.S);
+  summary.solve_seconds = t.seconds();
+
+  // Reconstruction V′ = r₀·(P·[N UD]·[X; S_local]), parallel over vertices.
+  t.reset();
+  pose.wf.head(model.nx) = pose.x.cast<float>();
+  pose.wf.tail(9 * model.d) = work.s_local.cast<float>();
+  if (out == nullptr) {  // the caller reconstructs (reconstruction_basis, reduced_coordinates)
+    summary.total_seconds = total.seconds();
+    return summary;
+  }
+  reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out);
+  summary.reconstruct_seconds = t.seconds();
+  summary.total_seconds = total.seconds();
+  return summary;
+}
+
+void Deformer::reset_pose() {
+  Pose& pose = state_->pose;
+  for (Index i = 0; i < state_->model.d; ++i) Eigen::Map<Eigen::Matrix3d>(pose.S.data() + 9 * i).setIdentity();
+  pose.r0.setIdentity();
+  pose.x.setZero();
+}
+
+void Deformer::set_round_threads(int threads) {
+  if (threads < 0) {
+    throw std::invalid_argument(fmt::format("Deformer::set_round_threads: threads must be ≥ 0, got {}", threads));
+  }
+  state_->settings.alternating.threads = threads;
+}
+
+}  // namespace qpreduce::deform

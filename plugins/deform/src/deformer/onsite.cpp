@@ -1,0 +1,138 @@
+// Deformer::set_handles, the on-site step (paper Section 3.2, "OP"): the
+// constraint rows of a handle set in the subspace, A_r = AᵀB, handed to the
+// engine's Phase 1 (FixedCoordinateSolver) and fused rounds; free Rigid
+// patches are tied to their cluster's rotation.
+#include "qpreduce/deform/deformer/deformer.h"
+
+#include "handle_checks.h"
+#include "state.h"
+
+#include <algorithm>
+#include <utility>
+
+namespace qpreduce::deform {
+namespace {
+
+using detail_deformer::Model;
+using detail_deformer::OnSite;
+using detail_deformer::RowMatrixD;
+using detail_deformer::Triplets;
+
+// The constraint matrix A (n_u × cols, as triplets over control rows) of a
+// handle set, in the order of the right-hand side b: 3 rows per point
+// handle, 12 per Fixed patch, 12 per prescribed patch, then 9 per tie.
+struct ConstraintLayout {
+  Triplets a;
+  Index cols = 0;
+  std::vector<Index> tied;  // free Rigid patches
+  Index tie_row0 = 0;       // their first row
+};
+
+// Point handles: the weighted point Σ w_i v_i, one column per axis.
+void add_point_rows(const Model& model, const Handles& handles, ConstraintLayout* out) {
+  for (const PointHandle& ph : handles.points) {
+    for (size_t i = 0; i < ph.vertices.size(); ++i) {
+      const double w = ph.weights.empty() ? 1.0 : ph.weights[i];
+      for (int a = 0; a < 3; ++a) model.control_row(ph.vertices[i], a, w, out->cols + a, &out->a);
+    }
+    out->cols += 3;
+  }
+}
+
+// Fixed and prescribed patches: their 12 transform entries; then the free
+// Rigid patches: t_s = s_c (rows 3a + c of t_s, row-major).
+void add_patch_rows(const Model& model, const Handles& handles, ConstraintLayout* out) {
+  auto add = [&](Index p, int entries) {
+    for (int c = 0; c < entries; ++c) out->a.emplace_back(model.patch_base + 12 * p + c, out->cols + c, 1.0);
+    out->cols += entries;
+  };
+  for (Index p : model.fixed_patches) add(p, 12);
+  for (Index p : handles.patches) add(p, 12);
+  out->tie_row0 = out->cols;
+  for (Index p = 0; p < model.s; ++p) {
+    if (model.patch_types[p] != PatchType::Rigid ||
+        std::find(handles.patches.begin(), handles.patches.end(), p) != handles.patches.end()) {
+      continue;
+    }
+    out->tied.push_back(p);
+    add(p, 9);
+  }
+}
+
+// A_r = AᵀB (cols × p) row by row from rows of B kept row-major: a free
+// vertex's control row r = 3i + a is row 3·free_vertices[i] + a of the float
+// reconstruction basis P·B, a patch unknown's is in patch_rows (AᵀB on the
+// column-major subspace would touch cols·p scattered cache lines); repeated
+// entries simply add up.
+RowMatrixD reduced_constraints(const Model& model, const ConstraintLayout& layout) {
+  RowMatrixD Ar = RowMatrixD::Zero(layout.cols, model.nx + 9 * model.d);
+  for (const auto& e : layout.a) {
+    const Index r = e.row();
+    if (r < model.patch_base) {
+      const Index v = model.free_vertices[static_cast<size_t>(r / 3)];
+      Ar.row(e.col()) += e.value() * model.basis.row(3 * v + r % 3).cast<double>();
+    } else {
+      Ar.row(e.col()) += e.value() * model.patch_rows.row(r - model.patch_base);
+    }
+  }
+  return Ar;
+}
+
+// tie_map = M_b[:, ties]·E (nx × 9d; only formed when there are ties, and
+// frame() reads it only then).
+void make_tie_map(const Model& model, const ConstraintLayout& layout, OnSite* onsite) {
+  if (layout.tied.empty()) {
+    onsite->tie_map.resize(0, 0);
+  } else {
+    onsite->tie_map.setZero(model.nx, 9 * model.d);
+  }
+  for (size_t i = 0; i < layout.tied.size(); ++i) {
+    const Index k = model.rigid_cluster_of_patch[layout.tied[i]];
+    for (int a = 0; a < 3; ++a)
+      for (int c = 0; c < 3; ++c)
+        onsite->tie_map.col(9 * k + 3 * c + a) +=
+            onsite->phase1.Mb().col(layout.tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
+  }
+}
+
+// The fused rounds for this handle set: Phase 2 sees G_z = M_N and
+// G_y = M_U, or M_U + M_N·tie_map with ties.
+void set_fused(const Model& model, bool tied, int threads, FusedPrecision precision, OnSite* onsite) {
+  if (!tied && onsite->fused_inputs_plain) {
+    // G_z = M_N, G_y = M_U as last time: not compared again
+    onsite->fused.set(onsite->phase1, threads, FusedForm::Automatic, precision);
+  } else if (!tied) {
+    onsite->fused.set(onsite->phase1, model.MN, model.MU, threads, FusedForm::Automatic, precision);
+    onsite->fused_inputs_plain = true;
+  } else {
+    onsite->MU_tied = model.MU + model.MN * onsite->tie_map;
+    onsite->fused.set(onsite->phase1, model.MN, onsite->MU_tied, threads, FusedForm::Automatic, precision);
+    onsite->fused_inputs_plain = false;
+  }
+}
+
+}  // namespace
+
+ConstraintSummary Deformer::set_handles(const Handles& handles, const ConstraintOptions& options) {
+  State& st = *state_;
+  if (!st.ready) throw std::invalid_argument("Deformer::set_handles: call precompute first");
+  const Model& model = st.model;
+  OnSite& onsite = st.onsite;
+  detail_deformer::check_handles(handles, model.n, model.patch_types);
+  ConstraintLayout layout;
+  add_point_rows(model, handles, &layout);
+  add_patch_rows(model, handles, &layout);
+  const RowMatrixD Ar = reduced_constraints(model, layout);
+  const ConstraintSummary cs =
+      onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+  make_tie_map(model, layout, &onsite);
+  set_fused(model, !layout.tied.empty(), options.threads, st.fused_precision(), &onsite);
+  onsite.tied_patches = std::move(layout.tied);
+  onsite.tie_row0 = layout.tie_row0;
+  onsite.handles = handles;
+  onsite.rows = layout.cols;
+  st.work.b.setZero(layout.cols);
+  return cs;
+}
+
+}  // namespace qpreduce::deform

@@ -1,0 +1,331 @@
+// Deformer::precompute, in the order of the paper's algorithm (Sections 4–5):
+// rotational clusters and linear proxies, the energy in the control layer,
+// the variational subspace (Eq. 14–15), the reduced operators of Phase 2 and
+// the reconstruction, and the Phase 1 preparation (State::finish).
+#include "qpreduce/deform/deformer/deformer.h"
+
+#include "sparse_products.h"
+#include "state.h"
+
+#include <qpreduce/support.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <optional>
+#include <utility>
+
+namespace qpreduce::deform {
+namespace {
+
+using detail_deformer::CompactMesh;
+using detail_deformer::Model;
+using detail_deformer::Triplets;
+using Groups = std::vector<std::vector<Index>>;
+
+// The mesh the automatic proxies are placed on: the referenced part (a
+// compacted copy when some vertex is unreferenced, else the mesh itself).
+struct ProxyMesh {
+  const CompactMesh* compact;  // null: the mesh itself
+  VerticesRef V;
+  ElementsRef E;
+};
+
+// The rotational clusters: the mesh's labels, or clusters of the referenced
+// part (surfaces: one label per vertex; an unreferenced vertex is an element
+// without edges, labelled 0); then each Rigid patch's own. Returns false with
+// *summary set when the clustering fails.
+bool make_rotation_clusters(Model& model, const DeformableMesh& mesh, const DeformerOptions& options,
+                            const ProxyMesh& pm, PrecomputeSummary* summary) {
+  const Index r = model.elements.size();
+  if (!mesh.clusters.empty()) {
+    check_size("DeformableMesh::clusters size", r, static_cast<Index>(mesh.clusters.size()));
+    for (Index k = 0; k < r; ++k) {
+      if (mesh.clusters[k] < 0) {
+        throw std::invalid_argument(fmt::format("DeformableMesh::clusters: element {} has negative label {}", k,
+                                                mesh.clusters[k]));
+      }
+    }
+    model.set_clusters(mesh.clusters, 1 + *std::max_element(mesh.clusters.begin(), mesh.clusters.end()));
+  } else {
+    const bool tet = mesh.is_tet();
+    Clustering clustering;
+    const ClusterSummary cs = compute_rotation_clusters(pm.V, pm.E, tet ? ClusterElement::Element : ClusterElement::Vertex,
+                                                        options.rotational_proxies, options.clustering, &clustering);
+    if (!cs.ok()) {
+      summary->status = cs.status;
+      summary->message = "rotational clusters: " + cs.message;
+      return false;
+    }
+    std::vector<int> labels = std::move(clustering.labels);
+    if (!tet && pm.compact) {
+      std::vector<int> full(static_cast<size_t>(model.n), 0);
+      for (size_t i = 0; i < pm.compact->old_of_new.size(); ++i)
+        full[static_cast<size_t>(pm.compact->old_of_new[i])] = labels[i];
+      labels = std::move(full);
+    }
+    model.set_clusters(std::move(labels), clustering.count);
+  }
+  model.separate_rigid_clusters(mesh.T);
+  return true;
+}
+
+// The linear proxy groups (the mesh's, or farthest-point samples of the
+// referenced part in original indices), restricted to free vertices; sets m
+// and nx.
+Groups make_linear_proxies(Model& model, const DeformableMesh& mesh, const DeformerOptions& options,
+                           const ProxyMesh& pm) {
+  LinearProxies proxies = mesh.linear;
+  if (proxies.count() == 0) {
+    proxies = linear_proxies_fps(pm.V, pm.E, options.linear_proxies);
+    if (pm.compact)
+      for (auto& g : proxies.groups)
+        for (Index& v : g) v = pm.compact->old_of_new[static_cast<size_t>(v)];
+  }
+  const Index n = model.n;
+  Groups groups;
+  for (const auto& g : proxies.groups) {
+    std::vector<Index> kept;
+    for (Index v : g) {
+      if (v < 0 || v >= n) throw std::invalid_argument(fmt::format("linear proxies: vertex {} outside [0, {})", v, n));
+      if (model.control_of_free[v] >= 0) kept.push_back(v);
+    }
+    if (!kept.empty()) groups.push_back(std::move(kept));
+  }
+  model.m = static_cast<Index>(groups.size());
+  model.nx = 3 * model.m + 12 * model.s;
+  return groups;
+}
+
+// Every connected component needs a proxy or a patch, else the KKT system
+// (Eq. 14) is singular. Throws std::invalid_argument naming the component.
+void check_components_pinned(const Model& model, const Groups& groups) {
+  const MeshComponents& comps = model.components;
+  std::vector<char> pinned(static_cast<size_t>(comps.count), 0);
+  for (const auto& g : groups)
+    for (Index v : g) pinned[static_cast<size_t>(comps.vertex_component[v])] = 1;
+  for (Index v = 0; v < model.n; ++v)
+    if (model.control_of_free[v] < 0) pinned[static_cast<size_t>(comps.vertex_component[v])] = 1;
+  for (Index c = 0; c < comps.count; ++c) {
+    if (!pinned[c]) {
+      throw std::invalid_argument(fmt::format(
+          "DeformableMesh: connected component {} of {} has no linear proxy and no patch; the KKT system (Eq. 14) "
+          "would be singular (use at least {} linear proxies, or patch that component)",
+          c, comps.count, comps.count));
+    }
+  }
+}
+
+// The energy in the control layer u: E(u, S) = ½uᵀH_u u − Sᵀ D_uᵀ u + c(S),
+// with D_V the rotational term of V′ for the Phase 2 matrices, and P.
+struct ControlSystem {
+  SparseMatrix<double> Hu;  // n_u × n_u
+  SparseMatrix<double> Du;  // n_u × 9d
+  SparseMatrix<double> DV;  // 3n × 9d
+  SparseMatrix<double> P;   // 3n × n_u
+};
+
+// Q eliminated (the model's L_QQ is block diagonal): H_u = PᵀHP, D_u = PᵀD_s.
+ControlSystem eliminated_control_system(const Model& model, const ModifiedArapSystem& full) {
+  ControlSystem cs;
+  EliminatedArapSystem elim = eliminate_rotation_corrections(full);
+  cs.P = model.control_matrix();
+  if (detail_deformer::is_identity(cs.P)) {  // every vertex free, no patch: u = V′
+    cs.Hu = std::move(elim.H);
+    cs.Du = std::move(elim.Ds);
+  } else {
+    const SparseMatrix<double> Pt = cs.P.transpose();
+    cs.Hu = detail_deformer::parallel_product(Pt, detail_deformer::parallel_product(elim.H, cs.P));
+    cs.Du = detail_deformer::parallel_product(Pt, elim.Ds);
+  }
+  cs.DV = std::move(elim.DV);
+  return cs;
+}
+
+// Q kept: u = [control (n_u − 4r); Q], [V′; Q] = blockdiag(P_V, I)·u.
+ControlSystem kept_q_control_system(Model& model, const ModifiedArapSystem& full) {
+  ControlSystem cs;
+  model.keep_rotation_corrections();
+  cs.P = model.control_matrix();
+  const Index n = model.n, r = model.elements.size();
+  SparseMatrix<double> Pfull(3 * n + 4 * r, model.nu);
+  {
+    Triplets tp;
+    tp.reserve(static_cast<size_t>(cs.P.nonZeros() + 4 * r));
+    for (Index c = 0; c < cs.P.outerSize(); ++c)
+      for (SparseMatrix<double>::InnerIterator it(cs.P, c); it; ++it) tp.emplace_back(it.row(), c, it.value());
+    const Index q0 = model.patch_base + 12 * model.s;
+    for (Index i = 0; i < 4 * r; ++i) tp.emplace_back(3 * n + i, q0 + i, 1.0);
+    Pfull.setFromTriplets(tp.begin(), tp.end());
+  }
+  const SparseMatrix<double> Pt = Pfull.transpose();
+  cs.Hu = Pt * full.L * Pfull;
+  cs.Hu = 0.5 * (cs.Hu + SparseMatrix<double>(cs.Hu.transpose()));
+  cs.Du = Pt * full.D;
+  cs.DV = full.D.topRows(3 * n);
+  return cs;
+}
+
+// The model's energy (Q eliminated when L_QQ is block diagonal), then the
+// control layer. The full system is freed before the factorization.
+ControlSystem assemble_control_system(Model& model, const DeformableMesh& mesh) {
+  const ModifiedArapSystem full = model.energy_model->assemble(mesh.V, model.elements, model.clusters, model.d);
+  check_size("DeformationModel::assemble: L rows", 3 * model.n + 4 * model.elements.size(), full.L.rows());
+  check_size("DeformationModel::assemble: D columns", 9 * model.d, full.D.cols());
+  return full.q_separable ? eliminated_control_system(model, full) : kept_q_control_system(model, full);
+}
+
+// C (n_u × nx): the linear proxies (group means of free vertices, Ŵ ⊗ I₃)
+// and the patch unknowns (Eq. 47) as columns of the constraint matrix.
+SparseMatrix<double> proxy_selection(const Model& model, const Groups& groups) {
+  Triplets tc;
+  for (Index j = 0; j < model.m; ++j) {
+    const double w = 1.0 / static_cast<double>(groups[j].size());
+    for (Index v : groups[j])
+      for (int a = 0; a < 3; ++a) tc.emplace_back(model.control_of_free[v] + a, 3 * j + a, w);
+  }
+  for (Index p = 0; p < model.s; ++p)
+    for (int c = 0; c < 12; ++c) tc.emplace_back(model.patch_base + 12 * p + c, 3 * model.m + 12 * p + c, 1.0);
+  SparseMatrix<double> C(model.nu, model.nx);
+  C.setFromTriplets(tc.begin(), tc.end());
+  return C;
+}
+
+// Augment with the cheapest columns: every patch column (one entry each) and,
+// when groups are long, only the shortest group's three columns of each
+// component (one group per component suffices).
+void choose_augment_columns(const Model& model, const Groups& groups, const SparseMatrix<double>& Hu,
+                            SubspaceOptions* sub) {
+  double fill = 0.0;
+  for (const auto& g : groups) fill += 3.0 * static_cast<double>(g.size() * g.size());
+  if (!(fill > sub->max_augmentation_fill * static_cast<double>(Hu.nonZeros()) && model.m > 0)) return;
+  const MeshComponents& comps = model.components;
+  std::vector<Index> best(static_cast<size_t>(comps.count), -1);
+  for (Index j = 0; j < model.m; ++j) {
+    const int c = comps.vertex_component[groups[j].front()];
+    if (best[c] < 0 || groups[j].size() < groups[best[c]].size()) best[c] = j;
+  }
+  for (Index j : best)
+    if (j >= 0)
+      for (int a = 0; a < 3; ++a) sub->augment_columns.push_back(3 * j + a);
+  for (Index c = 3 * model.m; c < model.nx; ++c) sub->augment_columns.push_back(c);
+}
+
+// Order the factorization by vertex (its three coordinates together), by
+// patch (its 12 transform entries) and by element (its 4 entries of Q, when
+// kept): the quotient graph is three to nine times smaller than the unknowns'
+// graph.
+void choose_ordering_groups(const Model& model, SubspaceOptions* sub) {
+  const Index nu = model.nu;
+  sub->ordering_groups.assign(static_cast<size_t>(nu), -1);
+  Index group = 0;
+  for (Index v = 0; v < model.n; ++v) {
+    const Index base = model.control_of_free[v];
+    if (base < 0) continue;
+    for (int a = 0; a < 3; ++a) sub->ordering_groups[static_cast<size_t>(base + a)] = group;
+    ++group;
+  }
+  for (Index p = 0; p < model.s; ++p, ++group)
+    for (int c = 0; c < 12; ++c) sub->ordering_groups[static_cast<size_t>(model.patch_base + 12 * p + c)] = group;
+  for (Index i = model.patch_base + 12 * model.s; i < nu; i += 4, ++group)
+    for (Index c = i; c < std::min(i + 4, nu); ++c) sub->ordering_groups[static_cast<size_t>(c)] = group;
+}
+
+// The engine's subspace options for this model: the user's, with the
+// augmentation columns and the ordering groups filled in when not given.
+SubspaceOptions subspace_options(const Model& model, const DeformerOptions& options, const Groups& groups,
+                                 const SparseMatrix<double>& Hu) {
+  SubspaceOptions sub = options.subspace;
+  // Phase 1 holds the rotational coordinates fixed (y = S), so U·D need not
+  // have full rank: rotations whose effect the linear proxies or patches
+  // already pin (all of them, with a proxy at every vertex) are legitimate.
+  sub.check_dependent_cd = false;
+  if (sub.augment_columns.empty()) choose_augment_columns(model, groups, Hu, &sub);
+  if (sub.ordering_groups.empty()) choose_ordering_groups(model, &sub);
+  return sub;
+}
+
+// The reconstruction basis P·[N UD] and the Phase 2 matrices
+// M_N, M_U = (D_Vᵀ·P)·[N UD], with the sparse 9d × n_u factor first, and the
+// float basis block by block: no 3n × p double copy of P·[N UD].
+void reduce_operators(Model& model, const SparseMatrix<double>& DV, const SparseMatrix<double>& P) {
+  const SparseMatrix<double> DVtP = SparseMatrix<double>(DV.transpose()) * P;
+  model.MN = DVtP * model.solver.subspace().N;
+  model.MU = DVtP * model.solver.subspace().UD;
+  model.make_basis(P);
+}
+
+}  // namespace
+
+PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
+                                       const ProgressFn& progress) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+  auto report = [&](const char* stage, double f) {
+    if (progress) progress(stage, f);
+  };
+  const Timer total;
+  auto st = std::make_unique<State>();
+  Model& model = st->model;
+  PrecomputeSummary summary;
+  model.set_topology(mesh);
+  st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
+  model.energy_model = options.resolve_model();
+
+  // The automatic proxies are placed on the referenced part of the mesh: a
+  // compacted copy only when some vertex is unreferenced, made once.
+  const ElementsRef E = mesh.is_tet() ? ElementsRef(mesh.T) : ElementsRef(mesh.F);
+  std::optional<CompactMesh> compact;
+  if (!model.unreferenced.empty() && (mesh.clusters.empty() || mesh.linear.count() == 0)) {
+    compact = detail_deformer::compact_mesh(mesh.V, E, model.unreferenced);
+  }
+  const ProxyMesh pm{compact ? &*compact : nullptr, compact ? VerticesRef(compact->V) : VerticesRef(mesh.V),
+                     compact ? ElementsRef(compact->E) : E};
+
+  report("clusters", 0.0);
+  Timer t;
+  if (!make_rotation_clusters(model, mesh, options, pm, &summary)) return summary;
+  summary.clustering_seconds = t.seconds();
+
+  report("linear proxies", 0.1);
+  const Groups groups = make_linear_proxies(model, mesh, options, pm);
+  check_components_pinned(model, groups);
+
+  report("energy", 0.15);
+  t.reset();
+  const ControlSystem system = assemble_control_system(model, mesh);
+  const SparseMatrix<double> C = proxy_selection(model, groups);
+  summary.assembly_seconds = t.seconds();
+  const SubspaceOptions sub = subspace_options(model, options, groups, system.Hu);
+
+  report("subspace", 0.2);
+  // The assembly's freed temporaries (about 300 MB on the Bumpy Plane) would
+  // otherwise stay resident under the build's peak (factor plus solution).
+  release_free_heap();
+  t.reset();
+  summary.subspace = model.solver.precompute(system.Hu, C, system.Du, sub);
+  summary.subspace_seconds = t.seconds();
+  if (!summary.subspace.ok()) {
+    summary.status = summary.subspace.status;
+    summary.message = "variational subspace: " + summary.subspace.message;
+    return summary;
+  }
+
+  report("reduction", 0.9);
+  t.reset();
+  reduce_operators(model, system.DV, system.P);
+  summary.reduction_seconds = t.seconds();
+
+  st->finish(options);
+  state_ = std::move(st);
+  reset_pose();
+  report("done", 1.0);
+
+  summary.status = Status::Success;
+  summary.message = "precomputed";
+  detail_deformer::describe(state_->model, &summary);
+  summary.total_seconds = total.seconds();
+  return summary;
+}
+
+}  // namespace qpreduce::deform

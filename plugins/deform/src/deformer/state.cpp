@@ -1,0 +1,251 @@
+// The deformer's model set-up (state.h): the compacted proxy mesh, the
+// topology and control layer, the rotational clusters with the Rigid patches'
+// own, the control matrix P, the float basis P·[N UD], and the hand-over to
+// the on-site step (State::finish).
+#include "state.h"
+
+#include "deformer/handle_checks.h"
+
+#include <qpreduce/support.h>
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <utility>
+
+namespace qpreduce::deform {
+namespace detail_deformer {
+
+CompactMesh compact_mesh(const Vertices& V, const ElementsRef& E,
+                                          const std::vector<Index>& unreferenced) {
+  CompactMesh cm;
+  const Index n = V.rows();
+  std::vector<Index> new_of_old(static_cast<size_t>(n), -1);
+  size_t next_unref = 0;
+  for (Index v = 0; v < n; ++v) {
+    if (next_unref < unreferenced.size() && unreferenced[next_unref] == v) {
+      ++next_unref;
+      continue;
+    }
+    new_of_old[static_cast<size_t>(v)] = static_cast<Index>(cm.old_of_new.size());
+    cm.old_of_new.push_back(v);
+  }
+  cm.V.resize(static_cast<Index>(cm.old_of_new.size()), 3);
+  for (size_t i = 0; i < cm.old_of_new.size(); ++i) cm.V.row(static_cast<Index>(i)) = V.row(cm.old_of_new[i]);
+  cm.E.resize(E.rows(), E.cols());
+  for (Index e = 0; e < E.rows(); ++e)
+    for (Index c = 0; c < E.cols(); ++c) cm.E(e, c) = static_cast<int>(new_of_old[static_cast<size_t>(E(e, c))]);
+  return cm;
+}
+
+void Model::set_topology(const DeformableMesh& mesh) {
+  check_mesh_elements(mesh, "DeformableMesh");
+  check_patch_labels(mesh, "DeformableMesh");
+  const bool tet = mesh.is_tet();
+  rest = mesh.V;
+  n = mesh.V.rows();
+  patch_of_vertex = mesh.patch_of_vertex;
+  patch_types = mesh.patch_types;
+  // Vertices used by no element carry no energy: an internal Fixed patch
+  // holds those that are not in a patch already at their rest positions.
+  const ElementsRef E = tet ? ElementsRef(mesh.T) : ElementsRef(mesh.F);
+  components = connected_components(n, E);
+  unreferenced = components.unreferenced;
+  std::vector<Index> loose;
+  for (Index v : unreferenced)
+    if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) loose.push_back(v);
+  if (!loose.empty()) {
+    if (patch_of_vertex.empty()) patch_of_vertex.assign(static_cast<size_t>(n), -1);
+    for (Index v : loose) patch_of_vertex[v] = static_cast<int>(patch_types.size());
+    patch_types.push_back(PatchType::Fixed);
+  }
+  s = static_cast<Index>(patch_types.size());
+  std::vector<Index> patch_size(static_cast<size_t>(s), 0);
+  for (int p : patch_of_vertex)
+    if (p >= 0) ++patch_size[static_cast<size_t>(p)];
+  fixed_patches.clear();
+  for (Index p = 0; p < s; ++p) {
+    if (patch_size[p] == 0) throw std::invalid_argument(fmt::format("DeformableMesh: patch {} has no vertex", p));
+    if (patch_types[p] == PatchType::Fixed) fixed_patches.push_back(p);
+  }
+  control_of_free.assign(static_cast<size_t>(n), -1);
+  Index free_count = 0;
+  for (Index v = 0; v < n; ++v)
+    if (patch_of_vertex.empty() || patch_of_vertex[v] < 0) control_of_free[v] = 3 * free_count++;
+  patch_base = 3 * free_count;
+  nu = patch_base + 12 * s;
+  keep_q = false;
+  elements = tet ? tet_elements(mesh.V, mesh.T) : spokes_and_rims_elements(mesh.V, mesh.F);
+}
+
+void Model::keep_rotation_corrections() {
+  if (keep_q) return;
+  keep_q = true;
+  nu += 4 * elements.size();
+}
+
+void Model::set_clusters(std::vector<int> labels, Index count) {
+  const Index r = elements.size();
+  check_size("rotational cluster labels", r, static_cast<Index>(labels.size()));
+  std::vector<Index> size(static_cast<size_t>(count), 0);
+  for (Index k = 0; k < r; ++k) {
+    if (labels[k] < 0 || labels[k] >= count) {
+      throw std::invalid_argument(fmt::format("rotational clusters: element {} has label {} outside [0, {})", k,
+                                              labels[k], count));
+    }
+    ++size[static_cast<size_t>(labels[k])];
+  }
+  for (Index c = 0; c < count; ++c)
+    if (size[c] == 0) throw std::invalid_argument(fmt::format("rotational clusters: cluster {} is empty", c));
+  clusters = std::move(labels);
+  d = count;
+  cluster_measure = Eigen::VectorXd::Zero(d);
+  for (Index k = 0; k < r; ++k) cluster_measure(clusters[k]) += elements.measure(k);
+}
+
+std::vector<Index> Model::patch_elements(Index p, const Tetrahedra& T) const {
+  std::vector<Index> out;
+  if (T.rows() == 0) {
+    for (Index v = 0; v < n; ++v)
+      if (patch_of_vertex[v] == p) out.push_back(v);
+    return out;
+  }
+  for (int need = 4; need >= 1 && out.empty(); need -= 3) {  // all four corners, else any
+    for (Index t = 0; t < T.rows(); ++t) {
+      int inside = 0;
+      for (int c = 0; c < 4; ++c) inside += patch_of_vertex[T(t, c)] == p;
+      if (inside >= need) out.push_back(t);
+    }
+  }
+  return out;
+}
+
+void Model::separate_rigid_clusters(const Tetrahedra& T) {
+  rigid_cluster_of_patch.assign(static_cast<size_t>(s), -1);
+  std::vector<int> labels = clusters;
+  std::vector<char> taken(labels.size(), 0);
+  int next = static_cast<int>(d);
+  std::vector<Index> rigid;
+  for (Index p = 0; p < s; ++p) {
+    if (patch_types[p] != PatchType::Rigid) continue;
+    rigid.push_back(p);
+    for (Index k : patch_elements(p, T)) {
+      if (taken[k]) continue;  // a tet touching two rigid patches stays with the first
+      taken[k] = 1;
+      labels[k] = next;
+    }
+    ++next;
+  }
+  if (rigid.empty()) return;
+  // Drop emptied clusters, keeping the order.
+  std::vector<int> remap(static_cast<size_t>(next), -1);
+  for (int l : labels) remap[l] = 0;
+  int count = 0;
+  for (int& r : remap)
+    if (r == 0) r = count++;
+  for (int& l : labels) l = remap[l];
+  for (size_t i = 0; i < rigid.size(); ++i) {
+    const int c = remap[d + static_cast<Index>(i)];
+    if (c < 0) throw std::invalid_argument(fmt::format("Rigid patch {} has no element", rigid[i]));
+    rigid_cluster_of_patch[rigid[i]] = c;
+  }
+  set_clusters(std::move(labels), count);
+}
+
+void Model::find_rigid_clusters(const Tetrahedra& T) {
+  rigid_cluster_of_patch.assign(static_cast<size_t>(s), -1);
+  for (Index p = 0; p < s; ++p) {
+    if (patch_types[p] != PatchType::Rigid) continue;
+    const std::vector<Index> el = patch_elements(p, T);
+    if (el.empty()) throw std::invalid_argument(fmt::format("Rigid patch {} has no element", p));
+    const int c = clusters[el.front()];
+    for (Index k : el)
+      if (clusters[k] != c) throw std::invalid_argument(fmt::format("Rigid patch {} spans several clusters", p));
+    rigid_cluster_of_patch[p] = c;
+  }
+}
+
+void Model::control_row(Index v, int a, double scale, Index col, Triplets* t) const {
+  const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
+  if (p < 0) {
+    t->emplace_back(control_of_free[v] + a, col, scale);
+    return;
+  }
+  const Index base = patch_base + 12 * p;
+  for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
+  t->emplace_back(base + 9 + a, col, scale);
+}
+
+SparseMatrix<double> Model::control_matrix() const {
+  Triplets tp, row;
+  tp.reserve(static_cast<size_t>(3 * n) * 4);
+  for (Index v = 0; v < n; ++v)
+    for (int a = 0; a < 3; ++a) {
+      row.clear();
+      control_row(v, a, 1.0, 0, &row);
+      for (const auto& e : row) tp.emplace_back(3 * v + a, e.row(), e.value());
+    }
+  SparseMatrix<double> P(3 * n, nu);
+  P.setFromTriplets(tp.begin(), tp.end());
+  return P;
+}
+
+void Model::make_basis(const SparseMatrix<double>& P) {
+  const Matrix<double>& N = solver.subspace().N;
+  const Matrix<double>& U = solver.subspace().UD;
+  basis.resize(3 * n, nx + 9 * d);
+  constexpr Index kBlock = 32;  // columns per double temporary (3n × 32)
+  for (Index j = 0; j < nx + 9 * d; j += kBlock) {
+    const Index w = std::min(kBlock, nx + 9 * d - j);
+    Matrix<double> block(nu, w);
+    for (Index c = 0; c < w; ++c) block.col(c) = j + c < nx ? N.col(j + c) : U.col(j + c - nx);
+    basis.middleCols(j, w) = (P * block).cast<float>();
+  }
+}
+
+void Model::finish_reduction() {
+  std::vector<char> rigid(static_cast<size_t>(d), 0);
+  for (Index c : rigid_cluster_of_patch)
+    if (c >= 0) rigid[static_cast<size_t>(c)] = 1;
+  projection = energy_model->projection(cluster_geometry(rest, elements, clusters, d, std::move(rigid)));
+  const Matrix<double>& N = solver.subspace().N;
+  const Matrix<double>& U = solver.subspace().UD;
+  patch_rows.resize(12 * s, nx + 9 * d);
+  for (Index i = 0; i < 12 * s; ++i) patch_rows.row(i) << N.row(patch_base + i), U.row(patch_base + i);
+  free_vertices.assign(static_cast<size_t>(patch_base / 3), -1);
+  for (Index v = 0; v < n; ++v)
+    if (control_of_free[v] >= 0) free_vertices[static_cast<size_t>(control_of_free[v] / 3)] = v;
+}
+
+void describe(const Model& model, PrecomputeSummary* summary) {
+  summary->vertices = model.n;
+  summary->elements = model.elements.size();
+  summary->rotational_proxies = model.d;
+  summary->linear_proxies = model.m;
+  summary->patches = model.s;
+  summary->reduced_size = model.nx + 9 * model.d;
+}
+
+}  // namespace detail_deformer
+
+void Deformer::State::finish(const DeformerOptions& options) {
+  model.finish_reduction();
+  const Index d = model.d, nx = model.nx;
+  pose.S.resize(9 * d);
+  pose.x = Eigen::VectorXd::Zero(nx);
+  pose.wf.resize(nx + 9 * d);
+  work.s_local.resize(9 * d);
+  settings.alternating.iterations = options.iterations;
+  settings.alternating.float_products = options.float_rounds;
+  settings.alternating.threads = options.round_threads;
+  settings.global_rotation = options.global_rotation;
+  // Phase 1's and the fused rounds' per-solver parts (H_zz's lifted inverse,
+  // its responses P0, C0 = M_N·P0) belong to the precompute: the first handle
+  // set then costs what the later ones do.
+  onsite.phase1.prepare(model.solver);
+  onsite.fused.prepare(onsite.phase1, model.MN, model.MU, fused_precision());
+  onsite.fused_inputs_plain = true;
+  ready = true;
+}
+
+}  // namespace qpreduce::deform

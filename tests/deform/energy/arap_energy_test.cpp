@@ -1,0 +1,205 @@
+// The modified ARAP energy E′ (Eq. 6–10), its Q elimination, the classic
+// ARAP energy, and fit_rotation (Phase 2 of the ARAP model).
+#include <catch2/catch.hpp>
+
+#include "qpreduce/deform/energy/arap_energy.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
+#include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
+
+#include <random>
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+
+namespace {
+
+Eigen::Matrix3d rotation(double angle, Eigen::Vector3d axis) {
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+// Small surface and solid used throughout.
+TriangleMesh small_cylinder() { return shapes::capped_cylinder(1.0, 3.0, 8, 6); }
+TetMesh small_box() { return shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 3); }
+
+std::vector<int> round_robin_clusters(Index r, Index d) {
+  std::vector<int> c(static_cast<size_t>(r));
+  for (Index k = 0; k < r; ++k) c[k] = static_cast<int>((k * d) / r);
+  return c;
+}
+
+Eigen::VectorXd random_vector(Index n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N;
+  Eigen::VectorXd v(n);
+  for (Index i = 0; i < n; ++i) v(i) = N(rng);
+  return v;
+}
+
+Eigen::VectorXd rotations_vector(Index d, unsigned seed) {
+  Eigen::VectorXd S(9 * d);
+  for (Index i = 0; i < d; ++i) {
+    const Eigen::VectorXd a = random_vector(4, seed + static_cast<unsigned>(i));
+    Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i) = rotation(a(0), a.tail(3));
+  }
+  return S;
+}
+
+struct EnergyCase {
+  Vertices V;
+  RotationElements el;
+  std::vector<int> clusters;
+  Index d = 3;
+};
+
+EnergyCase energy_case(bool tet) {
+  EnergyCase c;
+  if (tet) {
+    const TetMesh m = small_box();
+    c.V = m.V;
+    c.el = tet_elements(m.V, m.T);
+  } else {
+    const TriangleMesh m = small_cylinder();
+    c.V = m.V;
+    c.el = spokes_and_rims_elements(m.V, m.F);
+  }
+  c.clusters = round_robin_clusters(c.el.size(), c.d);
+  return c;
+}
+
+// u = [V′ interleaved; Q].
+Eigen::VectorXd pack(const Vertices& Vp, const Eigen::VectorXd& Q) {
+  Eigen::VectorXd u(3 * Vp.rows() + Q.size());
+  for (Index i = 0; i < Vp.rows(); ++i) u.segment<3>(3 * i) = Vp.row(i).transpose();
+  u.tail(Q.size()) = Q;
+  return u;
+}
+
+}  // namespace
+
+TEST_CASE("E′ assembled as ½uᵀLu − SᵀDᵀu + c(S) equals the term-by-term energy", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const EnergyCase c = energy_case(tet);
+  const EnergyParameters params{0.3, tet ? 0.0 : 0.2};
+  const ModifiedArapSystem sys = assemble_modified_arap(c.V, c.el, c.clusters, c.d, params);
+  const Index n = c.V.rows(), r = c.el.size();
+  REQUIRE(sys.L.rows() == 3 * n + 4 * r);
+  REQUIRE(sys.D.cols() == 9 * c.d);
+
+  // Symmetric and PSD.
+  const Matrix<double> L(sys.L);
+  CHECK((L - L.transpose()).norm() <= 1e-12 * L.norm());
+  const Eigen::VectorXd ev = Eigen::SelfAdjointEigenSolver<Matrix<double>>(L).eigenvalues();
+  CHECK(ev.minCoeff() >= -1e-10 * ev.maxCoeff());
+
+  Vertices Vp = c.V;
+  Vp += 0.1 * Eigen::Map<const Vertices>(random_vector(3 * n, 1).data(), n, 3);
+  const Eigen::VectorXd Q = 0.05 * random_vector(4 * r, 2);
+  const Eigen::VectorXd S = rotations_vector(c.d, 3);
+  const Eigen::VectorXd u = pack(Vp, Q);
+  // Constant term ½ Σ c ‖s e‖² = E′(0, 0, S).
+  const double constant = modified_arap_energy(c.V, c.el, c.clusters, params, Vertices::Zero(n, 3),
+                                               Eigen::VectorXd::Zero(4 * r), S);
+  const double assembled = 0.5 * u.dot(sys.L * u) - S.dot(sys.D.transpose() * u) + constant;
+  const double direct = modified_arap_energy(c.V, c.el, c.clusters, params, Vp, Q, S);
+  CHECK(assembled == Approx(direct).epsilon(1e-10));
+
+  // Gradient Lu − DS against central finite differences of the direct energy.
+  const Eigen::VectorXd grad = sys.L * u - sys.D * S;
+  double worst = 0.0;
+  for (Index i = 0; i < u.size(); i += std::max<Index>(1, u.size() / 40)) {
+    const double h = 1e-6;
+    Eigen::VectorXd up = u, um = u;
+    up(i) += h;
+    um(i) -= h;
+    auto energy_of = [&](const Eigen::VectorXd& x) {
+      Vertices V2(n, 3);
+      for (Index v = 0; v < n; ++v) V2.row(v) = x.segment<3>(3 * v).transpose();
+      return modified_arap_energy(c.V, c.el, c.clusters, params, V2, x.tail(4 * r), S);
+    };
+    const double fd = (energy_of(up) - energy_of(um)) / (2 * h);
+    worst = std::max(worst, std::abs(fd - grad(i)) / (1.0 + std::abs(grad(i))));
+  }
+  CHECK(worst < 1e-6);
+}
+
+TEST_CASE("eliminating Q gives the minimum of E′ over Q", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const EnergyCase c = energy_case(tet);
+  const EnergyParameters params{0.2, tet ? 0.0 : 0.4};
+  const ModifiedArapSystem sys = assemble_modified_arap(c.V, c.el, c.clusters, c.d, params);
+  const EliminatedArapSystem e = eliminate_rotation_corrections(sys);
+  const Index n = c.V.rows(), r = c.el.size(), nv = 3 * n;
+  const Eigen::VectorXd V = 0.3 * random_vector(nv, 4), S = rotations_vector(c.d, 5);
+  // Minimise over Q directly: L_QQ Q = D_Q S − L_QV V.
+  const Matrix<double> L(sys.L);
+  const Matrix<double> D(sys.D);
+  const Eigen::VectorXd Q = L.bottomRightCorner(4 * r, 4 * r).ldlt().solve(D.bottomRows(4 * r) * S -
+                                                                             L.bottomLeftCorner(4 * r, nv) * V);
+  Eigen::VectorXd u(nv + 4 * r);
+  u << V, Q;
+  const double full = 0.5 * u.dot(L * u) - S.dot(D.transpose() * u);
+  // min_Q E′ = ½VᵀHV − SᵀD_sᵀV − ½(D_Q S)ᵀL_QQ⁻¹(D_Q S): the last term depends on S only.
+  const Eigen::VectorXd DQS = D.bottomRows(4 * r) * S;
+  const double s_only = -0.5 * DQS.dot(L.bottomRightCorner(4 * r, 4 * r).ldlt().solve(DQS));
+  const double reduced = 0.5 * V.dot(e.H * V) - S.dot(e.Ds.transpose() * V) + s_only;
+  CHECK(reduced == Approx(full).epsilon(1e-10));
+  // H is symmetric PSD with the translations as null space.
+  const Matrix<double> H(e.H);
+  CHECK((H - H.transpose()).norm() <= 1e-12 * H.norm());
+  Eigen::VectorXd tx = Eigen::VectorXd::Zero(nv);
+  for (Index i = 0; i < n; ++i) tx(3 * i) = 1.0;
+  CHECK((e.H * tx).norm() <= 1e-10 * H.norm());
+}
+
+TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range", "[arap][phase2]") {
+  // G = R·S, S symmetric positive definite with cond S from 1 to 99 (the
+  // closed-form path takes cond G < 100): the polar factor is R exactly.
+  double worst = 0.0;
+  for (unsigned seed = 0; seed < 200; ++seed) {
+    const Eigen::VectorXd a = random_vector(10, 1000 + seed);
+    const Eigen::Matrix3d R = rotation(3.0 * a(0), a.segment<3>(1));
+    const Eigen::Matrix3d Q = rotation(3.0 * a(4), a.segment<3>(5));
+    const double cond = 1.0 + 98.0 * std::abs(a(8)) / (1.0 + std::abs(a(8)));
+    const Eigen::Vector3d sigma(1.0, std::sqrt(cond), cond);
+    const Eigen::Matrix3d S = Q * sigma.asDiagonal() * Q.transpose();
+    const Eigen::Matrix3d F = fit_rotation((1.0 + std::abs(a(9))) * R * S);
+    worst = std::max(worst, (F - R).norm());
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-13);
+  }
+  CHECK(worst < 1e-12);
+}
+
+TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
+  for (unsigned seed = 0; seed < 50; ++seed) {
+    const Eigen::VectorXd a = random_vector(4, seed);
+    const Eigen::Matrix3d R = rotation(a(0), a.tail(3));
+    Eigen::Matrix3d G = R * Eigen::Vector3d(3.0, 2.0, 1.0).asDiagonal();
+    if (seed % 2) G.col(seed % 3) *= -1.0;  // reflected
+    const Eigen::Matrix3d F = fit_rotation(G);
+    CHECK(F.determinant() == Approx(1.0).epsilon(1e-12));
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-12);
+    if (seed % 2 == 0) CHECK((F - R).norm() < 1e-12);  // unreflected: recovers R
+    // The fit maximises tr(FᵀG) over SO(3): no nearby rotation does better.
+    for (int k = 0; k < 3; ++k) {
+      Eigen::Vector3d axis = Eigen::Vector3d::Zero();
+      axis(k) = 1.0;
+      for (double eps : {1e-4, -1e-4}) CHECK((rotation(eps, axis) * F).cwiseProduct(G).sum() <= F.cwiseProduct(G).sum() + 1e-12);
+    }
+  }
+}
+
+TEST_CASE("classic ARAP energy is zero at rest and invariant under rigid motion", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  const EnergyCase c = energy_case(tet);
+  CHECK(arap_energy(c.V, c.el, c.V) == Approx(0.0).margin(1e-20));
+  const Eigen::Matrix3d R = rotation(0.7, Eigen::Vector3d(1, 2, 3));
+  Vertices moved = (c.V * R.transpose()).rowwise() + Eigen::RowVector3d(1, -2, 0.5);
+  CHECK(arap_energy(c.V, c.el, moved) == Approx(0.0).margin(1e-18));
+  Vertices bent = c.V;
+  bent.col(0) += 0.1 * bent.col(2).array().square().matrix();
+  CHECK(arap_energy(c.V, c.el, bent) > 1e-6);
+}
