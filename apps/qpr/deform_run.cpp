@@ -183,12 +183,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
     const VertexIds ids = read_id(a.rotational_clusters);
     ids.validate(n);
     const VertexGroups g = rotation_groups_from_ids(ids);
-    if (tet) {
-      sc.model.clusters.resize(static_cast<size_t>(sc.model.T.rows()));
-      for (Index t = 0; t < sc.model.T.rows(); ++t) sc.model.clusters[t] = g.group_of[sc.model.T(t, 0)];
-    } else {
-      sc.model.clusters = g.group_of;
-    }
+    sc.model.clusters = tet ? element_clusters_from_vertex_labels(g.group_of, sc.model.T) : g.group_of;
   }
   if (!a.affine_patches.empty()) {
     const VertexIds ids = read_id(a.affine_patches);

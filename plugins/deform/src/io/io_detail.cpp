@@ -1,3 +1,5 @@
+// Whole-file input, the text cursor, strict number parsing, triangulation and
+// buffered output shared by the readers and writers; see io_detail.h.
 #include "io_detail.h"
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// The JSON scene reader; the schema is in plugins/deform/README.md.
+// The JSON scene reader; the schema is in docs/formats.md ("JSON scene").
 #include "qpreduce/deform/io/scene.h"
 
 #include "qpreduce/deform/io/mesh_io.h"

@@ -1,6 +1,8 @@
 // k-means with k-means++ seeding (Arthur & Vassilvitskii 2007) and Lloyd
-// iterations; see proxies.h.
-#include "qpreduce/deform/proxies/proxies.h"
+// iterations; see kmeans.h.
+#include "qpreduce/deform/proxies/kmeans.h"
+
+#include "proxies_internal.h"
 
 #include <Eigen/Dense>
 
@@ -208,10 +210,7 @@ double objective_of(const Eigen::Ref<const RowMatrix>& X, const RowMatrix& C, co
 }  // namespace
 
 bool KMeansOptions::is_valid(std::string* why) const {
-  auto fail = [why](const char* reason) {
-    if (why) *why = reason;
-    return false;
-  };
+  const auto fail = [why](const char* reason) { return detail::reject(why, reason); };
   if (max_iterations < 0) return fail("KMeansOptions: max_iterations must be ≥ 0");
   if (!(tolerance >= 0.0)) return fail("KMeansOptions: tolerance must be ≥ 0");
   return true;

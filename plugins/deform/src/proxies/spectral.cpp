@@ -1,7 +1,9 @@
 // Generalized Laplace–Beltrami eigenpairs L φ = λ M φ (Spectra shift-invert
 // Lanczos, or a dense solver for small components) and the per-component
-// spectral embedding; see proxies.h.
-#include "spectral_internal.h"
+// spectral embedding; see spectral.h and docs/proxies.md.
+#include "qpreduce/deform/proxies/spectral.h"
+
+#include "proxies_internal.h"
 
 #include <qpreduce/support.h>
 
@@ -184,10 +186,7 @@ double subset_diagonal(const VerticesRef& V, const std::vector<Index>& rows) {
 }  // namespace
 
 bool SpectralOptions::is_valid(std::string* why) const {
-  auto fail = [why](const char* reason) {
-    if (why) *why = reason;
-    return false;
-  };
+  const auto fail = [why](const char* reason) { return detail::reject(why, reason); };
   if (eigenvectors < 1) return fail("SpectralOptions: eigenvectors must be ≥ 1");
   if (!(shift_scale > 0.0) || !std::isfinite(shift_scale)) return fail("SpectralOptions: shift_scale must be > 0");
   if (backend == Backend::SparseLU) return fail("SpectralOptions: backend must be symmetric (Cholmod or SimplicialLDLT)");
@@ -217,6 +216,102 @@ bool fail(SpectralSummary* summary, std::string message) {
   return false;
 }
 
+// Eigenpairs found so far by the Lanczos rounds: Q (n × f, M-orthonormal) and
+// their eigenvalues, in the order found.
+struct FoundPairs {
+  Matrix<double> Q;
+  std::vector<double> values;
+};
+
+// One round of shift-invert Lanczos (Spectra) for `need` more eigenpairs of
+// the operator with found->Q deflated; the new vectors are re-orthogonalised
+// against earlier rounds (M inner product), normalised and appended.
+bool lanczos_round(ShiftInvertOp& op, DiagonalOp& mop, const Eigen::VectorXd& mass, Index need, double sigma,
+                   Index round, const SpectralOptions& options, FoundPairs* found, SpectralSummary* summary) {
+  const Index n = mass.size();
+  Matrix<double>& Q = found->Q;
+  const Index ncv = std::min(n - Q.cols(), std::max(2 * need + 1, options.min_lanczos_vectors));
+  if (ncv <= need) {
+    return fail(summary, fmt::format("too few vectors left for Lanczos: {} eigenpairs wanted, n = {}, {} deflated",
+                                     need, n, Q.cols()));
+  }
+  op.deflate(&Q);
+  Spectra::SymGEigsShiftSolver<ShiftInvertOp, DiagonalOp, Spectra::GEigsMode::ShiftInvert> solver(op, mop, need,
+                                                                                                ncv, sigma);
+  Eigen::VectorXd v0 = start_vector(n, static_cast<std::uint64_t>(round) + 1);
+  if (Q.cols() > 0) v0 -= Q * (Q.transpose() * mass.cwiseProduct(v0));
+  solver.init(v0.data());
+  const Index converged = solver.compute(Spectra::SortRule::LargestMagn, options.max_restarts, options.tolerance);
+  summary->lanczos_operations += solver.num_operations();
+  if (solver.info() != Spectra::CompInfo::Successful) {
+    return fail(summary, fmt::format("Spectra shift-invert Lanczos did not converge: {} of {} eigenpairs after {} "
+                                     "restarts (round {}, n = {}, ncv = {}, σ = {:.3e}, tolerance {:.1e})",
+                                     converged, need, solver.num_iterations(), round, n, ncv, sigma,
+                                     options.tolerance));
+  }
+  const Eigen::VectorXd new_values = solver.eigenvalues();
+  Matrix<double> new_vectors = solver.eigenvectors();
+  for (Index j = 0; j < new_vectors.cols(); ++j) {
+    Eigen::VectorXd v = new_vectors.col(j);
+    if (Q.cols() > 0) v -= Q * (Q.transpose() * mass.cwiseProduct(v));
+    new_vectors.col(j) = v / std::sqrt(v.dot(mass.cwiseProduct(v)));
+  }
+  const Index f = Q.cols();
+  Q.conservativeResize(n, f + new_vectors.cols());
+  Q.rightCols(new_vectors.cols()) = new_vectors;
+  for (Index j = 0; j < new_values.size(); ++j) found->values.push_back(new_values[j]);
+  return true;
+}
+
+// The inertia check after a round: the eigenvalues below τ, just above the
+// count-th smallest found, counted from LDLᵀ(L − τM), minus those found, in
+// *missing (0 when none was missed). False, with the summary's status set,
+// when the count fails or more rounds than options.max_deflation_rounds
+// would be needed.
+bool count_missing(const SparseMatrix<double>& L, const Eigen::VectorXd& mass, const std::vector<double>& values,
+                   Index count, double sigma, Index round, const SpectralOptions& options, Index* missing,
+                   SpectralSummary* summary) {
+  std::vector<double> sorted = values;
+  std::sort(sorted.begin(), sorted.end());
+  const double lambda = sorted[static_cast<std::size_t>(count - 1)];
+  double tau = lambda + options.inertia_margin * (lambda - sigma);
+  Index below = count_below(L, mass, tau);
+  if (below < 0) {  // τ hit an eigenvalue of a leading block: move it a little
+    tau += options.inertia_margin * (lambda - sigma);
+    below = count_below(L, mass, tau);
+  }
+  if (below < 0) {
+    return fail(summary, fmt::format("inertia check: LDLᵀ of L − τM (τ = {:.6e}) hit a zero pivot", tau));
+  }
+  const Index found = std::count_if(values.begin(), values.end(), [tau](double v) { return v < tau; });
+  *missing = 0;
+  if (below <= found) return true;
+  if (round + 1 > options.max_deflation_rounds) {
+    return fail(summary, fmt::format("{} eigenvalues lie below τ = {:.6e} but only {} were found after {} "
+                                     "deflation rounds (max_deflation_rounds)",
+                                     below, tau, found, round));
+  }
+  *missing = below - found;
+  return true;
+}
+
+// The `count` smallest of the found pairs, ties in the order found
+// (finish_pairs sorts and normalises them).
+Eigenpairs keep_smallest(FoundPairs found, Index count) {
+  const std::vector<double>& values = found.values;
+  std::vector<Index> order(values.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&values](Index a, Index b) { return values[a] < values[b]; });
+  Eigenpairs kept;
+  kept.values.resize(count);
+  kept.vectors.resize(found.Q.rows(), count);
+  for (Index j = 0; j < count; ++j) {
+    kept.values[j] = values[order[j]];
+    kept.vectors.col(j) = found.Q.col(order[j]);
+  }
+  return kept;
+}
+
 // Shift-invert Lanczos (Spectra), in rounds: Lanczos from one start vector
 // finds one vector per eigenspace in exact arithmetic, so a repeated
 // eigenvalue (a symmetric shape) may come back with too few copies. After each
@@ -234,80 +329,19 @@ bool sparse_pairs(const SparseMatrix<double>& L, const Eigen::VectorXd& mass, In
   }
   timer.reset();
   DiagonalOp mop(mass);
-  Matrix<double> Q(n, 0);  // eigenvectors found so far, M-orthonormal
-  std::vector<double> values;
+  FoundPairs found{Matrix<double>(n, 0), {}};
   Index need = count;
   for (Index round = 0;; ++round) {
-    const Index ncv = std::min(n - Q.cols(), std::max(2 * need + 1, options.min_lanczos_vectors));
-    if (ncv <= need) {
-      return fail(summary, fmt::format("too few vectors left for Lanczos: {} eigenpairs wanted, n = {}, {} deflated",
-                                       need, n, Q.cols()));
-    }
-    op.deflate(&Q);
-    Spectra::SymGEigsShiftSolver<ShiftInvertOp, DiagonalOp, Spectra::GEigsMode::ShiftInvert> solver(op, mop, need,
-                                                                                                  ncv, sigma);
-    Eigen::VectorXd v0 = start_vector(n, static_cast<std::uint64_t>(round) + 1);
-    if (Q.cols() > 0) v0 -= Q * (Q.transpose() * mass.cwiseProduct(v0));
-    solver.init(v0.data());
-    const Index converged = solver.compute(Spectra::SortRule::LargestMagn, options.max_restarts, options.tolerance);
-    summary->lanczos_operations += solver.num_operations();
-    if (solver.info() != Spectra::CompInfo::Successful) {
-      return fail(summary, fmt::format("Spectra shift-invert Lanczos did not converge: {} of {} eigenpairs after {} "
-                                       "restarts (round {}, n = {}, ncv = {}, σ = {:.3e}, tolerance {:.1e})",
-                                       converged, need, solver.num_iterations(), round, n, ncv, sigma,
-                                       options.tolerance));
-    }
-    const Eigen::VectorXd new_values = solver.eigenvalues();
-    Matrix<double> new_vectors = solver.eigenvectors();
-    // Re-orthogonalise against earlier rounds (M inner product) and normalise.
-    for (Index j = 0; j < new_vectors.cols(); ++j) {
-      Eigen::VectorXd v = new_vectors.col(j);
-      if (Q.cols() > 0) v -= Q * (Q.transpose() * mass.cwiseProduct(v));
-      new_vectors.col(j) = v / std::sqrt(v.dot(mass.cwiseProduct(v)));
-    }
-    const Index f = Q.cols();
-    Q.conservativeResize(n, f + new_vectors.cols());
-    Q.rightCols(new_vectors.cols()) = new_vectors;
-    for (Index j = 0; j < new_values.size(); ++j) values.push_back(new_values[j]);
+    if (!lanczos_round(op, mop, mass, need, sigma, round, options, &found, summary)) return false;
     summary->deflation_rounds = round;
     if (!options.verify_with_inertia) break;
-
-    std::vector<double> sorted = values;
-    std::sort(sorted.begin(), sorted.end());
-    const double lambda = sorted[static_cast<std::size_t>(count - 1)];
-    double tau = lambda + options.inertia_margin * (lambda - sigma);
-    Index below = count_below(L, mass, tau);
-    if (below < 0) {  // τ hit an eigenvalue of a leading block: move it a little
-      tau += options.inertia_margin * (lambda - sigma);
-      below = count_below(L, mass, tau);
-    }
-    if (below < 0) {
-      return fail(summary, fmt::format("inertia check: LDLᵀ of L − τM (τ = {:.6e}) hit a zero pivot", tau));
-    }
-    const Index found = std::count_if(values.begin(), values.end(), [tau](double v) { return v < tau; });
-    if (below <= found) break;
-    if (round + 1 > options.max_deflation_rounds) {
-      return fail(summary, fmt::format("{} eigenvalues lie below τ = {:.6e} but only {} were found after {} "
-                                       "deflation rounds (max_deflation_rounds)",
-                                       below, tau, found, round));
-    }
-    need = below - found;
+    Index missing = 0;
+    if (!count_missing(L, mass, found.values, count, sigma, round, options, &missing, summary)) return false;
+    if (missing == 0) break;
+    need = missing;
   }
   summary->eigen_seconds = timer.seconds();
-  out->values = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Index>(values.size()));
-  out->vectors = std::move(Q);
-  // Keep the `count` smallest (finish_pairs sorts).
-  std::vector<Index> order(values.size());
-  std::iota(order.begin(), order.end(), 0);
-  std::stable_sort(order.begin(), order.end(), [&values](Index a, Index b) { return values[a] < values[b]; });
-  Eigenpairs kept;
-  kept.values.resize(count);
-  kept.vectors.resize(n, count);
-  for (Index j = 0; j < count; ++j) {
-    kept.values[j] = out->values[order[j]];
-    kept.vectors.col(j) = out->vectors.col(order[j]);
-  }
-  *out = std::move(kept);
+  *out = keep_smallest(std::move(found), count);
   return true;
 }
 

@@ -1,5 +1,5 @@
 // qpreduce::deform — handle and proxy inputs: Botsch–Sorkine `.sel` / `.def`
-// and the paper demo's `.id` / `.anim` (see shared/data/paper-examples/README.md).
+// and the paper demo's `.id` / `.anim` (docs/formats.md, "Handle and proxy files").
 //
 // The files hold one entry per mesh vertex but do not name their mesh, so
 // every type here keeps the path it was read from (`source`) and has a
