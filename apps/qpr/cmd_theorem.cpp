@@ -8,7 +8,7 @@
 #include "svg_plot.h"
 
 #include <qpreduce/problems/generators.h>
-#include <qpreduce/quotient.h>
+#include <qpreduce/theorem.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
