@@ -20,7 +20,7 @@
 // Usage: gmrf_inpainting [nx] [queries] [seed]   (defaults 400 20 1)
 #include <qpreduce/problems/families.h>
 #include <qpreduce/full_solve.h>
-#include <qpreduce/quotient.h>
+#include <qpreduce/theorem.h>
 #include <qpreduce/subspace_solver.h>
 
 #include <fmt/format.h>

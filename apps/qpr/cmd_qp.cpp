@@ -27,7 +27,7 @@
 
 #include <qpreduce/full_solve.h>
 #include <qpreduce/problems/matrix_market.h>
-#include <qpreduce/quotient.h>
+#include <qpreduce/theorem.h>
 #include <qpreduce/problems/schur_baseline.h>
 #include <qpreduce/subspace_solver.h>
 #include <qpreduce/support.h>

@@ -11,7 +11,7 @@
 
 #include <qpreduce/support.h>
 #include <qpreduce/problems/generators.h>
-#include <qpreduce/quotient.h>
+#include <qpreduce/theorem.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>

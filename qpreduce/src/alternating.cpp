@@ -108,16 +108,11 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
       R_.topRows(m) = Ay;
       detail::blas_gemm(false, false, 1.0, Az, prep_->P0, 1.0, R_.topRows(m));
       R_.bottomRows(mu - m) = prep_->LtG;
-      MatD MY;
-      if constexpr (!std::is_same_v<Scalar, double>) {
-        MY = prep_->P0;
-        detail::blas_gemm(false, false, -1.0, rso.T, R_, 1.0, MY);
-      }
-      if (R_.allFinite() && rso.T.allFinite() && MY.allFinite()) {
+      if (R_.allFinite() && rso.T.allFinite()) {
         fast_ = true;
-        Mb_ = rso.T.leftCols(m).template cast<Scalar>();
+        Mb_ = rso.T.leftCols(m);
         T_ = std::move(rso.T);
-        MY_ = MY.template cast<Scalar>();  // empty in double
+        MY_.resize(0, 0);  // kept factored
         ry_.resize(mu);
       }
     }
@@ -128,15 +123,11 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
     const MatD Hr = solver.reduced_hessian().template cast<double>();
     const MatD G = solver.reduced_linear_map().topRows(d).template cast<double>() - Hr.topRightCorner(d, k);
     const detail::QpOperators ops = detail::qp_operators(Hr.topLeftCorner(d, d), Az, options, &summary);
-    Mb_ = ops.Mc.template cast<Scalar>();
+    Mb_ = ops.Mc;
     MatD MY(d, k);  // M_g·G − M_c·A_y, through the BLAS (blas.h)
     detail::blas_gemm(false, false, 1.0, ops.Mg, G, 0.0, MY);
     detail::blas_gemm(false, false, -1.0, ops.Mc, Ay, 1.0, MY);
-    if constexpr (std::is_same_v<Scalar, double>) {
-      MY_ = std::move(MY);
-    } else {
-      MY_ = MY.template cast<Scalar>();
-    }
+    MY_ = std::move(MY);
   }
   k_ = k;
   summary.fast_path = fast_;
@@ -169,47 +160,25 @@ void FixedCoordinateSolver<Scalar>::prepare_impl(const SubspaceSolver<Scalar>& s
 
 template <typename Scalar>
 Matrix<Scalar> FixedCoordinateSolver<Scalar>::MY() const {
-  if (!(fast_ && std::is_same_v<Scalar, double>)) return MY_;
+  if (!fast_) return MY_;
   Matrix<double> MY = prep_->P0;
   detail::blas_gemm(false, false, -1.0, T_, R_, 1.0, MY);
-  return MY.template cast<Scalar>();
+  return MY;
 }
 
 template <typename Scalar>
 void FixedCoordinateSolver<Scalar>::solve(const ConstRef& b, const ConstRef& Y, Ref z) const {
   assert(ready_ && b.size() == m() && Y.size() == k() && z.size() == d());
   detail::gemv(Mb_, b.data(), z.data(), false);
-  if constexpr (std::is_same_v<Scalar, double>) {
-    if (fast_) {
-      // z += P0·Y − T·(R·Y); ry_ is μ scratch.
-      detail::gemv(prep_->P0, Y.data(), z.data(), true);
-      detail::gemv(R_, Y.data(), ry_.data(), false);
-      ry_ = -ry_;
-      detail::gemv(T_, ry_.data(), z.data(), true);
-      return;
-    }
+  if (fast_) {
+    // z += P0·Y − T·(R·Y); ry_ is μ scratch.
+    detail::gemv(prep_->P0, Y.data(), z.data(), true);
+    detail::gemv(R_, Y.data(), ry_.data(), false);
+    ry_ = -ry_;
+    detail::gemv(T_, ry_.data(), z.data(), true);
+    return;
   }
   detail::gemv(MY_, Y.data(), z.data(), true);
-}
-
-template <typename Scalar>
-AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2Projection<Scalar>& phase2,
-                             const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
-                             Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y) {
-  assert(options.is_valid(nullptr));
-  assert(phase1.ready() && z.size() == phase1.d() && y.size() == phase1.k() && b.size() == phase1.m());
-  AlternatingSummary summary;
-  double change = 0.0;
-  for (int it = 0; it < options.iterations; ++it) {
-    phase1.solve(b, y, z);
-    change = phase2.project(z, y);
-    summary.iterations = it + 1;
-    if (options.tolerance > 0 && change <= options.tolerance * std::max(1.0, static_cast<double>(y.norm()))) break;
-  }
-  phase1.solve(b, y, z);
-  summary.last_change = change;
-  summary.status = Status::Success;
-  return summary;
 }
 
 namespace {
@@ -527,14 +496,6 @@ AlternatingSummary FusedAlternation<Scalar>::run_parallel(InputProjection<Scalar
 }
 
 template class FusedAlternation<double>;
-template class FusedAlternation<float>;
 template class FixedCoordinateSolver<double>;
-template class FixedCoordinateSolver<float>;
-template AlternatingSummary alternate<double>(const FixedCoordinateSolver<double>&, Phase2Projection<double>&,
-                                              const Eigen::Ref<const Vector<double>>&, const AlternatingOptions&,
-                                              Eigen::Ref<Vector<double>>, Eigen::Ref<Vector<double>>);
-template AlternatingSummary alternate<float>(const FixedCoordinateSolver<float>&, Phase2Projection<float>&,
-                                             const Eigen::Ref<const Vector<float>>&, const AlternatingOptions&,
-                                             Eigen::Ref<Vector<float>>, Eigen::Ref<Vector<float>>);
 
 }  // namespace qpreduce

@@ -2,6 +2,7 @@
 // compute in the same pass) and the reduced solver needs.
 #pragma once
 
+#include "qpreduce/factorization.h"
 #include "qpreduce/subspace.h"
 
 namespace qpreduce::detail {
@@ -36,6 +37,35 @@ class ScopedOmpThreads {
  private:
   int previous_ = 0;
 };
+
+// Rows per block for the row-blocked dense passes (N = G·S⁻¹, Dᵀ·X): a
+// 512 × 300 double block is 1.2 MB, a few L2-sized panels for the GEMM kernel.
+constexpr Index kRowBlock = 512;
+
+// ---- Steps of a subspace build (subspace.cpp, used by subspace_build.cpp) ----
+
+// The KKT matrix [[H, C], [Cᵀ, 0]] of Eq. 4, (n + d) × (n + d).
+SparseMatrix<double> kkt_matrix(const SparseMatrix<double>& H, const SparseMatrix<double>& C);
+
+// One pass over column blocks B_j of B = [N UD] (OpenMP over blocks, so no
+// n × p temporary), each with one sparse product H·B_j, computing
+//   * `residual` (when not null): the relative residual of Eq. 4, see
+//     SubspaceSummary::kkt_residual — H·B_j, projected off Span(C);
+//   * `gram` (when not null): H_r = BᵀHB (p × p), the blocks on and above the
+//     diagonal as B(:, :j_end)ᵀ·(H·B_j), mirrored below.
+void blocked_pass(const SparseMatrix<double>& H, const SparseMatrix<double>& C, const SparseMatrix<double>& D,
+                  const Matrix<double>& N, const Matrix<double>& UD, double* residual, Matrix<double>* gram);
+
+// S (n × a) as a dense matrix whose every page is first written by the
+// OpenMP threads (no zero-page faults in the solve that follows).
+Matrix<double> dense_written(const SparseMatrix<double>& S);
+
+// Solves K·x = K·v for a fixed v and returns ‖x − v‖/‖v‖ (+inf if not
+// finite): whether the factorization of K can be trusted.
+double probe_error(const SparseFactorization& factor, const SparseMatrix<double>& K);
+
+// Gershgorin bound on λ_max of a symmetric sparse matrix: max column sum of |a_ij|.
+double gershgorin_bound(const SparseMatrix<double>& A);
 
 // Sᵀ·X for sparse S (n × a) and dense X (n × b): row-blocked dense products
 // when S is mostly full (Gaussian or polynomial design columns), Eigen's

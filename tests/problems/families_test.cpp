@@ -3,7 +3,7 @@
 // and the cached-Cholesky + Schur baseline agrees with the full solve.
 #include <qpreduce/problems/families.h>
 #include <qpreduce/full_solve.h>
-#include <qpreduce/quotient.h>
+#include <qpreduce/theorem.h>
 #include <qpreduce/problems/schur_baseline.h>
 #include <qpreduce/subspace_solver.h>
 

@@ -111,17 +111,6 @@ class FixedCoordinateSolver {
   bool ready_ = false;
 };
 
-// Phase 2: a plugin's projection of the fixed coordinates onto its manifold
-// (rotations, scaled rotations, rigid patches), given the current z and y.
-template <typename Scalar>
-class Phase2Projection {
- public:
-  virtual ~Phase2Projection() = default;
-  // Overwrites y (size k) in place and returns ‖y_new − y_old‖. Called once
-  // per alternating iteration; implementations should not allocate.
-  virtual double project(const Eigen::Ref<const Vector<Scalar>>& z, Eigen::Ref<Vector<Scalar>> y) = 0;
-};
-
 struct AlternatingOptions {
   // Phase 1/Phase 2 rounds per call (the paper uses a fixed 8 per frame, so a
   // frame's cost does not depend on the pose).
@@ -156,19 +145,12 @@ struct AlternatingSummary : Outcome {  // Success after a run
   double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
 };
 
-// Runs Phase 1 then Phase 2, `options.iterations` times, starting from the
-// given y (warm start) and ending with a Phase 1, so z is optimal for the
-// returned y. z: d, y: k.
-template <typename Scalar>
-AlternatingSummary alternate(const FixedCoordinateSolver<Scalar>& phase1, Phase2Projection<Scalar>& phase2,
-                             const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
-                             Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
-
 // Phase 2 projections whose input is linear in (z, y): g = G_z·z + G_y·y
 // (g: q entries), then y ← Π(g). Substituting Phase 1, z = M_b·b + M_Y·y,
 //     g = (G_z·M_b)·b + (G_z·M_Y + G_y)·y = g_b + F_y·y,
 // so a round costs one q×k GEMV plus Π, g_b is formed once per call, and z
-// once after the last round. The iterates are those of `alternate` exactly.
+// once after the last round. The iterates are those of the plain alternation
+// (Phase 1 solve, then Phase 2 on (z, y)) exactly.
 //
 // When Phase 1 came from its fast path (M_Y = P0 − T·R, M_b = T's first m
 // columns, above),
