@@ -1,6 +1,6 @@
 // qpreduce — common types, status codes and argument checks.
 //
-// Three layers of errors (../../../shared/STYLE.md §4):
+// Three layers of errors:
 //   * `assert` on hot-path contracts (sizes inside per-frame loops);
 //   * `std::invalid_argument` at the API boundary, with "expected N, got M";
 //   * numerical outcomes (not positive definite, rank deficient, infeasible)
