@@ -1,4 +1,4 @@
-#include "qpreduce/detail/factored_operators.h"
+#include "factored_operators.h"
 
 #include "range_space.h"
 

@@ -6,7 +6,7 @@
 //     H: p×p symmetric PSD, A: m×p,   w = M_c·c + M_g·g,
 //
 // shared by SubspaceSolver (H = H_r, w = [z; y]) and FixedCoordinateSolver
-// (H = H_zz, w = z). detail/qp_operators.h is the null-space method for the
+// (H = H_zz, w = z). src/qp_operators.h is the null-space method for the
 // same operators; this is the O(p²·(m+ν)) alternative once H̃⁻¹ is known.
 //
 // Once per H (`prepare_range_space`, O(p³)): in energy-normalised
@@ -59,7 +59,7 @@ struct RangeSpace {
   Matrix<double> lift_cols;    // L = D_s·V_L/σ (p × ν)
   Eigen::VectorXd lift_block;  // β (ν)
   // Only with factored_terms (SubspaceSolver's factored fast path,
-  // detail/factored_operators.h); empty and 0 otherwise.
+  // src/factored_operators.h); empty and 0 otherwise.
   Matrix<double> T2;           // D_s·H̃⁻²·D_s (p × p, symmetric)
   Matrix<double> T3;           // D_s·H̃⁻³·D_s (p × p, symmetric)
   double inv_fro2 = 0.0;       // ‖H̃⁻¹‖_F²

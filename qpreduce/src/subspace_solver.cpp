@@ -1,6 +1,7 @@
 #include "qpreduce/subspace_solver.h"
 
 #include "blas.h"
+#include "factored_operators.h"
 #include "range_space.h"
 #include "simd_kernels.h"
 #include "subspace_internal.h"
@@ -167,7 +168,7 @@ void SubspaceSolver<Scalar>::reference_operators(const MatD& Abar, const Constra
                                                  ConstraintSummary* summary, MatD* Mb_out, MatD* Mq_out,
                                                  MatD* MY_out) const {
   // The small QP in the scaled coordinates w̄ (w = D_s·w̄): Hessian D_s·H_r·D_s,
-  // constraints Ā (m×p). Shared with the Phase 1 solver (detail/qp_operators.h).
+  // constraints Ā (m×p). Shared with the Phase 1 solver (src/qp_operators.h).
   const auto& Ds = range_->scale.asDiagonal();
   const MatD Hbar = Ds * Hr_d_ * Ds;
   const detail::QpOperators ops = detail::qp_operators(Hbar, Abar, options, summary);
@@ -266,10 +267,12 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
     if (factored) {
       if (detail::range_space_rank(*range_, Ar, options, &summary)) {
         const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
+        // Copies of the solver share the operators: write into a fresh set when shared.
+        if (!factored_ops_ || factored_ops_.use_count() > 1) factored_ops_ = std::make_shared<detail::FactoredOperators>();
         factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
                                                options.rank_tolerance,
                                                (Ar * range_->scale.asDiagonal()).squaredNorm(),  // ‖Ā‖_F²
-                                               &factored_ops_);
+                                               factored_ops_.get());
       }
       fast = factored_;
     } else if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
@@ -339,7 +342,7 @@ void SubspaceSolver<Scalar>::solve(const ConstRef& b, const ConstRef& q_r, Ref w
   if constexpr (std::is_same_v<Scalar, double>) {
     if (factored_) {
       // w = M0·q_r + Y·(Σ⁻¹·([b; 0] − Yᵀq_r)); r and t live on the stack.
-      const MatD& Y = factored_ops_.Y;
+      const MatD& Y = factored_ops_->Y;
       const Index q = Y.cols();
       assert(q <= kMaxFactoredRank);
       double r_buf[kMaxFactoredRank], t_buf[kMaxFactoredRank];
@@ -348,7 +351,7 @@ void SubspaceSolver<Scalar>::solve(const ConstRef& b, const ConstRef& q_r, Ref w
       r.tail(q - m_).setZero();
       r.noalias() -= Y.transpose() * q_r;  // Eigen's row-major GEMV: no temporary for a contiguous q_r
       std::fill(t_buf, t_buf + q, 0.0);
-      detail::symv_lower_add(factored_ops_.Sinv, r_buf, t_buf);
+      detail::symv_lower_add(factored_ops_->Sinv, r_buf, t_buf);
       std::fill(w.data(), w.data() + w.size(), 0.0);
       detail::symv_lower_add(range_->Minv0, q_r.data(), w.data());
       detail::gemv_add(Y.data(), Y.rows(), q, Y.outerStride(), t_buf, w.data());
@@ -365,9 +368,9 @@ void SubspaceSolver<Scalar>::solve_in_D(const ConstRef& b, const ConstRef& Y, Re
   if constexpr (std::is_same_v<Scalar, double>) {
     if (factored_) {
       // w = P0·Y + Yf·(Σ⁻¹[I_m; 0]·b − Φ·Y); t lives on the stack.
-      const MatD& Yf = factored_ops_.Y;
-      const MatD& Sinv = factored_ops_.Sinv;
-      const MatD& PhiNeg = factored_ops_.PhiNeg;
+      const MatD& Yf = factored_ops_->Y;
+      const MatD& Sinv = factored_ops_->Sinv;
+      const MatD& PhiNeg = factored_ops_->PhiNeg;
       const Index q = Yf.cols();
       assert(q <= kMaxFactoredRank);
       double t_buf[kMaxFactoredRank];

@@ -109,7 +109,6 @@
 #pragma once
 
 #include "qpreduce/common.h"
-#include "qpreduce/detail/factored_operators.h"
 #include "qpreduce/subspace.h"
 
 #include <cstdint>
@@ -119,10 +118,10 @@
 namespace qpreduce {
 
 namespace detail {
-struct RangeSpace;  // range_space.h (private to the engine)
+// Private to the engine (src/range_space.h, src/factored_operators.h).
+struct RangeSpace;
+struct FactoredOperators;
 }  // namespace detail
-template <typename Scalar>
-class FixedCoordinateSolver;  // alternating.h
 
 struct ConstraintOptions {
   // false: hard constraints (Eq. 17); true: soft constraints (Eq. 18).
@@ -244,6 +243,12 @@ class SubspaceSolver {
   const MatrixS& reduced_hessian() const { return Hr_; }  // H_r = BᵀHB, p×p
   const MatrixS& reduced_constraints() const { return Ar_; }  // A_r = AᵀB, m×p
   const MatrixS& reduced_linear_map() const { return BtD_; }   // BᵀD, p×k (q_r = BᵀD·Y)
+  // Changes with every precompute and restore (a process-wide counter), so
+  // that state derived from this solver (FixedCoordinateSolver's fast path)
+  // knows when to redo it.
+  std::uint64_t generation() const { return generation_; }
+  // SubspaceOptions::reduced_lift_tolerance of the last precompute or restore.
+  double lift_tolerance() const { return lift_tolerance_; }
 
  private:
   using MatD = Matrix<double>;
@@ -255,9 +260,6 @@ class SubspaceSolver {
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
   void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,
                            MatD* Mq, MatD* MY) const;
-  // Phase 1 (alternating.h) prepares its own fast path from H_r, BᵀD, the
-  // lift tolerance, once per generation.
-  friend class FixedCoordinateSolver<Scalar>;
 
   VariationalSubspace<Scalar> subspace_;
   MatrixS Hr_;   // p × p
@@ -275,13 +277,12 @@ class SubspaceSolver {
   std::shared_ptr<const detail::RangeSpace> range_;
   MatD P0_;  // D_s·H̃⁻¹·D_s·BᵀD (p × k)
   double lift_tolerance_ = 0.0;  // SubspaceOptions::reduced_lift_tolerance of the precompute
-  // Changes with every precompute/restore (process-wide counter), so that
-  // state derived from this solver (Phase 1's fast path) knows when to redo it.
-  std::uint64_t generation_ = 0;
+  std::uint64_t generation_ = 0;  // see generation()
   // For the factored fast path (double only; range_ then has T₂, T₃, ‖H̃⁻¹‖_F²).
   MatD lift_btd_;  // LᵀBᵀD (ν × k)
-  // The factored operators of the current constraint set (when factored_).
-  detail::FactoredOperators factored_ops_;
+  // The factored operators of the current constraint set (when factored_);
+  // copies of the solver share them until one of them sets new constraints.
+  std::shared_ptr<detail::FactoredOperators> factored_ops_;
   Index n_ = 0, m_ = 0;
   bool ready_ = false, constrained_ = false, factored_ = false;
 };

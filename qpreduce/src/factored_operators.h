@@ -1,5 +1,5 @@
-// Private to the engine: the factored fast path of SubspaceSolver (see
-// "Factored fast path" in subspace_solver.h for the math). All in unscaled
+// Private to the engine: the factored fast path of SubspaceSolver (the math:
+// docs/engine.md, "Factored fast path"). All in unscaled
 // coordinates, double; p: subspace size, ν: lifted directions, k: columns of
 // D, m: constraints, q = m + ν.
 #pragma once

@@ -1,0 +1,177 @@
+// Phase 1 of the alternation (alternating.h): z = M_b·b + M_Y·Y for one
+// constraint set, by the range-space fast path on H_zz (FactoredPhaseOne) or
+// the null-space method (ExplicitPhaseOne); phase_one.h has both forms.
+#include "qpreduce/alternating.h"
+
+#include "blas.h"
+#include "phase_one.h"
+#include "qp_operators.h"
+#include "range_space.h"
+
+#include "qpreduce/support.h"
+
+#include <memory>
+#include <optional>
+
+namespace qpreduce {
+
+namespace detail {
+
+Matrix<double> FactoredPhaseOne::MY() const {
+  Matrix<double> MY = prep_->P0;
+  blas_gemm(false, false, -1.0, T_, R_, 1.0, MY);
+  return MY;
+}
+
+void FactoredPhaseOne::apply(const double* b, const double* Y, double* z, double* scratch) const {
+  // z = M_b·b + P0·Y − T·(R·Y); scratch holds R·Y (μ).
+  gemv(Mb_, b, z, false);
+  gemv(prep_->P0, Y, z, true);
+  gemv(R_, Y, scratch, false);
+  for (Index i = 0; i < R_.rows(); ++i) scratch[i] = -scratch[i];
+  gemv(T_, scratch, z, true);
+}
+
+namespace {
+
+// The fast path's per-solver part for `solver` (O(d³ + d²k)).
+std::shared_ptr<const FixedCoordinatePrep> make_prep(const SubspaceSolver<double>& solver) {
+  const Index d = solver.d(), k = solver.k();
+  const Matrix<double>& Hr = solver.reduced_hessian();
+  auto prep = std::make_shared<FixedCoordinatePrep>();
+  prep->generation = solver.generation();
+  prep->range = prepare_range_space(Hr.topLeftCorner(d, d), solver.lift_tolerance());
+  prep->G = solver.reduced_linear_map().topRows(d) - Hr.topRightCorner(d, k);
+  prep->P0.resize(d, k);
+  blas_gemm(false, false, 1.0, prep->range.Minv0, prep->G, 0.0, prep->P0);
+  prep->LtG.resize(prep->range.lift_cols.cols(), k);
+  blas_gemm(true, false, 1.0, prep->range.lift_cols, prep->G, 0.0, prep->LtG);
+  return prep;
+}
+
+// The fast path for (A_z, A_y), or null when it does not apply (then the
+// caller runs the null-space method). Sets *summary as range_space_operators.
+std::shared_ptr<const PhaseOneOperator> fast_phase_one(const std::shared_ptr<const FixedCoordinatePrep>& prep,
+                                                       const Matrix<double>& Az, const Matrix<double>& Ay,
+                                                       const ConstraintOptions& options, ConstraintSummary* summary) {
+  RangeSpaceOperators rso;
+  if (!range_space_operators(prep->range, Az, options, summary, &rso)) return nullptr;
+  // M_b = T's first m columns, M_Y = P0 − T·R with
+  // R = Y'ᵀG + [A_y; 0] = [A_z·P0 + A_y; LᵀG] (M0 symmetric). M_Y stays
+  // factored: forming it is d·μ·k multiply-adds and two passes over d × k.
+  const Index m = Az.rows(), mu = rso.T.cols(), k = Ay.cols();
+  Matrix<double> R(mu, k);
+  R.topRows(m) = Ay;
+  blas_gemm(false, false, 1.0, Az, prep->P0, 1.0, R.topRows(m));
+  R.bottomRows(mu - m) = prep->LtG;
+  if (!R.allFinite() || !rso.T.allFinite()) return nullptr;
+  return std::make_shared<FactoredPhaseOne>(prep, std::move(rso.T), std::move(R), m);
+}
+
+// The null-space method on H_zz (qp_operators.h): M_b = M_c, M_Y = M_g·G − M_c·A_y.
+std::shared_ptr<const PhaseOneOperator> null_space_phase_one(const SubspaceSolver<double>& solver,
+                                                             const Matrix<double>& Az, const Matrix<double>& Ay,
+                                                             const ConstraintOptions& options,
+                                                             ConstraintSummary* summary) {
+  const Index d = solver.d(), k = solver.k();
+  const Matrix<double>& Hr = solver.reduced_hessian();
+  const Matrix<double> G = solver.reduced_linear_map().topRows(d) - Hr.topRightCorner(d, k);
+  QpOperators ops = qp_operators(Hr.topLeftCorner(d, d), Az, options, summary);
+  Matrix<double> MY(d, k);  // through the BLAS (blas.h)
+  blas_gemm(false, false, 1.0, ops.Mg, G, 0.0, MY);
+  blas_gemm(false, false, -1.0, ops.Mc, Ay, 1.0, MY);
+  return std::make_shared<ExplicitPhaseOne>(std::move(ops.Mc), std::move(MY));
+}
+
+}  // namespace
+
+}  // namespace detail
+
+template <typename Scalar>
+ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceSolver<Scalar>& solver,
+                                                                 const SparseMatrix<Scalar>& A,
+                                                                 const ConstraintOptions& options) {
+  // (set_reduced_constraints checks the options and the rest.)
+  if (!solver.ready()) {
+    throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
+  }
+  check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
+  check_finite("FixedCoordinateSolver::set_constraints: A", A);
+  const Timer timer;
+  const Matrix<double> Az = A.transpose() * solver.subspace().N;
+  const Matrix<double> Ay = A.transpose() * solver.subspace().UD;
+  ConstraintSummary summary = set_reduced_constraints(solver, Az, Ay, options);
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const SubspaceSolver<Scalar>& solver,
+                                                                         const Matrix<double>& Az,
+                                                                         const Matrix<double>& Ay,
+                                                                         const ConstraintOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  if (!solver.ready()) {
+    throw std::invalid_argument("FixedCoordinateSolver::set_reduced_constraints: the subspace solver is not ready");
+  }
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_z columns (d)", solver.d(), Az.cols());
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_y columns (k)", solver.k(), Ay.cols());
+  check_size("FixedCoordinateSolver::set_reduced_constraints: A_y rows (as A_z)", Az.rows(), Ay.rows());
+  check_finite("FixedCoordinateSolver::set_reduced_constraints: A_z", Az);
+  check_finite("FixedCoordinateSolver::set_reduced_constraints: A_y", Ay);
+  const Timer timer;
+  op_.reset();
+
+  std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
+  if (options.threads > 0) blas.emplace(options.threads);
+  ConstraintSummary summary;
+  summary.m = Az.rows();
+  if (options.fast_path) {
+    prepare_impl(solver);
+    op_ = detail::fast_phase_one(prep_, Az, Ay, options, &summary);
+  }
+  if (!op_) {
+    summary = ConstraintSummary{};
+    op_ = detail::null_space_phase_one(solver, Az, Ay, options, &summary);
+  }
+  scratch_.resize(op_->scratch_size());
+  k_ = Ay.cols();
+  summary.fast_path = op_->factored() != nullptr;
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::prepare(const SubspaceSolver<Scalar>& solver) {
+  if (!solver.ready()) throw std::invalid_argument("FixedCoordinateSolver::prepare: the subspace solver is not ready");
+  const detail::ScopedBlasThreads blas(1);  // single-threaded BLAS, as set_constraints by default
+  prepare_impl(solver);
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::prepare_impl(const SubspaceSolver<Scalar>& solver) {
+  if (prep_ && prep_->generation == solver.generation()) return;
+  prep_ = detail::make_prep(solver);
+}
+
+template <typename Scalar>
+const Matrix<Scalar>& FixedCoordinateSolver<Scalar>::Mb() const {
+  static const Matrix<Scalar> empty;
+  return op_ ? op_->Mb() : empty;
+}
+
+template <typename Scalar>
+Matrix<Scalar> FixedCoordinateSolver<Scalar>::MY() const {
+  return op_ ? op_->MY() : Matrix<Scalar>();
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::solve(const ConstRef& b, const ConstRef& Y, Ref z) const {
+  assert(ready() && b.size() == m() && Y.size() == k() && z.size() == d());
+  op_->apply(b.data(), Y.data(), z.data(), scratch_.data());
+}
+
+template class FixedCoordinateSolver<double>;
+
+}  // namespace qpreduce

@@ -1,0 +1,416 @@
+// FusedAlternation (alternating.h): Phase 1 folded into Phase 2's input,
+// g = F_b·b + F_y·y, in the explicit or the factored form (fused_rounds.h).
+#include "qpreduce/alternating.h"
+
+#include "blas.h"
+#include "fused_rounds.h"
+#include "phase_one.h"
+#include "simd_kernels.h"
+
+#include "qpreduce/support.h"
+
+#include <fmt/format.h>
+
+#include <omp.h>
+
+#include <cstring>
+#include <memory>
+#include <optional>
+
+namespace qpreduce {
+
+bool AlternatingOptions::is_valid(std::string* why) const {
+  if (iterations < 1) {
+    if (why) *why = fmt::format("iterations must be at least 1, got {}", iterations);
+    return false;
+  }
+  if (!(tolerance >= 0.0)) {
+    if (why) *why = "tolerance must be non-negative";
+    return false;
+  }
+  if (threads < 0) {
+    if (why) *why = fmt::format("threads must be ≥ 0 (0: all), got {}", threads);
+    return false;
+  }
+  if (parallel_min_entries < 0) {
+    if (why) *why = fmt::format("parallel_min_entries must be ≥ 0, got {}", parallel_min_entries);
+    return false;
+  }
+  return true;
+}
+
+namespace {
+
+using detail::FusedModel;
+using detail::FusedWorkspace;
+using MatD = Matrix<double>;
+using MatF = Matrix<float>;
+
+// Columns per block when the fast path forms F_y and its float copy: a
+// q × 32 double block stays in L2 until it is copied (q = 9d ≤ 1000 →
+// ≤ 256 KiB).
+constexpr Index kColumnBlock = 32;
+
+// Same shape and the same bits.
+template <typename T>
+bool same_matrix(const Matrix<T>& a, const Matrix<T>& b) {
+  return a.rows() == b.rows() && a.cols() == b.cols() &&
+         (a.size() == 0 || std::memcmp(a.data(), b.data(), sizeof(T) * static_cast<size_t>(a.size())) == 0);
+}
+
+// Keeps copies of the inputs; a changed input invalidates what was formed from it.
+void keep_inputs(FusedModel& M, const MatD& Gz, const MatD& Gy) {
+  M.inputs_ready = false;
+  if (!same_matrix(M.Gz, Gz)) {
+    M.prep.reset();
+    M.Gz = Gz;
+  }
+  if (!same_matrix(M.Gy, Gy)) {
+    M.factored_rounds.base_valid = false;
+    M.Gy = Gy;
+  }
+  M.inputs_ready = true;
+}
+
+// C0 = G_z·P0, once per (Phase 1 preparation, G_z).
+void form_c0(FusedModel& M, const std::shared_ptr<const detail::FixedCoordinatePrep>& prep, const MatD& Gz) {
+  if (M.prep == prep) return;
+  M.prep.reset();
+  M.factored_rounds.base_valid = false;
+  check_finite("FusedAlternation: G_z", Gz);
+  M.C0.resize(Gz.rows(), prep->P0.cols());
+  detail::blas_gemm(false, false, 1.0, Gz, prep->P0, 0.0, M.C0);
+  M.Gz_f.resize(0, 0);
+  M.prep = prep;
+}
+
+// G_z's float copy unless it is current (form_c0 empties it).
+void form_gz_float(FusedModel& M, const MatD& Gz) {
+  if (M.Gz_f.rows() != Gz.rows() || M.Gz_f.cols() != Gz.cols()) M.Gz_f = Gz.cast<float>();
+}
+
+// G_z·T (q × μ) and F_b = G_z·M_b, its first m columns. In float (into
+// factored_rounds.GzT_f; the returned matrix is then empty) or in double.
+MatD form_gz_t(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gz, bool in_float) {
+  const Index q = Gz.rows(), m = phase1.Mb().cols(), mu = phase1.T().cols();
+  MatD GzT;
+  if (in_float) {
+    form_gz_float(M, Gz);
+    const MatF Tf = phase1.T().cast<float>();
+    M.factored_rounds.GzT_f.resize(q, mu);
+    detail::blas_gemm(false, false, 1.0, M.Gz_f, Tf, 0.0, M.factored_rounds.GzT_f);
+    M.Fb = M.factored_rounds.GzT_f.leftCols(m).cast<double>();
+  } else {
+    GzT.resize(q, mu);
+    detail::blas_gemm(false, false, 1.0, Gz, phase1.T(), 0.0, GzT);
+    M.Fb = GzT.leftCols(m);
+  }
+  return GzT;
+}
+
+// Factored form: F₀ = C0 + G_y once per (C0, G_y); G_z·T and R per set.
+void set_factored(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gy, MatD GzT,
+                  FusedPrecision precision) {
+  detail::FactoredRounds& fr = M.factored_rounds;
+  if (!fr.base_valid) {
+    check_finite("FusedAlternation::set: G_y", Gy);
+    fr.F0 = M.C0 + Gy;
+    fr.F0_f = fr.F0.cast<float>();
+    fr.base_valid = true;
+  }
+  fr.GzT = std::move(GzT);  // empty after a Float set
+  if (precision == FusedPrecision::Double) fr.GzT_f = fr.GzT.cast<float>();
+  M.float_set = precision == FusedPrecision::Float;
+  fr.R = phase1.R();
+  fr.R_f = fr.R.cast<float>();
+  M.factored = true;
+}
+
+// Explicit form from the fast path: F_y = C0 + G_y − (G_z·T)·R, in column
+// blocks that are still in cache for the float copy.
+void set_explicit_fast(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gy, const MatD& GzT) {
+  detail::ExplicitRounds& er = M.explicit_rounds;
+  const Index q = Gy.rows(), k = Gy.cols();
+  er.F.resize(q, k);
+  er.F_f.resize(q, k);
+  for (Index c0 = 0; c0 < k; c0 += kColumnBlock) {
+    const Index w = std::min(kColumnBlock, k - c0);
+    if (!Gy.middleCols(c0, w).allFinite()) check_finite("FusedAlternation::set: G_y", Gy);  // throws
+    er.F.middleCols(c0, w) = M.C0.middleCols(c0, w) + Gy.middleCols(c0, w);
+    detail::blas_gemm(false, false, -1.0, GzT, phase1.R().middleCols(c0, w), 1.0, er.F.middleCols(c0, w));
+    er.F_f.middleCols(c0, w) = er.F.middleCols(c0, w).cast<float>();
+  }
+}
+
+// Explicit form from Phase 1's null-space method: F_b = G_z·M_b, F_y = G_z·M_Y + G_y.
+void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phase1, const MatD& Gz, const MatD& Gy) {
+  check_finite("FusedAlternation::set: G_z", Gz);
+  check_finite("FusedAlternation::set: G_y", Gy);
+  detail::ExplicitRounds& er = M.explicit_rounds;
+  er.F = Gy;
+  M.Fb.resize(Gz.rows(), phase1.m());
+  detail::blas_gemm(false, false, 1.0, Gz, phase1.Mb(), 0.0, M.Fb);
+  detail::blas_gemm(false, false, 1.0, Gz, phase1.MY(), 1.0, er.F);
+  er.F_f = er.F.cast<float>();
+}
+
+void size_workspace(const FusedModel& M, FusedWorkspace& W) {
+  const Index q = M.q(), k = M.k(), mu = M.rounds().scratch_size();
+  W.gb.resize(q);
+  W.g.resize(q);
+  W.gf.resize(q);
+  W.yf.resize(k);
+  W.scratch.resize(mu);
+  W.scratch_f.resize(mu);
+}
+
+// Rows [r0, r1) of g = g_b + F_y·y, from y, or from its float copy yf when
+// not null (the q × k product in float, accumulated onto g in double).
+void round_product(const FusedModel& M, FusedWorkspace& W, const double* y, const float* yf, Index r0, Index r1,
+                   double* scratch, float* scratch_f) {
+  const Index rows = r1 - r0;
+  if (yf != nullptr) {
+    std::fill(W.gf.data() + r0, W.gf.data() + r1, 0.0f);
+    M.rounds().add_rows(yf, r0, r1, scratch_f, W.gf.data());
+    W.g.segment(r0, rows) = W.gb.segment(r0, rows) + W.gf.segment(r0, rows).cast<double>();
+    return;
+  }
+  W.g.segment(r0, rows) = W.gb.segment(r0, rows);
+  M.rounds().add_rows(y, r0, r1, scratch, W.g.data());
+}
+
+// The rounds on `threads` threads over block ranges (AlternatingOptions::
+// threads); y is updated in place, z is left to the caller.
+AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                                const AlternatingOptions& options, Index threads, Index block,
+                                Eigen::Ref<Vector<double>> y) {
+  const Index q = M.q(), blocks = q / block, mu = M.rounds().scratch_size();
+  const bool use_float = options.float_products;
+  W.y2.resize(q, 2);
+  W.y2.col(0) = y;
+  if (use_float) {
+    W.yf2.resize(q, 2);
+    W.yf2.col(0) = y.cast<float>();
+  }
+  // Per-thread Σ‖Δy_j‖² and ‖y_j‖², by round parity: read after the round's
+  // barrier, next written two rounds later (after the next barrier).
+  constexpr int kMaxThreads = 64;
+  threads = std::min<Index>(threads, kMaxThreads);
+  double change2[2][kMaxThreads] = {}, norm2[2][kMaxThreads] = {};
+  W.scratch_threads.resize(mu, threads);  // these allocate on the first call only
+  W.scratch_f_threads.resize(mu, threads);
+  int rounds = 0;
+  double last = 0.0;
+#pragma omp parallel num_threads(static_cast<int>(threads))
+  {
+    const Index t = omp_get_thread_num(), nt = omp_get_num_threads();
+    const Index r0 = block * (blocks * t / nt), r1 = block * (blocks * (t + 1) / nt), rows = r1 - r0;
+    double* scratch = W.scratch_threads.col(t).data();
+    float* scratch_f = W.scratch_f_threads.col(t).data();
+    for (int it = 0; it < options.iterations; ++it) {
+      const int cur = it % 2, next = 1 - cur;
+      round_product(M, W, W.y2.col(cur).data(), use_float ? W.yf2.col(cur).data() : nullptr, r0, r1, scratch,
+                    scratch_f);
+      change2[cur][t] = projection.project_blocks(W.g, y, r0 / block, r1 / block);
+      norm2[cur][t] = static_cast<double>(y.segment(r0, rows).squaredNorm());
+      W.y2.col(next).segment(r0, rows) = y.segment(r0, rows);
+      if (use_float) W.yf2.col(next).segment(r0, rows) = y.segment(r0, rows).cast<float>();
+#pragma omp barrier
+      // Only this round's sums are read here: y itself may already be
+      // changing in another thread's next round.
+      double total = 0.0, ynorm2 = 0.0;
+      for (Index s = 0; s < nt; ++s) {
+        total += change2[cur][s];
+        ynorm2 += norm2[cur][s];
+      }
+      const double change = std::sqrt(total);
+      if (t == 0) {
+        rounds = it + 1;
+        last = change;
+      }
+      // Every thread takes the same decision from the same sums.
+      if (options.tolerance > 0 && change <= options.tolerance * std::max(1.0, std::sqrt(ynorm2))) break;
+    }
+  }
+  AlternatingSummary summary;
+  summary.iterations = rounds;
+  summary.last_change = last;
+  return summary;
+}
+
+// The serial rounds.
+AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                              const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+  AlternatingSummary summary;
+  for (int it = 0; it < options.iterations; ++it) {
+    if (options.float_products) W.yf = y.cast<float>();
+    round_product(M, W, y.data(), options.float_products ? W.yf.data() : nullptr, 0, M.q(), W.scratch.data(),
+                  W.scratch_f.data());
+    summary.last_change = projection.project(W.g, y);
+    summary.iterations = it + 1;
+    if (options.tolerance > 0 &&
+        summary.last_change <= options.tolerance * std::max(1.0, static_cast<double>(y.norm())))
+      break;
+  }
+  return summary;
+}
+
+}  // namespace
+
+template <typename Scalar>
+FusedAlternation<Scalar>::FusedAlternation()
+    : model_(std::make_unique<FusedModel>()), workspace_(std::make_unique<FusedWorkspace>()) {}
+
+template <typename Scalar>
+FusedAlternation<Scalar>::~FusedAlternation() = default;
+
+template <typename Scalar>
+FusedAlternation<Scalar>::FusedAlternation(const FusedAlternation& other)
+    : model_(std::make_unique<FusedModel>(*other.model_)),
+      workspace_(std::make_unique<FusedWorkspace>(*other.workspace_)) {}
+
+template <typename Scalar>
+FusedAlternation<Scalar>& FusedAlternation<Scalar>::operator=(const FusedAlternation& other) {
+  if (this != &other) {
+    *model_ = *other.model_;
+    *workspace_ = *other.workspace_;
+  }
+  return *this;
+}
+
+// Moves swap, so that a moved-from object stays usable (and empty of nothing
+// it did not have).
+template <typename Scalar>
+FusedAlternation<Scalar>::FusedAlternation(FusedAlternation&& other) noexcept
+    : model_(std::make_unique<FusedModel>()), workspace_(std::make_unique<FusedWorkspace>()) {
+  model_.swap(other.model_);
+  workspace_.swap(other.workspace_);
+}
+
+template <typename Scalar>
+FusedAlternation<Scalar>& FusedAlternation<Scalar>::operator=(FusedAlternation&& other) noexcept {
+  model_.swap(other.model_);
+  workspace_.swap(other.workspace_);
+  return *this;
+}
+
+template <typename Scalar>
+bool FusedAlternation<Scalar>::ready() const {
+  return model_->ready;
+}
+
+template <typename Scalar>
+bool FusedAlternation<Scalar>::factored() const {
+  return model_->factored;
+}
+
+template <typename Scalar>
+bool FusedAlternation<Scalar>::float_set() const {
+  return model_->float_set;
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
+                                   const Matrix<Scalar>& Gy, int threads, FusedForm form, FusedPrecision precision) {
+  set_impl(phase1, &Gz, &Gy, threads, form, precision);
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::set(const FixedCoordinateSolver<Scalar>& phase1, int threads, FusedForm form,
+                                   FusedPrecision precision) {
+  if (!model_->inputs_ready) throw std::invalid_argument("FusedAlternation::set: no G_z, G_y given yet");
+  set_impl(phase1, nullptr, nullptr, threads, form, precision);
+}
+
+// Gz, Gy: new inputs, or null for the kept ones (no comparison, no copy).
+template <typename Scalar>
+void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>* Gz,
+                                        const Matrix<Scalar>* Gy, int threads, FusedForm form,
+                                        FusedPrecision precision) {
+  FusedModel& M = *model_;
+  std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
+  if (threads > 0) blas.emplace(threads);
+  if (!phase1.ready()) throw std::invalid_argument("FusedAlternation::set: Phase 1 has no constraints yet");
+  const MatD& gz = Gz ? *Gz : M.Gz;
+  const MatD& gy = Gy ? *Gy : M.Gy;
+  check_size("FusedAlternation::set: G_z columns (d)", phase1.d(), gz.cols());
+  check_size("FusedAlternation::set: G_y columns (k)", phase1.k(), gy.cols());
+  check_size("FusedAlternation::set: G_y rows (as G_z)", gz.rows(), gy.rows());
+  M.ready = false;
+  M.factored = false;
+  M.float_set = false;
+  if (Gz) keep_inputs(M, *Gz, *Gy);
+  if (const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored()) {
+    form_c0(M, phase1.preparation(), M.Gz);
+    const bool factored =
+        form == FusedForm::Factored || (form == FusedForm::Automatic && M.Gz.rows() * M.Gy.cols() > kExplicitMaxEntries);
+    MatD GzT = form_gz_t(M, *fast, M.Gz, factored && precision == FusedPrecision::Float);
+    if (factored) {
+      set_factored(M, *fast, M.Gy, std::move(GzT), precision);
+    } else {
+      set_explicit_fast(M, *fast, M.Gy, GzT);
+    }
+  } else {
+    set_explicit_plain(M, phase1, M.Gz, M.Gy);
+  }
+  size_workspace(M, *workspace_);
+  M.ready = true;
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz,
+                                       const Matrix<Scalar>& Gy, FusedPrecision precision) {
+  check_size("FusedAlternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
+  const auto& prep = phase1.preparation();
+  if (prep) {
+    check_size("FusedAlternation::prepare: G_z columns (d)", prep->G.rows(), Gz.cols());
+    check_size("FusedAlternation::prepare: G_y columns (k)", prep->G.cols(), Gy.cols());
+  }
+  check_finite("FusedAlternation::prepare: G_z", Gz);
+  check_finite("FusedAlternation::prepare: G_y", Gy);
+  FusedModel& M = *model_;
+  M.ready = false;
+  keep_inputs(M, Gz, Gy);
+  if (prep) {
+    const detail::ScopedBlasThreads blas(1);
+    form_c0(M, prep, M.Gz);
+    if (precision == FusedPrecision::Float) form_gz_float(M, M.Gz);
+  }
+}
+
+template <typename Scalar>
+AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Scalar>& phase1,
+                                                 InputProjection<Scalar>& projection,
+                                                 const Eigen::Ref<const Vector<Scalar>>& b,
+                                                 const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
+                                                 Eigen::Ref<Vector<Scalar>> y) {
+  const FusedModel& M = *model_;
+  FusedWorkspace& W = *workspace_;
+  if (!M.ready) throw std::invalid_argument("FusedAlternation::run: not set (call set after set_constraints or prepare)");
+  check_size("FusedAlternation::run: b (m)", M.Fb.cols(), b.size());
+  check_size("FusedAlternation::run: y (k)", M.k(), y.size());
+  check_size("FusedAlternation::run: z (d)", phase1.d(), z.size());
+  assert(options.is_valid(nullptr));
+  if (M.float_set && !options.float_products) {
+    throw std::invalid_argument(
+        "FusedAlternation::run: set with FusedPrecision::Float needs float rounds "
+        "(AlternatingOptions::float_products)");
+  }
+  // The products go through the run-time dispatched AVX2/FMA kernels
+  // (simd_kernels.h) when the CPU has them.
+  detail::gemv(M.Fb, b.data(), W.gb.data(), false);
+  const Index q = M.q(), k = M.k(), block = projection.block_size();
+  const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
+                        q * k >= options.parallel_min_entries && q / block >= 2;
+  AlternatingSummary summary = parallel ? run_parallel(M, W, projection, options, std::min<Index>(threads, q / block),
+                                                       block, y)
+                                        : run_serial(M, W, projection, options, y);
+  phase1.solve(b, y, z);
+  summary.status = Status::Success;
+  return summary;
+}
+
+template class FusedAlternation<double>;
+
+}  // namespace qpreduce

@@ -1,0 +1,116 @@
+// Private to the engine: FusedAlternation's model and workspace (alternating.h;
+// derivation in docs/engine.md, "The alternation").
+//
+// A round forms g = g_b + F_y·y (q entries, g_b = F_b·b once per run) and
+// projects it. F_y (q × k) comes in one of two forms behind RoundOperator:
+//
+//   ExplicitRounds  F_y as a matrix (and its float copy);
+//   FactoredRounds  F₀ = C0 + G_y (q × k, kept while Phase 1's preparation,
+//                   G_z and G_y stay the same) and, per constraint set,
+//                   G_z·T (q × μ) and R (μ × k): F_y·y = F₀·y − (G_z·T)·(R·y).
+#pragma once
+
+#include "phase_one.h"
+#include "simd_kernels.h"
+
+#include "qpreduce/common.h"
+
+#include <algorithm>
+#include <memory>
+
+namespace qpreduce::detail {
+
+class RoundOperator {
+ public:
+  virtual ~RoundOperator() = default;
+  // out[r0, r1) += rows [r0, r1) of F_y·y, in double or in float. scratch:
+  // scratch_size() entries. No heap allocation.
+  virtual void add_rows(const double* y, Index r0, Index r1, double* scratch, double* out) const = 0;
+  virtual void add_rows(const float* y, Index r0, Index r1, float* scratch, float* out) const = 0;
+  virtual Index scratch_size() const = 0;
+};
+
+class ExplicitRounds final : public RoundOperator {
+ public:
+  Matrix<double> F;    // F_y (q × k)
+  Matrix<float> F_f;   // F_y in float
+
+  void add_rows(const double* y, Index r0, Index r1, double* /*scratch*/, double* out) const override {
+    gemv_add(F.data() + r0, r1 - r0, F.cols(), F.outerStride(), y, out + r0);
+  }
+  void add_rows(const float* y, Index r0, Index r1, float* /*scratch*/, float* out) const override {
+    gemv_add(F_f.data() + r0, r1 - r0, F_f.cols(), F_f.outerStride(), y, out + r0);
+  }
+  Index scratch_size() const override { return 0; }
+};
+
+class FactoredRounds final : public RoundOperator {
+ public:
+  Matrix<double> F0;                // C0 + G_y (q × k)
+  Matrix<float> F0_f;               // in float
+  bool base_valid = false;          // F0 is current for (C0, G_y)
+  Matrix<double> GzT, R;            // G_z·T (q × μ; empty after a Float set), R (μ × k)
+  Matrix<float> GzT_f, R_f;         // in float
+
+  void add_rows(const double* y, Index r0, Index r1, double* scratch, double* out) const override {
+    add_rows_of(F0, GzT, R, y, r0, r1, scratch, out);
+  }
+  void add_rows(const float* y, Index r0, Index r1, float* scratch, float* out) const override {
+    add_rows_of(F0_f, GzT_f, R_f, y, r0, r1, scratch, out);
+  }
+  Index scratch_size() const override { return R.rows(); }
+
+ private:
+  // out += F0·y − (G_z·T)·(R·y) on rows [r0, r1); scratch = −R·y (μ).
+  template <typename T>
+  static void add_rows_of(const Matrix<T>& F0, const Matrix<T>& GzT, const Matrix<T>& R, const T* y, Index r0,
+                          Index r1, T* scratch, T* out) {
+    const Index rows = r1 - r0, mu = R.rows();
+    gemv_add(F0.data() + r0, rows, F0.cols(), F0.outerStride(), y, out + r0);
+    std::fill(scratch, scratch + mu, T(0));
+    gemv_add(R.data(), mu, R.cols(), R.outerStride(), y, scratch);
+    for (Index i = 0; i < mu; ++i) scratch[i] = -scratch[i];
+    gemv_add(GzT.data() + r0, rows, mu, GzT.outerStride(), scratch, out + r0);
+  }
+};
+
+// What FusedAlternation::set and prepare form.
+struct FusedModel {
+  // The last inputs (q × d, q × k), for set(phase1) and the bitwise tests.
+  Matrix<double> Gz, Gy;
+  bool inputs_ready = false;
+  // C0 = G_z·P0 (q × k) for Phase 1's preparation `prep`, and G_z in float
+  // (formed at the first Float set; emptied whenever C0 is redone).
+  std::shared_ptr<const FixedCoordinatePrep> prep;
+  Matrix<double> C0;
+  Matrix<float> Gz_f;
+  // The current constraint set.
+  Matrix<double> Fb;  // F_b = G_z·M_b (q × m)
+  ExplicitRounds explicit_rounds;
+  FactoredRounds factored_rounds;
+  bool factored = false;   // the rounds use factored_rounds
+  bool float_set = false;  // factored_rounds.GzT_f and Fb were formed in float
+  bool ready = false;
+
+  const RoundOperator& rounds() const {
+    return factored ? static_cast<const RoundOperator&>(factored_rounds) : explicit_rounds;
+  }
+  Index q() const { return Fb.rows(); }
+  Index k() const { return Gy.cols(); }
+};
+
+// The rounds' vectors (allocated by `set`, reused by every `run`).
+struct FusedWorkspace {
+  Vector<double> gb, g;                // F_b·b and g (q)
+  Vector<float> gf, yf;                // float rounds: F_y·y (q) and y (k)
+  Vector<double> scratch;              // μ, the factored form's R·y
+  Vector<float> scratch_f;
+  Matrix<double> scratch_threads;      // μ × threads (parallel rounds)
+  Matrix<float> scratch_f_threads;
+  // Parallel rounds: y as read by the next round's product, double-buffered
+  // (round r reads column r mod 2 and its Phase 2 writes the other).
+  Matrix<double> y2;
+  Matrix<float> yf2;
+};
+
+}  // namespace qpreduce::detail

@@ -1,0 +1,89 @@
+// Private to the engine: Phase 1 of the alternation (alternating.h) for one
+// constraint set, z = M_b·b + M_Y·Y (b: m, Y: k, z: d), in one of two forms
+// behind one small interface (the derivation: docs/engine.md, "The
+// alternation"):
+//
+//   ExplicitPhaseOne   M_b (d × m) and M_Y (d × k) as matrices (the
+//                      null-space method, src/qp_operators.h);
+//   FactoredPhaseOne   the range-space fast path on H_zz: M_b = T's first m
+//                      columns and M_Y = P0 − T·R, with T = Y'·Σ⁻¹ (d × μ),
+//                      R = [A_z·P0 + A_y; LᵀG] (μ × k), μ = m + ν, and P0 the
+//                      per-solver part (FixedCoordinatePrep).
+//
+// Both are immutable once made, so FixedCoordinateSolver copies share them.
+#pragma once
+
+#include "qpreduce/common.h"
+#include "range_space.h"
+#include "simd_kernels.h"
+
+#include <cstdint>
+#include <memory>
+
+namespace qpreduce::detail {
+
+// The fast path's per-solver part, once per SubspaceSolver::generation():
+// with G = NᵀD − H_zy (d × k) the unconstrained z-response to Y is P0 = M0·G.
+struct FixedCoordinatePrep {
+  std::uint64_t generation = 0;  // SubspaceSolver::generation() it was made from
+  RangeSpace range;              // of H_zz (d × d)
+  Matrix<double> G;              // NᵀD − H_zy (d × k)
+  Matrix<double> P0;             // M0·G (d × k)
+  Matrix<double> LtG;            // LᵀG (ν × k), L = D_sV_L/σ the lifted directions
+};
+
+class FactoredPhaseOne;
+
+class PhaseOneOperator {
+ public:
+  virtual ~PhaseOneOperator() = default;
+  const Matrix<double>& Mb() const { return Mb_; }  // d × m
+  // M_Y (d × k), formed on each call in the factored form.
+  virtual Matrix<double> MY() const = 0;
+  // z = M_b·b + M_Y·Y. scratch: μ entries (factored form; unused otherwise).
+  // No heap allocation.
+  virtual void apply(const double* b, const double* Y, double* z, double* scratch) const = 0;
+  // The factored form, or null.
+  virtual const FactoredPhaseOne* factored() const { return nullptr; }
+  virtual Index scratch_size() const { return 0; }
+
+ protected:
+  explicit PhaseOneOperator(Matrix<double> Mb) : Mb_(std::move(Mb)) {}
+  Matrix<double> Mb_;
+};
+
+class ExplicitPhaseOne final : public PhaseOneOperator {
+ public:
+  ExplicitPhaseOne(Matrix<double> Mb, Matrix<double> MY) : PhaseOneOperator(std::move(Mb)), MY_(std::move(MY)) {}
+  Matrix<double> MY() const override { return MY_; }
+  const Matrix<double>& explicit_MY() const { return MY_; }
+  void apply(const double* b, const double* Y, double* z, double* /*scratch*/) const override {
+    gemv(Mb_, b, z, false);
+    gemv(MY_, Y, z, true);
+  }
+
+ private:
+  Matrix<double> MY_;  // d × k
+};
+
+class FactoredPhaseOne final : public PhaseOneOperator {
+ public:
+  // T: d × μ with M_b its first m columns; R: μ × k.
+  FactoredPhaseOne(std::shared_ptr<const FixedCoordinatePrep> prep, Matrix<double> T, Matrix<double> R, Index m)
+      : PhaseOneOperator(T.leftCols(m)), prep_(std::move(prep)), T_(std::move(T)), R_(std::move(R)) {}
+  Matrix<double> MY() const override;
+  void apply(const double* b, const double* Y, double* z, double* scratch) const override;
+  const FactoredPhaseOne* factored() const override { return this; }
+  Index scratch_size() const override { return R_.rows(); }
+
+  const FixedCoordinatePrep& prep() const { return *prep_; }
+  const Matrix<double>& T() const { return T_; }  // d × μ
+  const Matrix<double>& R() const { return R_; }  // μ × k
+
+ private:
+  std::shared_ptr<const FixedCoordinatePrep> prep_;
+  Matrix<double> T_;
+  Matrix<double> R_;
+};
+
+}  // namespace qpreduce::detail
