@@ -1,4 +1,4 @@
-// Benchmark: the three non-graphics QP families of issue 7 (families.h) at
+// Benchmark: the three non-graphics QP families (families.h) at
 // n ≈ 10⁵, per demand, against the two baselines measured in the same run.
 //
 //   BM_QpPrecompute     SubspaceSolver::precompute (one factorization,

@@ -2,8 +2,8 @@
 //
 // The engine is compiled for baseline x86-64, where Eigen's matrix–vector
 // products use SSE2 without FMA and run compute-bound on the small dense
-// operators of a frame (SubspaceSolver::solve's p × p M_q, about 20 µs at
-// p = 300; FusedAlternation's q × k F_y). These kernels are compiled for
+// operators of a frame (SubspaceSolver::solve's p × p M_q; FusedAlternation's
+// q × k F_y). These kernels are compiled for
 // AVX2 + FMA and chosen at run time when the CPU has both; otherwise Eigen's
 // products are used. All matrices are column-major with leading dimension ld.
 #pragma once
@@ -327,7 +327,7 @@ inline void rows3_dot_eigen(const float* B, Index p, const float* w, float* out)
 // block (leading dimension ld). `panel` is scratch of at least m × 32
 // doubles. B is copied into a row-major panel first, so that each nonzero of
 // S costs one contiguous w-wide update instead of w strided ones (Eigen's
-// column-major sparse × dense product): 2–3× faster at n ≈ 10⁵.
+// column-major sparse × dense product).
 inline void sparse_times_block(const Eigen::SparseMatrix<double, Eigen::RowMajor, int>& S, const double* B,
                                Index ldb, Index w, double* panel, double* out, Index ld) {
   const Index n = S.rows(), m = S.cols();

@@ -1,4 +1,4 @@
-// The three QP families of issue 7 (families.h): in-design demands are
+// The three QP families (families.h): in-design demands are
 // reproduced exactly, Theorem 4.10 bounds every generated off-design demand,
 // and the cached-Cholesky + Schur baseline agrees with the full solve.
 #include <qpreduce/problems/families.h>

@@ -66,9 +66,9 @@ struct SubspaceOptions {
   // Optional: a group id in [0, g) for each of the n unknowns, e.g. the
   // vertex of each coordinate of a mesh. CHOLMOD then computes its
   // fill-reducing ordering on the g-node quotient graph, with each group's
-  // unknowns kept together (SparseFactorization::setOrderingGroups): on the
-  // 40k-vertex Bumpy Plane's ARAP Hessian (n = 121k) the ordering takes
-  // 0.3 s instead of 1.2 s. Empty: order the unknowns themselves.
+  // unknowns kept together (SparseFactorization::setOrderingGroups), several
+  // times faster on mesh Hessians (docs/engine.md). Empty: order the
+  // unknowns themselves.
   std::vector<Index> ordering_groups;
   // Right-hand sides solved per block. Blocks are solved concurrently, one per
   // OpenMP thread (omp_get_max_threads(); set OMP_NUM_THREADS to change it),

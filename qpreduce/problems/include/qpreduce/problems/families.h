@@ -1,4 +1,4 @@
-// qpreduce — seeded non-graphics QP families (issue 7), shared by tests,
+// qpreduce — seeded non-graphics QP families, shared by tests,
 // benchmarks, examples and `qpr qp`. Each is Eq. 1,
 //     min_X ½XᵀHX − qᵀX   s.t.  AᵀX = b,     H n×n PSD, A n×m, b m, q n,
 // solved again and again with a changing demand (A, b, q), together with the

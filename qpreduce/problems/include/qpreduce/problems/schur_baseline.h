@@ -1,4 +1,4 @@
-// qpreduce — the strongest simple competitor of the reduced solver (issue 7):
+// qpreduce — the strongest simple competitor of the reduced solver:
 // a Cholesky factor of H cached once, and per demand a Schur complement.
 //
 // Eq. 1:  min_X ½XᵀHX − qᵀX  s.t.  AᵀX = b   (H n×n PSD, A n×m, b m, q n).

@@ -1,4 +1,4 @@
-// qpreduce::testing — the invariant kit every plugin passes (issue 5,
+// qpreduce::testing — the invariant kit every plugin passes (see
 // docs/plugins.md). It knows no meshes: a plugin hands it its energy as a
 // quadratic form plus a direct evaluation, and its Phase 2 projection.
 //
