@@ -13,12 +13,6 @@
 
 namespace qpreduce {
 
-MatrixMarketError::MatrixMarketError(std::string file, long line, std::string problem)
-    : std::runtime_error(line > 0 ? fmt::format("{}:{}: {}", file, line, problem) : fmt::format("{}: {}", file, problem)),
-      file_(std::move(file)),
-      line_(line),
-      problem_(std::move(problem)) {}
-
 bool MarketReadOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& s) {
     if (why) *why = s;
