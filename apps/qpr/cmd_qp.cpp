@@ -56,6 +56,11 @@ using SpMat = qpreduce::SparseMatrix<double>;
 using Vec = qpreduce::Vector<double>;
 using json = nlohmann::json;
 
+// The subcommand's help line.
+constexpr const char* kAbout =
+    "Solve many demands (A, b, q) of one QP min ½XᵀHX − qᵀX s.t. AᵀX = b from Matrix Market files through the "
+    "variational subspace of (H, C, D). Exit code 1: bound violated; 2: bad input; 3: numerical failure.";
+
 struct Options {
   std::string H, C, D, demands, report, out;
   double soft = 0.0;  // 0: hard constraints
@@ -467,10 +472,7 @@ int run_qp(const Options& opt) {
 }  // namespace
 
 void register_qp(CLI::App& app) {
-  auto [cmd, opt] = add_command<Options>(
-      app, "qp",
-      "Solve many demands (A, b, q) of one QP min ½XᵀHX − qᵀX s.t. AᵀX = b from Matrix Market files through the "
-      "variational subspace of (H, C, D). Exit code 1: bound violated; 2: bad input; 3: numerical failure.");
+  auto [cmd, opt] = add_command<Options>(app, "qp", kAbout);
   cmd->add_option("--H", opt->H, "H.mtx: n×n symmetric PSD Hessian")->required();
   cmd->add_option("--C", opt->C, "C.mtx: n×d constraint design space")->required();
   cmd->add_option("--D", opt->D, "D.mtx: n×k linear-term design space (optional)");

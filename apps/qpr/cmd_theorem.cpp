@@ -38,6 +38,11 @@ const std::vector<double> kEpsilons = {0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 
 // Requested sizes, cycled over groups (grids round to s² or s³ vertices).
 const std::vector<qpreduce::Index> kSizes = {40, 64, 100, 150};
 
+// The subcommand's help line.
+constexpr const char* kAbout =
+    "Check the error bound of Theorem 4.10 on seeded trials (families × ε). Exit code 1 if the bound is violated, "
+    "2 if a trial failed, 3 if an output file cannot be written.";
+
 struct Options {
   int trials = 200;
   std::uint64_t seed = 1;
@@ -341,10 +346,7 @@ int run_theorem(const Options& opt) {
 }  // namespace
 
 void register_theorem(CLI::App& app) {
-  auto [cmd, opt] = add_command<Options>(
-      app, "theorem",
-      "Check the error bound of Theorem 4.10 on seeded trials (families × ε). Exit code 1 if the bound is violated, "
-      "2 if a trial failed, 3 if an output file cannot be written.");
+  auto [cmd, opt] = add_command<Options>(app, "theorem", kAbout);
   cmd->add_option("--trials", opt->trials, "number of trials (groups of 10 values of ε share H, C, D)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();

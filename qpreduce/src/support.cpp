@@ -4,12 +4,24 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
 
 namespace qpreduce {
 
+namespace {
+std::string file_error_message(const std::string& file, long line, const std::string& problem) {
+  return line > 0 ? fmt::format("{}:{}: {}", file, line, problem) : fmt::format("{}: {}", file, problem);
+}
+}  // namespace
+
+FileError::FileError(std::string file, long line, std::string problem)
+    : std::runtime_error(file_error_message(file, line, problem)),
+      file_(std::move(file)),
+      line_(line),
+      problem_(std::move(problem)) {}
 
 void check_size(const char* what, Index expected, Index got) {
   if (expected != got) {

@@ -256,28 +256,28 @@ constexpr int kMaxRedraws = 64;
 // Smallest accepted size: d + k ≤ 18 design columns must fit in rank(H).
 constexpr Index kMinTheoremSize = 24;
 
-}  // namespace
+bool is_dense(TheoremFamily family) {
+  return family == TheoremFamily::DensePsd || family == TheoremFamily::DensePd;
+}
 
-TheoremTrial theorem_problem(TheoremFamily family, Index size, double epsilon, std::uint64_t seed) {
-  if (size < kMinTheoremSize) {
-    throw std::invalid_argument(
-        fmt::format("theorem_problem: size: expected at least {}, got {}", kMinTheoremSize, size));
-  }
-  if (!(epsilon >= 0.0) || !std::isfinite(epsilon)) {
-    throw std::invalid_argument(fmt::format("theorem_problem: epsilon must be finite and ≥ 0, got {}", epsilon));
-  }
-  TheoremTrial t;
-  t.family = family;
-  t.size = size;
-  t.epsilon = epsilon;
-  t.seed = seed;
+struct TheoremDims {
+  Index d, k, m;  // controls (columns of C), design columns of D, constraints
+};
 
-  // Dimensions first, from their own stream, so they do not depend on n.
-  std::mt19937_64 rng(sub_seed(seed, 0) ^ static_cast<std::uint64_t>(family));
+// Dimensions first, from their own stream, so they do not depend on n; the
+// dense PSD family then draws its nullity from the same stream.
+TheoremDims draw_dimensions(std::mt19937_64& rng) {
   const Index d = std::uniform_int_distribution<Index>(4, 12)(rng);
   const Index k = std::uniform_int_distribution<Index>(1, 6)(rng);
   const Index m = std::uniform_int_distribution<Index>(1, std::min<Index>(d, 6))(rng);
+  return {d, k, m};
+}
 
+// Fills H, kernel, C and D for the family; returns the actual n (the grid
+// families round `size` to a square or a cube).
+Index draw_operators(TheoremFamily family, Index size, const TheoremDims& dims, std::uint64_t seed,
+                     std::mt19937_64& rng, TheoremTrial& t) {
+  const Index d = dims.d, k = dims.k, m = dims.m;
   Index n = size;
   switch (family) {
     case TheoremFamily::DensePsd:
@@ -313,36 +313,73 @@ TheoremTrial theorem_problem(TheoremFamily family, Index size, double epsilon, s
       break;
     }
   }
+  return n;
+}
 
-  t.A_c = gaussian_matrix(d, m, sub_seed(seed, 4));
-  const bool dense = family == TheoremFamily::DensePsd || family == TheoremFamily::DensePd;
+// Whether C·A_c is well conditioned and, when H has a kernel K, Kᵀ·C·A_c
+// pins the ker H part of X firmly (see the constants above).
+bool demand_well_posed(const TheoremTrial& t, Index n) {
+  const Matrix<double> CAc = t.C * t.A_c;
+  const Vector<double> sv = Eigen::JacobiSVD<Matrix<double>>(CAc).singularValues();
+  bool ok = sv(0) <= kMaxConstraintCondition * sv(sv.size() - 1);
+  if (ok && t.kernel.cols() > 0) {
+    const Matrix<double> KtA = t.kernel.transpose() * CAc;  // ν × m, ν ≤ m
+    const Vector<double> ksv = Eigen::JacobiSVD<Matrix<double>>(KtA).singularValues();
+    const double sigma_min = ksv(ksv.size() - 1);
+    ok = sigma_min >= kWellPosed * CAc.norm() / std::sqrt(double(n)) && ksv(0) <= kMaxKernelCondition * sigma_min;
+  }
+  return ok;
+}
+
+// Draws A_c (d × m), redrawing it until the demand is well posed.
+void draw_well_posed_constraints(TheoremFamily family, Index size, const TheoremDims& dims, Index n,
+                                 std::uint64_t seed, TheoremTrial& t) {
+  t.A_c = gaussian_matrix(dims.d, dims.m, sub_seed(seed, 4));
   for (int attempt = 1;; ++attempt) {
-    const Matrix<double> CAc = t.C * t.A_c;
-    const Vector<double> sv = Eigen::JacobiSVD<Matrix<double>>(CAc).singularValues();
-    bool ok = sv(0) <= kMaxConstraintCondition * sv(sv.size() - 1);
-    if (ok && t.kernel.cols() > 0) {
-      const Matrix<double> KtA = t.kernel.transpose() * CAc;  // ν × m, ν ≤ m
-      const Vector<double> ksv = Eigen::JacobiSVD<Matrix<double>>(KtA).singularValues();
-      const double sigma_min = ksv(ksv.size() - 1);
-      ok = sigma_min >= kWellPosed * CAc.norm() / std::sqrt(double(n)) &&
-           ksv(0) <= kMaxKernelCondition * sigma_min;
-    }
-    if (ok) break;
+    if (demand_well_posed(t, n)) break;
     if (attempt == kMaxRedraws) {
       throw std::runtime_error(fmt::format("theorem_problem({}, {}, ε, {}): no well-posed demand in {} draws",
                                            to_string(family), size, seed, kMaxRedraws));
     }
     // Redraw A_c, and for the dense families C too (KᵀC itself may be nearly
     // rank deficient, and then no A_c helps).
-    t.A_c = gaussian_matrix(d, m, sub_seed(seed, 100 + static_cast<std::uint64_t>(attempt)));
-    if (dense) t.C = gaussian_sparse(n, d, sub_seed(seed, 200 + static_cast<std::uint64_t>(attempt)));
+    t.A_c = gaussian_matrix(dims.d, dims.m, sub_seed(seed, 100 + static_cast<std::uint64_t>(attempt)));
+    if (is_dense(family)) t.C = gaussian_sparse(n, dims.d, sub_seed(seed, 200 + static_cast<std::uint64_t>(attempt)));
   }
-  t.Y = gaussian_vector(k, sub_seed(seed, 5));
-  t.b = gaussian_vector(m, sub_seed(seed, 6));
-  t.E = gaussian_matrix(n, m, sub_seed(seed, 7));
+}
+
+// Draws Y, b and the perturbation directions E (n × m) and F (n), scaled to
+// the norms of C·A_c and D·Y.
+void draw_demand_and_perturbations(const TheoremDims& dims, Index n, std::uint64_t seed, TheoremTrial& t) {
+  t.Y = gaussian_vector(dims.k, sub_seed(seed, 5));
+  t.b = gaussian_vector(dims.m, sub_seed(seed, 6));
+  t.E = gaussian_matrix(n, dims.m, sub_seed(seed, 7));
   t.E *= (t.C * t.A_c).norm() / t.E.norm();
   t.F = gaussian_vector(n, sub_seed(seed, 8));
   t.F *= (t.D * t.Y).norm() / t.F.norm();
+}
+
+}  // namespace
+
+TheoremTrial theorem_problem(TheoremFamily family, Index size, double epsilon, std::uint64_t seed) {
+  if (size < kMinTheoremSize) {
+    throw std::invalid_argument(
+        fmt::format("theorem_problem: size: expected at least {}, got {}", kMinTheoremSize, size));
+  }
+  if (!(epsilon >= 0.0) || !std::isfinite(epsilon)) {
+    throw std::invalid_argument(fmt::format("theorem_problem: epsilon must be finite and ≥ 0, got {}", epsilon));
+  }
+  TheoremTrial t;
+  t.family = family;
+  t.size = size;
+  t.epsilon = epsilon;
+  t.seed = seed;
+
+  std::mt19937_64 rng(sub_seed(seed, 0) ^ static_cast<std::uint64_t>(family));
+  const TheoremDims dims = draw_dimensions(rng);
+  const Index n = draw_operators(family, size, dims, seed, rng, t);
+  draw_well_posed_constraints(family, size, dims, n, seed, t);
+  draw_demand_and_perturbations(dims, n, seed, t);
   t.set_epsilon(epsilon);
   return t;
 }

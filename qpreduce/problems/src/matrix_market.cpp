@@ -13,12 +13,6 @@
 
 namespace qpreduce {
 
-MatrixMarketError::MatrixMarketError(std::string file, long line, std::string problem)
-    : std::runtime_error(line > 0 ? fmt::format("{}:{}: {}", file, line, problem) : fmt::format("{}: {}", file, problem)),
-      file_(std::move(file)),
-      line_(line),
-      problem_(std::move(problem)) {}
-
 bool MarketReadOptions::is_valid(std::string* why) const {
   auto fail = [&](const std::string& s) {
     if (why) *why = s;
@@ -113,10 +107,14 @@ double parse_value(LineReader& r, const std::string& token, Field field) {
   return v;
 }
 
-Parsed parse(const std::string& path, const MarketReadOptions& options) {
-  std::string why;
-  if (!options.is_valid(&why)) throw std::invalid_argument("MarketReadOptions: " + why);
-  LineReader r(path);
+struct Header {
+  bool array = false;  // "array" (dense, column-major) rather than "coordinate"
+  Field field = Field::Real;
+  Symmetry symmetry = Symmetry::General;
+};
+
+// Reads and checks the "%%MatrixMarket matrix <format> <field> <symmetry>" line.
+Header read_header(LineReader& r, const std::string& path) {
   std::string line;
   if (!r.next_raw(&line)) throw MatrixMarketError(path, 1, "empty file (expected a '%%MatrixMarket' header)");
   const std::vector<std::string> h = split(line);
@@ -130,20 +128,26 @@ Parsed parse(const std::string& path, const MarketReadOptions& options) {
   if (format != "coordinate" && format != "array") {
     r.fail(fmt::format("header: format '{}' is not supported (expected coordinate or array)", h[2]));
   }
-  Field field = Field::Real;
-  if (field_s == "integer") field = Field::Integer;
-  else if (field_s == "pattern") field = Field::Pattern;
+  Header header;
+  if (field_s == "integer") header.field = Field::Integer;
+  else if (field_s == "pattern") header.field = Field::Pattern;
   else if (field_s != "real" && field_s != "double") {
     r.fail(fmt::format("header: field '{}' is not supported (expected real, integer or pattern)", h[3]));
   }
-  Parsed p;
-  if (sym_s == "symmetric") p.symmetry = Symmetry::Symmetric;
+  if (sym_s == "symmetric") header.symmetry = Symmetry::Symmetric;
   else if (sym_s != "general") {
     r.fail(fmt::format("header: symmetry '{}' is not supported (expected general or symmetric)", h[4]));
   }
-  const bool array = format == "array";
-  if (array && field == Field::Pattern) r.fail("header: array storage cannot be 'pattern'");
+  header.array = format == "array";
+  if (header.array && header.field == Field::Pattern) r.fail("header: array storage cannot be 'pattern'");
+  return header;
+}
 
+// Reads the size line into p (rows, cols, size_line), checks it against the
+// header and the options, and returns the declared entry count (0 for array).
+Index read_size_line(LineReader& r, const Header& header, const MarketReadOptions& options, Parsed& p) {
+  std::string line;
+  const bool array = header.array;
   if (!r.next_data(&line)) r.fail("missing size line");
   p.size_line = r.line();
   const std::vector<std::string> s = split(line);
@@ -168,81 +172,110 @@ Parsed parse(const std::string& path, const MarketReadOptions& options) {
   if (options.require_symmetric && p.rows != p.cols) {
     r.fail(fmt::format("expected a square (symmetric) matrix, got {} × {}", p.rows, p.cols));
   }
+  return declared;
+}
 
+// Array storage: one value per line, column-major; symmetric storage lists
+// the lower triangle only. Zeros are not stored.
+void read_array_values(LineReader& r, Field field, Parsed& p) {
+  std::string line;
   const bool sym = p.symmetry == Symmetry::Symmetric;
-  if (array) {
-    // Column-major; symmetric storage lists the lower triangle only.
-    Index i = 0, j = 0;
-    const Index total = sym ? p.rows * (p.rows + 1) / 2 : p.rows * p.cols;
-    p.entries.reserve(static_cast<size_t>(total));
-    for (Index e = 0; e < total; ++e) {
-      if (!r.next_data(&line)) r.fail(fmt::format("expected {} values, the file ends after {}", total, e));
-      const std::vector<std::string> t = split(line);
-      if (t.size() != 1) r.fail(fmt::format("expected 1 value per line (array storage), got {} fields", t.size()));
-      const double v = parse_value(r, t[0], field);
-      if (v != 0.0) p.entries.push_back({i, j, v, r.line()});
-      if (++i == p.rows) {
-        ++j;
-        i = sym ? j : 0;
-      }
-    }
-  } else {
-    p.entries.reserve(static_cast<size_t>(declared));
-    const size_t fields = field == Field::Pattern ? 2 : 3;
-    for (Index e = 0; e < declared; ++e) {
-      if (!r.next_data(&line)) r.fail(fmt::format("expected {} entries, the file ends after {}", declared, e));
-      const std::vector<std::string> t = split(line);
-      if (t.size() != fields) {
-        r.fail(fmt::format("expected {} fields ({}), got {}", fields, fields == 2 ? "row col" : "row col value",
-                           t.size()));
-      }
-      const Index i = parse_index(r, t[0], "row"), j = parse_index(r, t[1], "col");
-      if (i < 1 || i > p.rows) r.fail(fmt::format("row {} out of range [1, {}]", i, p.rows));
-      if (j < 1 || j > p.cols) r.fail(fmt::format("col {} out of range [1, {}]", j, p.cols));
-      if (sym && i < j) r.fail(fmt::format("entry ({}, {}) above the diagonal in symmetric storage", i, j));
-      const double v = field == Field::Pattern ? 1.0 : parse_value(r, t[2], field);
-      p.entries.push_back({i - 1, j - 1, v, r.line()});
+  Index i = 0, j = 0;
+  const Index total = sym ? p.rows * (p.rows + 1) / 2 : p.rows * p.cols;
+  p.entries.reserve(static_cast<size_t>(total));
+  for (Index e = 0; e < total; ++e) {
+    if (!r.next_data(&line)) r.fail(fmt::format("expected {} values, the file ends after {}", total, e));
+    const std::vector<std::string> t = split(line);
+    if (t.size() != 1) r.fail(fmt::format("expected 1 value per line (array storage), got {} fields", t.size()));
+    const double v = parse_value(r, t[0], field);
+    if (v != 0.0) p.entries.push_back({i, j, v, r.line()});
+    if (++i == p.rows) {
+      ++j;
+      i = sym ? j : 0;
     }
   }
-  if (r.next_data(&line)) {
-    r.fail(array ? "more values than rows × cols" : fmt::format("more entries than the {} declared", declared));
-  }
+}
 
-  // Duplicates: sort by (col, row) and compare neighbours.
-  std::stable_sort(p.entries.begin(), p.entries.end(),
+// Coordinate storage: `declared` lines "row col [value]", 1-based.
+void read_coordinate_entries(LineReader& r, Field field, Index declared, Parsed& p) {
+  std::string line;
+  const bool sym = p.symmetry == Symmetry::Symmetric;
+  p.entries.reserve(static_cast<size_t>(declared));
+  const size_t fields = field == Field::Pattern ? 2 : 3;
+  for (Index e = 0; e < declared; ++e) {
+    if (!r.next_data(&line)) r.fail(fmt::format("expected {} entries, the file ends after {}", declared, e));
+    const std::vector<std::string> t = split(line);
+    if (t.size() != fields) {
+      r.fail(fmt::format("expected {} fields ({}), got {}", fields, fields == 2 ? "row col" : "row col value",
+                         t.size()));
+    }
+    const Index i = parse_index(r, t[0], "row"), j = parse_index(r, t[1], "col");
+    if (i < 1 || i > p.rows) r.fail(fmt::format("row {} out of range [1, {}]", i, p.rows));
+    if (j < 1 || j > p.cols) r.fail(fmt::format("col {} out of range [1, {}]", j, p.cols));
+    if (sym && i < j) r.fail(fmt::format("entry ({}, {}) above the diagonal in symmetric storage", i, j));
+    const double v = field == Field::Pattern ? 1.0 : parse_value(r, t[2], field);
+    p.entries.push_back({i - 1, j - 1, v, r.line()});
+  }
+}
+
+// Sorts the entries by (col, row) and rejects two entries at one position.
+void sort_and_reject_duplicates(const std::string& path, std::vector<Entry>& entries) {
+  std::stable_sort(entries.begin(), entries.end(),
                    [](const Entry& a, const Entry& b) { return a.col != b.col ? a.col < b.col : a.row < b.row; });
-  for (size_t e = 1; e < p.entries.size(); ++e) {
-    const Entry &a = p.entries[e - 1], &b = p.entries[e];
+  for (size_t e = 1; e < entries.size(); ++e) {
+    const Entry &a = entries[e - 1], &b = entries[e];
     if (a.row == b.row && a.col == b.col) {
       throw MatrixMarketError(path, b.line,
                               fmt::format("duplicate entry ({}, {}) (first on line {})", b.row + 1, b.col + 1, a.line));
     }
   }
+}
 
-  if (options.require_symmetric && !sym) {
-    double max_abs = 0.0;
-    for (const Entry& e : p.entries) max_abs = std::max(max_abs, std::abs(e.value));
-    const double tol = options.symmetry_tolerance * max_abs;
-    auto find = [&](Index row, Index col) -> const Entry* {
-      const auto it = std::lower_bound(p.entries.begin(), p.entries.end(), std::make_pair(col, row),
-                                       [](const Entry& a, const std::pair<Index, Index>& key) {
-                                         return a.col != key.first ? a.col < key.first : a.row < key.second;
-                                       });
-      return it != p.entries.end() && it->row == row && it->col == col ? &*it : nullptr;
-    };
-    for (const Entry& e : p.entries) {
-      if (e.row == e.col) continue;
-      const Entry* mirror = find(e.col, e.row);
-      const double m = mirror ? mirror->value : 0.0;
-      if (std::abs(e.value - m) > tol) {
-        throw MatrixMarketError(
-            path, e.line,
-            mirror ? fmt::format("not symmetric: entry ({}, {}) = {} but ({}, {}) = {} (line {})", e.row + 1,
-                                 e.col + 1, e.value, e.col + 1, e.row + 1, m, mirror->line)
-                   : fmt::format("not symmetric: entry ({}, {}) = {} has no mirror entry ({}, {})", e.row + 1,
-                                 e.col + 1, e.value, e.col + 1, e.row + 1));
-      }
+// General storage checked for symmetry: |a_ij − a_ji| ≤ tolerance · max|a|.
+// Precondition: entries sorted by (col, row).
+void check_symmetric(const std::string& path, const std::vector<Entry>& entries, double symmetry_tolerance) {
+  double max_abs = 0.0;
+  for (const Entry& e : entries) max_abs = std::max(max_abs, std::abs(e.value));
+  const double tol = symmetry_tolerance * max_abs;
+  auto find = [&](Index row, Index col) -> const Entry* {
+    const auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(col, row),
+                                     [](const Entry& a, const std::pair<Index, Index>& key) {
+                                       return a.col != key.first ? a.col < key.first : a.row < key.second;
+                                     });
+    return it != entries.end() && it->row == row && it->col == col ? &*it : nullptr;
+  };
+  for (const Entry& e : entries) {
+    if (e.row == e.col) continue;
+    const Entry* mirror = find(e.col, e.row);
+    const double m = mirror ? mirror->value : 0.0;
+    if (std::abs(e.value - m) > tol) {
+      throw MatrixMarketError(
+          path, e.line,
+          mirror ? fmt::format("not symmetric: entry ({}, {}) = {} but ({}, {}) = {} (line {})", e.row + 1, e.col + 1,
+                               e.value, e.col + 1, e.row + 1, m, mirror->line)
+                 : fmt::format("not symmetric: entry ({}, {}) = {} has no mirror entry ({}, {})", e.row + 1,
+                               e.col + 1, e.value, e.col + 1, e.row + 1));
     }
+  }
+}
+
+Parsed parse(const std::string& path, const MarketReadOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("MarketReadOptions: " + why);
+  LineReader r(path);
+  const Header header = read_header(r, path);
+  Parsed p;
+  p.symmetry = header.symmetry;
+  const Index declared = read_size_line(r, header, options, p);
+  if (header.array) read_array_values(r, header.field, p);
+  else read_coordinate_entries(r, header.field, declared, p);
+  std::string line;
+  if (r.next_data(&line)) {
+    r.fail(header.array ? "more values than rows × cols" : fmt::format("more entries than the {} declared", declared));
+  }
+  sort_and_reject_duplicates(path, p.entries);
+  if (options.require_symmetric && p.symmetry != Symmetry::Symmetric) {
+    check_symmetric(path, p.entries, options.symmetry_tolerance);
   }
   return p;
 }

@@ -2,6 +2,8 @@
 // ARAP energy, and fit_rotation (Phase 2 of the ARAP model).
 #include <catch2/catch.hpp>
 
+#include "energy_test_util.h"
+
 #include "qpreduce/deform/energy/arap_energy.h"
 #include "qpreduce/deform/mesh/shapes.h"
 
@@ -18,10 +20,6 @@ namespace {
 Eigen::Matrix3d rotation(double angle, Eigen::Vector3d axis) {
   return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
 }
-
-// Small surface and solid used throughout.
-TriangleMesh small_cylinder() { return shapes::capped_cylinder(1.0, 3.0, 8, 6); }
-TetMesh small_box() { return shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 3); }
 
 std::vector<int> round_robin_clusters(Index r, Index d) {
   std::vector<int> c(static_cast<size_t>(r));
@@ -46,24 +44,11 @@ Eigen::VectorXd rotations_vector(Index d, unsigned seed) {
   return S;
 }
 
-struct EnergyCase {
-  Vertices V;
-  RotationElements el;
-  std::vector<int> clusters;
-  Index d = 3;
-};
+using EnergyCase = energy_test::ElementsCase;
 
+// The small box of tets or cylinder surface in 3 round-robin clusters.
 EnergyCase energy_case(bool tet) {
-  EnergyCase c;
-  if (tet) {
-    const TetMesh m = small_box();
-    c.V = m.V;
-    c.el = tet_elements(m.V, m.T);
-  } else {
-    const TriangleMesh m = small_cylinder();
-    c.V = m.V;
-    c.el = spokes_and_rims_elements(m.V, m.F);
-  }
+  EnergyCase c = energy_test::small_elements(tet, 3);
   c.clusters = round_robin_clusters(c.el.size(), c.d);
   return c;
 }

@@ -3,6 +3,8 @@
 // penalty γ (Eq. 11); a custom model plugged in without touching the engine.
 #include <catch2/catch.hpp>
 
+#include "energy_test_util.h"
+
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/io_error.h"
 #include "qpreduce/deform/energy/model.h"
@@ -32,24 +34,11 @@ std::vector<int> band_clusters(const Vertices& V, const RotationElements& el, In
   return c;
 }
 
-struct Case {
-  Vertices V;
-  RotationElements el;
-  std::vector<int> clusters;
-  Index d = 4;
-};
+using Case = energy_test::ElementsCase;
 
+// The small box of tets or cylinder surface in 4 slabs along z.
 Case small_case(bool tet) {
-  Case c;
-  if (tet) {
-    const TetMesh m = shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 3);
-    c.V = m.V;
-    c.el = tet_elements(m.V, m.T);
-  } else {
-    const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 8, 6);
-    c.V = m.V;
-    c.el = spokes_and_rims_elements(m.V, m.F);
-  }
+  Case c = energy_test::small_elements(tet, 4);
   c.clusters = band_clusters(c.V, c.el, c.d, 2);
   return c;
 }
@@ -71,6 +60,27 @@ SparseMatrix<double> joint_hessian(const ModifiedArapSystem& sys) {
   SparseMatrix<double> J(nu + ns, nu + ns);
   J.setFromTriplets(t.begin(), t.end());
   return J;
+}
+
+// Precomputes `model` with `opts`, sets the handles `h` (both must succeed)
+// and moves the one moving patch through four frames, patch_at(a) for
+// a = 1/4, 1/2, 3/4, 1, each warm-started from the last. Returns the last
+// frame's vertices.
+template <typename PatchAt>
+Vertices four_patch_frames(Deformer& deformer, const DeformableMesh& model, const DeformerOptions& opts,
+                           const Handles& h, PatchAt patch_at) {
+  const PrecomputeSummary ps = deformer.precompute(model, opts);
+  INFO(ps.message);
+  REQUIRE(ps.ok());
+  REQUIRE(deformer.set_handles(h).ok());
+  Vertices out;
+  for (int f = 1; f <= 4; ++f) {
+    HandleTargets t;
+    t.points.resize(0, 3);
+    t.patch_transforms = {patch_at(f / 4.0)};
+    deformer.frame(t, &out);
+  }
+  return out;
 }
 
 struct ModelCase {
@@ -311,22 +321,13 @@ TEST_CASE("gamma > 0 reduces the rotation differences between neighbouring clust
     opts.iterations = 30;
     opts.energy.gamma = gamma;
     Deformer deformer;
-    const PrecomputeSummary ps = deformer.precompute(model, opts);
-    INFO(ps.message);
-    REQUIRE(ps.ok());
-    REQUIRE(deformer.set_handles(h).ok());
-    Vertices out;
-    for (int f = 1; f <= 4; ++f) {
-      // The bend over four frames (warm start).
-      const double a = f / 4.0;
-      HandleTargets ft;
-      ft.points.resize(0, 3);
+    // The bend over four frames (warm start).
+    four_patch_frames(deformer, model, opts, h, [&](double a) {
       Eigen::Matrix<double, 3, 4> T;
       T.leftCols<3>() = Eigen::AngleAxisd(-a * M_PI / 2, Eigen::Vector3d::UnitX()).toRotationMatrix();
       T.col(3) = a * t;
-      ft.patch_transforms = {T};
-      deformer.frame(ft, &out);
-    }
+      return T;
+    });
     // Σ_{a<b} W_ab‖s_a − s_b‖² over neighbouring clusters.
     const ClusterGeometry g = cluster_geometry(model.V, deformer.elements(), deformer.clusters(),
                                                deformer.rotational_proxies());
@@ -451,24 +452,15 @@ TEST_CASE("rigid patches stay rigid and fixed patches do not move, under every m
   opts.linear_proxies = 12;
   opts.iterations = 20;
   Deformer deformer;
-  const PrecomputeSummary ps = deformer.precompute(model, opts);
-  INFO(ps.message);
-  REQUIRE(ps.ok());
-  REQUIRE(deformer.set_handles(h).ok());
   // Turn the top patch about its centre (0, 0, 4), grow it 15 % and shift it
   // sideways, over a few frames.
-  Vertices out;
-  for (int f = 1; f <= 4; ++f) {
-    const double a = f / 4.0;
-    HandleTargets t;
-    t.points.resize(0, 3);
+  Vertices out = four_patch_frames(deformer, model, opts, h, [](double a) {
     Eigen::Matrix<double, 3, 4> T;
     T.leftCols<3>() = (1.0 + 0.15 * a) * Eigen::AngleAxisd(-a * 1.4, Eigen::Vector3d::UnitX()).toRotationMatrix();
     const Eigen::Vector3d c(0, 0, 4.0);
     T.col(3) = c - T.leftCols<3>() * c + a * Eigen::Vector3d(0.3, 1.5, -0.5);
-    t.patch_transforms = {T};
-    deformer.frame(t, &out);
-  }
+    return T;
+  });
   const double diag = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
   // Fixed: the identity, and its vertices at rest (float reconstruction).
   const Eigen::Matrix<double, 3, 4> fixed = deformer.patch_transform(0);

@@ -4,6 +4,7 @@
 // the on-site step (State::finish).
 #include "state.h"
 
+#include "deformer/control_layer.h"
 #include "deformer/handle_checks.h"
 
 #include <qpreduce/support.h>
@@ -166,14 +167,7 @@ void Model::find_rigid_clusters(const Tetrahedra& T) {
 }
 
 void Model::control_row(Index v, int a, double scale, Index col, Triplets* t) const {
-  const int p = patch_of_vertex.empty() ? -1 : patch_of_vertex[v];
-  if (p < 0) {
-    t->emplace_back(control_of_free[v] + a, col, scale);
-    return;
-  }
-  const Index base = patch_base + 12 * p;
-  for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * rest(v, c));
-  t->emplace_back(base + 9 + a, col, scale);
+  add_control_row(patch_of_vertex, rest, control_of_free, patch_base, v, a, scale, col, t);
 }
 
 SparseMatrix<double> Model::control_matrix() const {

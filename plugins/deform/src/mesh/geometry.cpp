@@ -124,15 +124,25 @@ Eigen::VectorXd per_element(const char* what, const char* kind, int corners, con
   return out;
 }
 
+// Checks V and E (`corners` columns, `kind` in messages), lets
+// add_weights(e, weights) append the off-diagonal weights w_ij of element e
+// (at most `per_element` of them) and assembles the Laplacian.
+template <typename AddWeights>
+SparseMatrix<double> laplacian_from_elements(const char* what, const char* kind, int corners, int per_element,
+                                             const VerticesRef& V, const ElementsRef& E, AddWeights add_weights) {
+  check_vertices(what, V);
+  check_elements(what, kind, V.rows(), E, corners);
+  std::vector<Triplet> weights;
+  weights.reserve(per_element * E.rows());
+  for (Index e = 0; e < E.rows(); ++e) add_weights(e, weights);
+  return assemble_laplacian(V.rows(), weights);
+}
+
 }  // namespace
 
 SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef& F, double tolerance) {
   const char* what = "cotangent_laplacian";
-  check_vertices(what, V);
-  check_elements(what, "face", V.rows(), F, 3);
-  std::vector<Triplet> weights;
-  weights.reserve(3 * F.rows());
-  for (Index f = 0; f < F.rows(); ++f) {
+  return laplacian_from_elements(what, "face", 3, 3, V, F, [&](Index f, std::vector<Triplet>& weights) {
     const double twice_area = checked_double_area(what, V, F, f, tolerance);
     for (int c = 0; c < 3; ++c) {
       // cot of the angle at corner c = (u·v)/|u×v|, u, v the two edges leaving it;
@@ -141,8 +151,7 @@ SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef
       const Vec3 u = row(V, i) - row(V, o), v = row(V, j) - row(V, o);
       weights.emplace_back(i, j, 0.5 * u.dot(v) / twice_area);
     }
-  }
-  return assemble_laplacian(V.rows(), weights);
+  });
 }
 
 Eigen::VectorXd face_areas(const VerticesRef& V, const ElementsRef& F, double tolerance) {
@@ -190,11 +199,7 @@ Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> vertex_normals(const V
 
 SparseMatrix<double> cotangent_laplacian_tets(const VerticesRef& V, const ElementsRef& T, double tolerance) {
   const char* what = "cotangent_laplacian_tets";
-  check_vertices(what, V);
-  check_elements(what, "tet", V.rows(), T, 4);
-  std::vector<Triplet> weights;
-  weights.reserve(6 * T.rows());
-  for (Index t = 0; t < T.rows(); ++t) {
+  return laplacian_from_elements(what, "tet", 4, 6, V, T, [&](Index t, std::vector<Triplet>& weights) {
     Eigen::Matrix3d E;
     const double six_volume = checked_six_volume(what, V, T, t, tolerance, &E);
     // Rows of E⁻¹ are ∇φ_b, ∇φ_c, ∇φ_d; ∇φ_a = −(their sum). K_ij = vol·∇φ_i·∇φ_j,
@@ -206,8 +211,7 @@ SparseMatrix<double> cotangent_laplacian_tets(const VerticesRef& V, const Elemen
     for (int i = 0; i < 4; ++i) {
       for (int j = i + 1; j < 4; ++j) weights.emplace_back(T(t, i), T(t, j), -volume * G.row(i).dot(G.row(j)));
     }
-  }
-  return assemble_laplacian(V.rows(), weights);
+  });
 }
 
 Eigen::VectorXd tet_volumes(const VerticesRef& V, const ElementsRef& T, double tolerance) {

@@ -1,7 +1,7 @@
 // Local-global (Sorkine–Alexa) ARAP in full space, classic or modified
 // energy, one cached factorization per handle set (reference.h).
 #include "reference_internal.h"
-
+#include "deformer/control_layer.h"
 
 #include <qpreduce/support.h>
 
@@ -46,14 +46,7 @@ struct LocalGlobalState {
 
   // Adds the control-layer entries of coordinate (v, a) scaled by `scale` to column `col`.
   void control_row(Index v, int a, double scale, Index col, Triplets* t) const {
-    const int p = m.patch_of_vertex[v];
-    if (p < 0) {
-      t->emplace_back(control_of_free[v] + a, col, scale);
-      return;
-    }
-    const Index base = nu - 12 * s + 12 * p;
-    for (int c = 0; c < 3; ++c) t->emplace_back(base + 3 * a + c, col, scale * m.V(v, c));
-    t->emplace_back(base + 9 + a, col, scale);
+    detail_deformer::add_control_row(m.patch_of_vertex, m.V, control_of_free, nu - 12 * s, v, a, scale, col, t);
   }
 };
 

@@ -18,26 +18,21 @@
 #pragma once
 
 #include "qpreduce/common.h"
+#include "qpreduce/support.h"
 
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace qpreduce {
 
-class MatrixMarketError : public std::runtime_error {
+// Thrown on any problem with a Matrix Market file. line = 0 when the problem
+// is not tied to one line (cannot open the file). what() is
+// "<file>:<line>: <problem>" (or "<file>: <problem>"); see FileError.
+class MatrixMarketError : public FileError {
  public:
-  // line = 0 when the problem is not tied to one line (cannot open the file).
-  // what() is "<file>:<line>: <problem>" (or "<file>: <problem>").
-  MatrixMarketError(std::string file, long line, std::string problem);
-
-  const std::string& file() const { return file_; }
-  long line() const { return line_; }
-  const std::string& problem() const { return problem_; }
-
- private:
-  std::string file_;
-  long line_;
-  std::string problem_;
+  MatrixMarketError(std::string file, long line, std::string problem)
+      : FileError(std::move(file), line, std::move(problem)) {}
 };
 
 struct MarketReadOptions {

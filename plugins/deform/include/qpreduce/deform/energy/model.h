@@ -1,7 +1,8 @@
 // qpreduce::deform — the plugin contract: how a deformation model plugs into
 // the reduced deformer without touching the engine (docs/plugins.md).
 //
-// A model supplies two things (DESIGN "plugins own the physics"):
+// A model supplies two things (the plugin owns the physics, the engine the
+// linear algebra):
 //
 //  1. Energy blocks. A quadratic energy in u = [V′ (3n); Q (4r)] and the
 //     cluster coordinates S (9d, cluster a at 9a..9a+8, column-major 3×3):
@@ -53,14 +54,22 @@ struct ClusterGeometry {
   std::vector<char> rigid;
 };
 
-// Builds the ClusterGeometry of elements labelled `clusters` (r entries in
-// [0, d)); `rigid` may be empty (no rigid cluster). Throws
-// std::invalid_argument when a cluster has C_a ≤ 0.
+// Builds the ClusterGeometry of rotation elements grouped into d clusters.
+//   V         n × 3 rest positions
+//   elements  r rotation elements over V (arap_energy.h)
+//   clusters  r labels in [0, d), one per element
+//   d         number of clusters
+//   rigid     d flags (1: a rigid patch's cluster), or empty: none rigid
+// Returns measure, stiffness (d each), coupling (d × d) and rigid (d).
+// Throws std::invalid_argument on a label outside [0, d), sizes that
+// disagree, or a cluster with C_a ≤ 0 (its scale and rotation undetermined).
 ClusterGeometry cluster_geometry(const Vertices& V, const RotationElements& elements,
                                  const std::vector<int>& clusters, Index d, std::vector<char> rigid = {});
 
-// Σ_{a<b} W_ab‖s_a − s_b‖²_F: how much neighbouring cluster transforms S
-// (9d) differ, what γ (Eq. 11) penalises.
+// Σ_{a<b} W_ab‖s_a − s_b‖²_F: how much neighbouring cluster transforms differ,
+// what γ (Eq. 11) penalises.
+//   geometry  the clusters' ClusterGeometry (its coupling W, d × d)
+//   S         9d cluster transforms (cluster a at 9a..9a+8, column-major 3 × 3)
 double cluster_rotation_roughness(const ClusterGeometry& geometry, const Eigen::VectorXd& S);
 
 // Phase 2 of a model: an InputProjection (engine) that also knows its
@@ -81,6 +90,9 @@ class ClusterProjection : public InputProjection<double> {
   virtual double energy(const Eigen::Ref<const Eigen::VectorXd>& g, const Eigen::Ref<const Eigen::VectorXd>& y) const = 0;
 };
 
+// A deformation model (the plugin contract above): its energy blocks and its
+// Phase 2 projection. Implementations are immutable and shared between
+// deformers (std::shared_ptr<const DeformationModel>).
 class DeformationModel {
  public:
   virtual ~DeformationModel() = default;
@@ -101,13 +113,18 @@ class DeformationModel {
 // E′ of Eq. 8–11 with rotations (paper Phase 2, Eq. 19; with γ > 0 the
 // cluster rotations are updated block by block, Gauss–Seidel over clusters,
 // from G_a + 2γ·Σ_b W_ab s_b).
+//   energy  α, β, γ of E′ (β acts on surfaces only; ignored for tets)
+// Throws std::invalid_argument when `energy` is not valid.
 std::shared_ptr<const DeformationModel> make_arap_model(const EnergyParameters& energy);
 
 // Conformal-like deformation (appendix, Eq. 48–49): the same energy, with
 // s_a = ψ_a·t_a, t_a ∈ SO(3), ψ_a ∈ [1/psi_max, psi_max]. Phase 2 in two
 // steps per cluster: t_a = nearest rotation of G̃_a (Ψ fixed), then
 // ψ_a = clamp(tr(t_aᵀG̃_a) / (C_a + 6γ·Σ_b W_ab)) in closed form (T fixed).
-// psi_max > 1. Rigid clusters keep ψ = 1.
+// Rigid clusters keep ψ = 1.
+//   energy   α, β, γ of E′, as for make_arap_model
+//   psi_max  the largest scale, finite and > 1
+// Throws std::invalid_argument when `energy` is not valid or psi_max ≤ 1.
 std::shared_ptr<const DeformationModel> make_conformal_model(const EnergyParameters& energy, double psi_max);
 
 }  // namespace qpreduce::deform

@@ -9,24 +9,19 @@
 //     "data/cylinder.sel: expected 4802 entries (one per mesh vertex), got 4800"
 #pragma once
 
-#include <stdexcept>
+#include "qpreduce/support.h"
+
 #include <string>
+#include <utility>
 
 namespace qpreduce::deform {
 
-class IoError : public std::runtime_error {
+// what() is "<file>:<line>: <problem>", or "<file>: <problem>" when line is 0
+// (binary data, whole-file checks); see qpreduce::FileError.
+class IoError : public FileError {
  public:
-  // line = 0 when the problem has no line (binary data, whole-file checks).
-  IoError(std::string file, long line, std::string problem);
-
-  const std::string& file() const { return file_; }
-  long line() const { return line_; }
-  const std::string& problem() const { return problem_; }
-
- private:
-  std::string file_;
-  long line_;
-  std::string problem_;
+  IoError(std::string file, long line, std::string problem)
+      : FileError(std::move(file), line, std::move(problem)) {}
 };
 
 }  // namespace qpreduce::deform

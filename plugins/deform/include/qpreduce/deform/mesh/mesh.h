@@ -45,10 +45,12 @@ struct TetMesh {
   Triangles F;
 };
 
-// Argument checks for the writers and for callers that build meshes in code:
-// throw std::invalid_argument when V has a NaN/inf entry, when there is no
-// vertex or no element, or when an index lies outside [0, V.rows()), with a
-// message "<what>: ...".
+// Argument checks for the writers and for callers that build meshes in code.
+//   what  the caller's name; every message starts "<what>: "
+//   mesh  V (n × 3) and its elements: F (m × 3); for tets T (m × 4) and the
+//         boundary F (k × 3, may be empty)
+// Throws std::invalid_argument when V has a NaN/inf entry, when there is no
+// vertex or no element, or when an index lies outside [0, n).
 void check_mesh(const char* what, const TriangleMesh& mesh);
 void check_mesh(const char* what, const TetMesh& mesh);
 

@@ -52,6 +52,8 @@
 
 namespace qpreduce::deform {
 
+// The energy a reference minimises (see above): classic ARAP (Eq. 6) or E′
+// (Eq. 8–10).
 enum class ReferenceEnergy { ClassicArap, ModifiedArap };
 const char* to_string(ReferenceEnergy energy);
 
@@ -147,10 +149,19 @@ class LocalGlobalArap {
   LocalGlobalArap(LocalGlobalArap&&) noexcept;
   LocalGlobalArap& operator=(LocalGlobalArap&&) noexcept;
 
+  // Builds the rotation elements and the energy matrices of both energies.
+  //   model    rest pose V (n × 3), its elements, patches and, for
+  //            ModifiedArap, the rotational clusters
+  //   options  the energy, its parameters and the solver settings
   // Throws std::invalid_argument on a bad model (as Deformer::precompute), on
   // ModifiedArap without clusters, or on invalid options.
   void precompute(const DeformableMesh& model, const ReferenceOptions& options = {});
 
+  // Splits the control layer into pinned and free coordinates for this handle
+  // set and factors the global step. Precondition: precompute was called.
+  //   handles  point handles (vertex indices in [0, n), optional weights) and
+  //            prescribed patches (indices into the model's patches)
+  // Returns the coordinate counts and the factorization's status.
   // Throws std::invalid_argument on handles out of range, on a connected
   // component that nothing anchors (no Fixed/prescribed patch, no handle: its
   // position would be undetermined), or on linearly dependent weighted
@@ -158,7 +169,11 @@ class LocalGlobalArap {
   HandleSetSummary set_handles(const Handles& handles);
 
   // Runs the alternation from `initial` (n × 3; empty: the rest pose) to the
-  // targets. Throws std::invalid_argument on target sizes, NaN, or conflicting
+  // targets. Precondition: set_handles was called.
+  //   targets  one row of `points` per point handle (m × 3), one 3 × 4 [A | t]
+  //            per prescribed patch
+  //   out      V (n × 3), the rotations and, for E′, Q (ReferenceSolution)
+  // Returns the energy, iterations, residual and whether it converged. Throws std::invalid_argument on target sizes, NaN, or conflicting
   // targets (one vertex held at two different places by two constraints).
   ReferenceSummary solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial = {});
 
@@ -169,19 +184,20 @@ class LocalGlobalArap {
   std::unique_ptr<State> state_;
 };
 
-// One-off local-global solve (precompute, set_handles, solve).
+// One-off local-global solve: LocalGlobalArap's precompute(model, options),
+// set_handles(handles) and solve(targets, out, initial), with their inputs,
+// outputs and errors. A failed set_handles comes back as the summary's status.
 ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial = {});
 
-// Ceres full-space minimiser of the chosen energy. Residuals: per element k
-// and triangle t of G_k (tets: the tet itself), (B_t ⊗ I₃)·δ with δ_i =
-// v′_i − r v_i for the corners of t, r = r_k (classic) or s_{i_k} + q_k (E′),
-// and B_tᵀB_t = the element's cotangent stiffness on t (PSD even where a
-// cotangent is negative, so the sum of squares equals the energy exactly);
-// for E′ also U_k Q_k with U_kᵀU_k the Eq. 10 penalty Hessian. Constrained
-// vertices are constant parameter blocks. Throws std::invalid_argument on
-// the unsupported constraints named above, bad input, or conflicting targets.
+// Ceres full-space minimiser of the chosen energy, as a sum of squared
+// residuals that equals it exactly (docs/deform.md, "The Ceres residuals").
+// Constrained vertices are constant parameter blocks.
+//   model, handles, targets, options, initial  as for solve_local_global
+//   out  V (n × 3), the rotations and, for E′, Q (ReferenceSolution)
+// Throws std::invalid_argument on the unsupported constraints named above
+// (weighted point handles, free patches), bad input, or conflicting targets.
 // Throws std::runtime_error when qpreduce was built without Ceres
 // (QPREDUCE_NO_CERES; has_ceres_reference() tells).
 ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
@@ -191,16 +207,20 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
 // Whether solve_ceres_reference is available (qpreduce was built with Ceres).
 bool has_ceres_reference();
 
-// Where the constraints put each vertex, when they put it somewhere: the
-// Fixed patches, the prescribed patches and the single-vertex point handles
-// (weighted handles and free patches are not per-vertex). `pinned` has n
-// entries (true where a target is set). Throws std::invalid_argument on
-// conflicting targets (a vertex held at two places more than `tolerance`
-// apart), naming the vertex and both constraints.
+// Where the constraints put each vertex, when they put it somewhere.
 struct VertexTargets {
-  std::vector<char> pinned;
-  Vertices position;  // n × 3, meaningful where pinned
+  std::vector<char> pinned;  // n entries, true where a target is set
+  Vertices position;         // n × 3, meaningful where pinned
 };
+
+// The per-vertex targets of the Fixed patches, the prescribed patches and
+// the single-vertex point handles (weighted handles and free patches are not
+// per-vertex).
+//   model      rest pose V (n × 3) and its patches
+//   handles, targets  as for LocalGlobalArap::set_handles and solve
+//   tolerance  how far apart two targets of one vertex may be (absolute)
+// Throws std::invalid_argument on conflicting targets (a vertex held at two
+// places more than `tolerance` apart), naming the vertex and both constraints.
 VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                              double tolerance);
 

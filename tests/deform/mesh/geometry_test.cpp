@@ -1,8 +1,8 @@
-// Geometry used by the proxies (cotangent Laplacians, masses, components):
-// invariants, hand-computed values and the error paths.
+// Mesh geometry (src/mesh/geometry.cpp: cotangent Laplacians, masses,
+// normals, components): invariants, hand-computed values and the error paths.
 #include <catch2/catch.hpp>
 
-#include "proxies_test_util.h"
+#include "../proxies/proxies_test_util.h"  // the seeded meshes and Laplacian invariants
 
 #include <cmath>
 #include <stdexcept>
