@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Quality study of the reduced ARAP deformer against full-space references (issue 4).
+"""Quality study of the reduced ARAP deformer against full-space references.
 
 One command regenerates the measured tables of docs/quality.md (between the
 `<!-- quality_study:NAME -->` markers) and the figures docs/figures/quality_*.svg:
@@ -30,6 +30,9 @@ import shutil
 import subprocess
 import sys
 import time
+
+from quality_tables import TARGET_RATIO, TARGET_RMS, TARGET_SPEEDUP, fragments, label, short  # noqa: E402
+from svg_plot import PALETTE, svg_plot  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -91,7 +94,6 @@ QUICK = dict(
     conv_iters=[8],
     conv_scen=[("sel", "cylinder", {})],
 )
-TARGET_RMS, TARGET_RATIO, TARGET_SPEEDUP = 0.02, 1.5, 100.0
 
 
 # ---------------------------------------------------------------------------
@@ -447,260 +449,6 @@ class Study:
 # ---------------------------------------------------------------------------
 # Output: markdown fragments and SVG figures
 # ---------------------------------------------------------------------------
-def pct(x, digits=2):
-    return ("%." + str(digits) + "f %%") % (100 * x)
-
-
-def g(x, digits=4):
-    return ("%." + str(digits) + "g") % x
-
-
-def label(kind, name):
-    return name.replace("_", " ") + {"sel": " `.sel/.def`", "tet": " (tets) `.sel/.def`", "anim": " `.anim`"}[kind]
-
-
-def short(kind, name):
-    return name.replace("_hansel", "") + {"sel": " (sel/def)", "tet": " (tets)", "anim": " (anim)"}[kind]
-
-
-def table(header, rows):
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
-    return "\n".join(out)
-
-
-def fragments(st, info):
-    R = st.results
-    frag = {}
-    # run info
-    frag["run"] = table(["", ""], [[k, v] for k, v in info])
-    # main table
-    rows = []
-    for row in R["main"]:
-        rep = row["rep"]
-        red, ref = rep["reduced"], rep["references"]["local-global"]
-        rows.append([label(row["kind"], row["name"]), rep["vertices"], g(red["arap_energy"]),
-                     g(ref["arap_energy"]) + ("" if ref["converged"] else " (cap)"),
-                     ("%.2f" % rep["energy_ratio"]) if ref["arap_energy"] > 1e-8 else "— (rest pose)",
-                     pct(rep["rms_deviation"]), pct(rep["max_deviation"]),
-                     "%.0e / %.0e" % (red["handle_residual"], ref["handle_residual"]),
-                     "%.2f" % red["frame_ms"],
-                     "%.0f (%d)" % (ref["solve_ms"], ref["iterations"]),
-                     "%.0f×" % rep["speedup"],
-                     "%.2f" % (red["frame_ms"] / (ref["solve_ms"] / ref["iterations"])),
-                     pct(row["rms_cgal"][0]) if "rms_cgal" in row else "—",
-                     pct(row["lg_vs_cgal"][0], 3) if "lg_vs_cgal" in row else "—"])
-    frag["main"] = table(["scenario", "n", "reduced E", "reference E", "E ratio", "RMS dev.", "max dev.",
-                          "handle res. red. / ref.", "reduced frame ms", "reference ms (rounds)", "speedup",
-                          "ref. rounds per frame", "RMS vs CGAL/libigl", "ref. vs CGAL/libigl"], rows)
-    # ceres
-    rows = []
-    for row in R.get("ceres", []):
-        c, lg = row["ceres"], row["lg"]
-        rows.append([row["model"] + " `.sel/.def`", "%d%s" % (c["iterations"], "" if c["converged"] else " (cap)"),
-                     "%.1f" % (c["solve_ms"] / 1000), g(c["arap_energy"]), g(lg["arap_energy"]),
-                     pct(c.get("rms_deviation", float("nan"))),
-                     pct(row["ceres_vs_lg"][0], 3) if "ceres_vs_lg" in row else "—",
-                     "%.0f×" % (c["solve_ms"] / row["rep"]["reduced"]["frame_ms"])])
-    frag["ceres"] = table(["scenario", "Ceres LM iterations", "Ceres s", "Ceres E", "local-global E",
-                           "RMS reduced vs Ceres", "RMS Ceres vs local-global", "speedup vs Ceres"], rows)
-    # local-global ladder
-    rows = []
-    for row in R.get("ladder", []):
-        ref, fin = row["rep"]["references"]["local-global"], row["main"]["references"]["local-global"]
-        rows.append([label("sel", row["model"]), row["rounds"], "%.0f" % ref["solve_ms"],
-                     g(ref["arap_energy"]), "%.4f" % (ref["arap_energy"] / fin["arap_energy"]),
-                     "%s / %s" % (pct(row["vs_final"][0], 3), pct(row["vs_final"][1], 3)),
-                     pct(row["vs_cgal"][0], 3) if row["vs_cgal"] else "—",
-                     "%.0f×" % (ref["solve_ms"] / row["main"]["reduced"]["frame_ms"])])
-    frag["ladder"] = table(["scenario", "local-global rounds", "solve ms", "classic E", "E / E(cap)",
-                            "RMS / max dev. from the capped run", "RMS dev. from CGAL",
-                            "÷ reduced frame (main table)"], rows)
-    # modified energy
-    rows = []
-    for row in R.get("modified", []):
-        rep = row["rep"]
-        ref = rep["references"]["local-global"]
-        setting = ", ".join("%s = %s" % (k, v) for k, v in row["extra"].items()) or "defaults"
-        rows.append([label(row["kind"], row["name"]), setting,
-                     "%d%s" % (ref["iterations"], "" if ref["converged"] else " (cap)"),
-                     g(ref["arap_energy"]), g(rep["reduced"]["arap_energy"]), g(row["classic_energy"]),
-                     pct(row["emin_vs_classic"][0]), pct(row["reduced_vs_emin"][0]), pct(row["reduced_vs_classic"][0])])
-    frag["modified"] = table(["scenario", "setting", "E′ rounds", "classic E of E′ minimiser", "classic E reduced",
-                              "classic E reference", "RMS E′ min. vs classic", "RMS reduced vs E′ min.",
-                              "RMS reduced vs classic"], rows)
-    # sweeps
-    for what, col in (("rot", "d"), ("lin", "m"), ("alpha", "α"), ("beta", "β")):
-        if what not in R:
-            continue
-        rows = []
-        for (kind, name), pts in R[what].items():
-            for p in pts:
-                rep = p["rep"]
-                rows.append([label(kind, name), p["value"],
-                             "%d / %d" % (rep["linear_proxies"], rep["rotational_proxies"]),
-                             "%.2f" % p["ratio"], pct(p["rms"]), pct(p["max"]), "%.0e" % rep["handle_residual_max"],
-                             "%.2f" % rep["frame_ms"], "%.1f" % rep["precompute_s"]])
-        frag[what] = table(["scenario", col, "linear / rotational proxies", "E ratio", "RMS dev.", "max dev.",
-                            "handle res.", "frame ms", "precompute s"], rows)
-    # the paper demo's proxies
-    rows = []
-    for p in R.get("paper_ids", []):
-        rep = p["rep"]
-        main = next(r for r in R["main"] if r["kind"] == "anim" and r["name"] == p["name"])
-        rows.append([label("anim", p["name"]), "`%s`" % p["files"].replace(", ", "`, `"),
-                     "%d / %d" % (rep["linear_proxies"], rep["rotational_proxies"]),
-                     "%.2f (%.2f)" % (p["ratio"], main["rep"]["energy_ratio"]),
-                     "%s (%s)" % (pct(p["rms"]), pct(main["rep"]["rms_deviation"])), pct(p["max"]),
-                     "%.2f" % rep["frame_ms"]])
-    frag["paper_ids"] = table(["scenario", "linear groups, rotational clusters", "linear / rotational proxies",
-                               "E ratio (defaults)", "RMS dev. (defaults)", "max dev.", "frame ms"], rows)
-    # convergence
-    rows = []
-    for (kind, name, lab), (extra, pts) in R.get("conv", {}).items():
-        setting = ", ".join("%s = %s" % (k, v) for k, v in extra.items()) or "defaults"
-        for p in pts:
-            rows.append([label(kind, name), setting, p["frames"], p["iterations"], "%.2f" % p["ratio"], pct(p["rms"]),
-                         pct(p["max"]), "%.2f" % p["rep"]["frame_ms"]])
-    frag["conv"] = table(["scenario", "setting", "frames", "iterations / frame", "E ratio", "RMS dev.", "max dev.",
-                          "frame ms"], rows)
-    # timing
-    rows = []
-    for t in R.get("timing", []):
-        rep, ref = t["rep"], t["main"]["references"]["local-global"]
-        rows.append([label("sel", t["model"]), rep["vertices"], "1" if t["threads"] else "all (%d)" % os.cpu_count(),
-                     "%.3f" % rep["frame_ms"], "%.1f" % rep["iteration_us"], "%.3f" % rep["reconstruction_ms"],
-                     "%.1f" % (ref["solve_ms"] / ref["iterations"]),
-                     "%.0f (%d%s)" % (ref["solve_ms"], ref["iterations"], "" if ref["converged"] else ", cap"),
-                     "%.0f×" % (ref["solve_ms"] / rep["frame_ms"])])
-    frag["timing"] = table(["scenario", "n", "threads", "reduced frame ms", "iteration µs", "reconstruction ms",
-                            "local-global ms / round", "local-global solve ms (rounds)", "speedup"], rows)
-    # targets
-    rows = []
-    for row in R["main"]:
-        if row["kind"] != "sel":
-            continue
-        rep = row["rep"]
-        ok_r = rep["rms_deviation"] <= TARGET_RMS
-        ok_e = rep["energy_ratio"] <= TARGET_RATIO
-        cells = [label("sel", row["name"]), "%s %s" % (pct(rep["rms_deviation"]), "✓" if ok_r else "✗"),
-                 "%.2f %s" % (rep["energy_ratio"], "✓" if ok_e else "✗")]
-        if row["name"] == "bumpy_plane":
-            cells.append("%.0f× %s" % (rep["speedup"], "✓" if rep["speedup"] >= TARGET_SPEEDUP else "✗"))
-            one = [t for t in R.get("timing", []) if t["model"] == "bumpy_plane" and t["threads"] == 1]
-            if one:
-                ref = rep["references"]["local-global"]
-                cells[-1] += " (one thread, 64 frames: %.0f×)" % (ref["solve_ms"] / one[0]["rep"]["frame_ms"])
-        else:
-            cells.append("(%.0f×)" % rep["speedup"])
-        rows.append(cells)
-    frag["targets"] = table(["scenario (defaults, %d frames)" % st.cfg["frames"], "RMS dev. ≤ 2 %", "E ratio ≤ 1.5",
-                             "speedup ≥ 100× (Bumpy Plane)"], rows)
-    return frag
-
-
-PALETTE = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#17becf"]
-
-
-def nice_ticks(lo, hi, log):
-    """Axis ticks: 1-2-5 steps on a linear axis (from 0 when all values are ≥ 0), decades on a log axis."""
-    if log:
-        k0, k1 = math.floor(math.log10(lo)), math.ceil(math.log10(hi))
-        mult = [1, 2, 5] if k1 - k0 <= 2 else [1]
-        t = [m * 10 ** k for k in range(k0, k1 + 1) for m in mult]
-        inside = [v for v in t if lo <= v <= hi]
-        below = [v for v in t if v < lo]
-        above = [v for v in t if v > hi]
-        return (below[-1:] + inside + above[:1]) or [lo, hi]
-    lo = min(0.0, lo)
-    span = hi - lo if hi > lo else 1.0
-    raw = span / 5
-    e = 10 ** math.floor(math.log10(raw))
-    step = next(m * e for m in (1, 2, 5, 10) if m * e >= raw)
-    t, v = [], math.floor(lo / step) * step
-    while v < hi + step * 0.999:
-        t.append(round(v, 12))
-        v += step
-    return t
-
-
-def svg_plot(path, title, xlabel, panels, series_names, logx=False, hlines=None, styles=None):
-    """panels: list of (ylabel, {series: [(x, y), …]}, logy). Hand-written SVG line plots."""
-    W, H = (440, 300) if len(panels) > 1 else (720, 340)
-    ml, mr, mt, mb = 76, 14, 34, 46
-    cols = 3 if len(panels) > 1 else 2
-    legend_h = 18 * ((len(series_names) + cols - 1) // cols) + 8
-    total_w, total_h = W * len(panels), H + legend_h
-    out = ['<svg xmlns="http://www.w3.org/2000/svg" width="%d" height="%d" viewBox="0 0 %d %d" '
-           'font-family="DejaVu Sans, Arial, sans-serif" font-size="12">' % (total_w, total_h, total_w, total_h),
-           '<rect width="100%" height="100%" fill="white"/>']
-    for pi, (ylabel, data, logy) in enumerate(panels):
-        ox = pi * W
-        xs = [x for s in data.values() for x, _ in s]
-        ys = [y for s in data.values() for _, y in s]
-        if hlines and hlines.get(pi) is not None:
-            ys.append(hlines[pi])
-        if not xs:
-            continue
-        fx = (lambda x: math.log10(x)) if logx else (lambda x: x)
-        x0, x1 = fx(min(xs)), fx(max(xs))
-        if x1 == x0:
-            x1 += 1
-        lo, hi = min(ys), max(ys)
-        if logy == "auto":
-            logy = lo > 0 and hi / lo > 20
-        fy = (lambda y: math.log10(y)) if logy else (lambda y: y)
-        yticks = nice_ticks(lo, hi, logy)
-        y0, y1 = fy(min(yticks[0], lo)), fy(max(yticks[-1], hi))
-        if y1 == y0:
-            y1 += 1
-
-        def px(x):
-            return ox + ml + (fx(x) - x0) / (x1 - x0) * (W - ml - mr)
-
-        def py(y):
-            return mt + (1 - (fy(y) - y0) / (y1 - y0)) * (H - mt - mb)
-
-        out.append('<rect x="%d" y="%d" width="%d" height="%d" fill="none" stroke="#444"/>'
-                   % (ox + ml, mt, W - ml - mr, H - mt - mb))
-        for x in sorted(set(xs)):
-            out.append('<line x1="%.1f" y1="%d" x2="%.1f" y2="%d" stroke="#ddd"/>' % (px(x), mt, px(x), H - mb))
-            out.append('<text x="%.1f" y="%d" text-anchor="middle">%s</text>' % (px(x), H - mb + 15, "%g" % x))
-        for y in yticks:
-            out.append('<line x1="%d" y1="%.1f" x2="%d" y2="%.1f" stroke="#eee"/>' % (ox + ml, py(y), ox + W - mr, py(y)))
-            out.append('<text x="%d" y="%.1f" text-anchor="end">%s</text>' % (ox + ml - 4, py(y) + 4, "%g" % y))
-        if hlines and hlines.get(pi) is not None:
-            yv = hlines[pi]
-            out.append('<line x1="%d" y1="%.1f" x2="%d" y2="%.1f" stroke="#000" stroke-dasharray="5,4"/>'
-                       % (ox + ml, py(yv), ox + W - mr, py(yv)))
-            out.append('<text x="%d" y="%.1f" text-anchor="end" font-size="10">target</text>'
-                       % (ox + W - mr - 3, py(yv) - 3))
-        out.append('<text x="%.1f" y="%d" text-anchor="middle">%s</text>' % (ox + ml + (W - ml - mr) / 2, H - 8, xlabel))
-        out.append('<text transform="translate(%d,%.1f) rotate(-90)" text-anchor="middle">%s</text>'
-                   % (ox + 13, mt + (H - mt - mb) / 2, ylabel))
-        out.append('<text x="%.1f" y="20" text-anchor="middle" font-weight="bold">%s</text>'
-                   % (ox + ml + (W - ml - mr) / 2, title if pi == 0 or len(panels) == 1 else ""))
-        for si, name in enumerate(series_names):
-            pts = data.get(name)
-            if not pts:
-                continue
-            c, dash = (styles or {}).get(name, (PALETTE[si % len(PALETTE)], ""))
-            out.append('<polyline fill="none" stroke="%s" stroke-width="2"%s points="%s"/>'
-                       % (c, ' stroke-dasharray="6,4"' if dash else "", " ".join("%.1f,%.1f" % (px(x), py(y)) for x, y in pts)))
-            for x, y in pts:
-                out.append('<circle cx="%.1f" cy="%.1f" r="3" fill="%s"/>' % (px(x), py(y), c))
-    for si, name in enumerate(series_names):
-        lx = 20 + (si % cols) * (total_w - 20) / cols
-        ly = H + 14 + 18 * (si // cols)
-        c, dash = (styles or {}).get(name, (PALETTE[si % len(PALETTE)], ""))
-        out.append('<line x1="%.1f" y1="%d" x2="%.1f" y2="%d" stroke="%s" stroke-width="3"%s/>'
-                   % (lx, ly - 4, lx + 22, ly - 4, c, ' stroke-dasharray="6,4"' if dash else ""))
-        out.append('<text x="%.1f" y="%d">%s</text>' % (lx + 28, ly, name))
-    out.append("</svg>")
-    with open(path, "w") as f:
-        f.write("\n".join(out) + "\n")
-
-
 def figures(st, figdir):
     R = st.results
     made = []
