@@ -36,6 +36,26 @@ SparseMatrix<Scalar> sparse_arg(const char* name, py::handle value, Dim rows, Di
 }
 
 template <typename Scalar>
+SparseMatrix<Scalar> square_sparse_arg(const char* name, py::handle value) {
+  auto H = sparse_arg<Scalar>(name, value, {-1, "n"}, {-1, "n"});
+  if (H.rows() != H.cols()) {
+    throw py::value_error(std::string(name) + ": expected a square matrix of shape (n, n), got (" +
+                          std::to_string(H.rows()) + ", " + std::to_string(H.cols()) + ")");
+  }
+  return H;
+}
+
+template <typename Scalar>
+DesignArgs<Scalar> design_args(py::handle H, py::handle C, py::handle D) {
+  DesignArgs<Scalar> design;
+  design.H = square_sparse_arg<Scalar>("H", H);
+  const Index n = design.H.rows();
+  design.C = sparse_arg<Scalar>("C", C, {n, "n"}, {-1, "d"});
+  design.D = D.is_none() ? SparseMatrix<Scalar>(n, 0) : sparse_arg<Scalar>("D", D, {n, "n"}, {-1, "k"});
+  return design;
+}
+
+template <typename Scalar>
 Matrix<Scalar> dense_arg(const char* name, py::handle value, Dim rows, Dim cols) {
   return convert("as_dense")(name, value, dim_tuple(rows), dim_tuple(cols), dtype_name<Scalar>())
       .template cast<Matrix<Scalar>>();
@@ -84,6 +104,8 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size) {
 
 #define QPREDUCE_PYTHON_ARGUMENTS(Scalar)                                                          \
   template SparseMatrix<Scalar> sparse_arg<Scalar>(const char*, py::handle, Dim, Dim);             \
+  template SparseMatrix<Scalar> square_sparse_arg<Scalar>(const char*, py::handle);                 \
+  template DesignArgs<Scalar> design_args<Scalar>(py::handle, py::handle, py::handle);              \
   template Matrix<Scalar> dense_arg<Scalar>(const char*, py::handle, Dim, Dim);                    \
   template Vector<Scalar> vector_copy_arg<Scalar>(const char*, py::handle, Dim);                   \
   template Eigen::Map<Vector<Scalar>> vector_view<Scalar>(const char*, py::handle, Dim, bool);     \

@@ -33,6 +33,18 @@ std::string shape_text(Dim rows, Dim cols);
 // dtype and index dtype), through qpreduce._convert.as_csc.
 template <typename Scalar>
 SparseMatrix<Scalar> sparse_arg(const char* name, py::handle value, Dim rows, Dim cols);
+// A square n × n sparse copy (sparse_arg with a check that rows = cols).
+template <typename Scalar>
+SparseMatrix<Scalar> square_sparse_arg(const char* name, py::handle value);
+
+// The design of a precompute: H (n×n), C (n×d) and D (n×k; None gives k = 0).
+template <typename Scalar>
+struct DesignArgs {
+  SparseMatrix<Scalar> H, C, D;
+};
+template <typename Scalar>
+DesignArgs<Scalar> design_args(py::handle H, py::handle C, py::handle D);
+
 // A dense copy of a 2-D array or scipy.sparse matrix (qpreduce._convert.as_dense).
 template <typename Scalar>
 Matrix<Scalar> dense_arg(const char* name, py::handle value, Dim rows, Dim cols);

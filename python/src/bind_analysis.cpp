@@ -4,6 +4,7 @@
 #include "arguments.h"
 #include "bindings.h"
 #include "fields.h"
+#include "locking.h"
 
 #include <qpreduce/full_solve.h>
 #include <qpreduce/quotient.h>
@@ -11,20 +12,12 @@
 
 #include <pybind11/stl.h>
 
+#include <mutex>
 #include <optional>
 
 namespace qpreduce::python {
 
 namespace {
-
-SparseMatrix<double> square_sparse_arg(const char* name, py::handle value) {
-  auto H = sparse_arg<double>(name, value, {-1, "n"}, {-1, "n"});
-  if (H.rows() != H.cols()) {
-    throw py::value_error(std::string(name) + ": expected a square matrix of shape (n, n), got (" +
-                          std::to_string(H.rows()) + ", " + std::to_string(H.cols()) + ")");
-  }
-  return H;
-}
 
 // A demand (A n×m, b m, q n) for a problem of n unknowns.
 struct Demand {
@@ -43,7 +36,7 @@ void bind_full_solve(py::module_& m) {
   m.def(
       "solve_full",
       [](py::handle H, py::handle A, py::handle b, py::handle q, py::handle options) {
-        const auto Hs = square_sparse_arg("H", H);
+        const auto Hs = square_sparse_arg<double>("H", H);
         const Demand demand = demand_args(Hs.rows(), A, b, q);
         const auto opts = options_arg<SubspaceOptions>("options", options);
         Vector<double> X;
@@ -89,7 +82,7 @@ void bind_quotient(py::module_& m) {
   m.def(
       "factor_psd",
       [](py::handle H, py::handle options) {
-        const auto Hs = square_sparse_arg("H", H);
+        const auto Hs = square_sparse_arg<double>("H", H);
         const auto opts = options_arg<QuotientOptions>("options", options);
         PsdFactor factor;
         FactorSummary summary;
@@ -106,7 +99,7 @@ void bind_quotient(py::module_& m) {
   m.def(
       "h_distance",
       [](py::handle H, py::handle x, py::handle y) {
-        const auto Hs = square_sparse_arg("H", H);
+        const auto Hs = square_sparse_arg<double>("H", H);
         return h_distance(Hs, vector_copy_arg<double>("x", x, {Hs.rows(), "n"}),
                           vector_copy_arg<double>("y", y, {Hs.rows(), "n"}));
       },
@@ -181,6 +174,14 @@ void bind_quotient(py::module_& m) {
       "lacks full column rank.");
 }
 
+// TheoremChecker and a lock: check() sets constraints on the checker's solver.
+struct LockedChecker {
+  TheoremChecker checker;
+  std::mutex mutex;
+
+  std::unique_lock<std::mutex> lock() { return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex); }
+};
+
 void bind_theorem(py::module_& m) {
   py::class_<TheoremBound> bound(m, "TheoremBound", "All terms of Eq. 39 for one demand (theorem.h).");
   Fields(bound, "TheoremBound")
@@ -242,34 +243,32 @@ void bind_theorem(py::module_& m) {
       .ro("X_hat_star", &TheoremSolutions::X_hat_star, "(r,), Eq. 35 (empty when undefined)")
       .ro("demand", &TheoremSolutions::demand, "CompanionDemand");
 
-  py::class_<TheoremChecker>(m, "TheoremChecker",
-                             "Precompute once per (H, C, D), then check many demands (theorem.h). Not for\n"
-                             "concurrent use from several threads.")
+  py::class_<LockedChecker>(m, "TheoremChecker",
+                            "Precompute once per (H, C, D), then check many demands (theorem.h). Calls on one\n"
+                            "checker are serialised by a lock (check() mutates the engine's constraints).")
       .def(py::init<>())
       .def(
           "precompute",
-          [](TheoremChecker& self, py::handle H, py::handle C, py::handle D, py::handle options) {
-            const auto Hs = square_sparse_arg("H", H);
-            const Index n = Hs.rows();
-            const auto Cs = sparse_arg<double>("C", C, {n, "n"}, {-1, "d"});
-            SparseMatrix<double> Ds(n, 0);
-            if (!D.is_none()) Ds = sparse_arg<double>("D", D, {n, "n"}, {-1, "k"});
+          [](LockedChecker& self, py::handle H, py::handle C, py::handle D, py::handle options) {
+            const auto design = design_args<double>(H, C, D);
             const auto opts = options_arg<QuotientOptions>("options", options);
             py::gil_scoped_release release;
-            return self.precompute(Hs, Cs, Ds, opts);
+            std::lock_guard<std::mutex> lock(self.mutex);
+            return self.checker.precompute(design.H, design.C, design.D, opts);
           },
           py::arg("H"), py::arg("C"), py::arg("D") = py::none(), py::arg("options") = py::none(),
           "precompute(H, C, D=None, options=None) -> TheoremSetupSummary; H n×n, C n×d, D n×k.")
       .def(
           "check",
-          [](TheoremChecker& self, py::handle A, py::handle b, py::handle q, bool return_solutions) -> py::object {
-            if (!self.ready()) throw py::value_error("TheoremChecker.check: call precompute first");
-            const Demand demand = demand_args(self.factor().n(), A, b, q);
+          [](LockedChecker& self, py::handle A, py::handle b, py::handle q, bool return_solutions) -> py::object {
+            auto lock = self.lock();
+            if (!self.checker.ready()) throw py::value_error("TheoremChecker.check: call precompute first");
+            const Demand demand = demand_args(self.checker.factor().n(), A, b, q);
             TheoremSolutions solutions;
             TheoremCheck result;
             {
               py::gil_scoped_release release;
-              result = self.check(demand.A, demand.b, demand.q, return_solutions ? &solutions : nullptr);
+              result = self.checker.check(demand.A, demand.b, demand.q, return_solutions ? &solutions : nullptr);
             }
             if (!return_solutions) return py::cast(result);
             return py::make_tuple(result, solutions);
@@ -277,25 +276,24 @@ void bind_theorem(py::module_& m) {
           py::arg("A"), py::arg("b"), py::arg("q"), py::arg("return_solutions") = false,
           "check(A, b, q, return_solutions=False) -> TheoremCheck or (TheoremCheck, TheoremSolutions)\n\n"
           "A: n×m (sparse or dense), b: (m,), q: (n,).")
-      .def_property_readonly("ready", &TheoremChecker::ready)
-      .def_property_readonly("factor", &TheoremChecker::factor, py::return_value_policy::copy)
-      .def_property_readonly("design", &TheoremChecker::design, py::return_value_policy::copy);
+      .def_property_readonly("ready", [](LockedChecker& self) { return self.lock(), self.checker.ready(); })
+      .def_property_readonly("factor", [](LockedChecker& self) { return self.lock(), self.checker.factor(); },
+                             "A copy of the PsdFactor of H.")
+      .def_property_readonly("design", [](LockedChecker& self) { return self.lock(), self.checker.design(); },
+                             "A copy of the WhitenedDesign.");
 
   m.def(
       "check_theorem",
       [](py::handle H, py::handle C, py::handle D, py::handle A, py::handle b, py::handle q, py::handle options,
          bool return_solutions) -> py::object {
-        const auto Hs = square_sparse_arg("H", H);
-        const Index n = Hs.rows();
-        const auto Cs = sparse_arg<double>("C", C, {n, "n"}, {-1, "d"});
-        const auto Ds = sparse_arg<double>("D", D, {n, "n"}, {-1, "k"});
-        const Demand demand = demand_args(n, A, b, q);
+        const auto design = design_args<double>(H, C, D);
+        const Demand demand = demand_args(design.H.rows(), A, b, q);
         const auto opts = options_arg<QuotientOptions>("options", options);
         TheoremSolutions solutions;
         TheoremCheck result;
         {
           py::gil_scoped_release release;
-          result = check_theorem(Hs, Cs, Ds, demand.A, demand.b, demand.q, opts,
+          result = check_theorem(design.H, design.C, design.D, demand.A, demand.b, demand.q, opts,
                                  return_solutions ? &solutions : nullptr);
         }
         if (!return_solutions) return py::cast(result);

@@ -5,6 +5,7 @@
 // data race; different solvers never wait for each other.
 #include "arguments.h"
 #include "bindings.h"
+#include "locking.h"
 
 #include <qpreduce/subspace_solver.h>
 
@@ -20,15 +21,9 @@ struct LockedSolver {
   SubspaceSolver<Scalar> solver;
   mutable std::shared_mutex mutex;
 
-  // A shared lock for the const calls; waits without the GIL only when a
-  // writer holds the lock (the common case costs no GIL round trip).
+  // A shared lock for the const calls (no GIL round trip unless a writer holds it).
   std::shared_lock<std::shared_mutex> read() const {
-    std::shared_lock<std::shared_mutex> lock(mutex, std::try_to_lock);
-    if (!lock.owns_lock()) {
-      py::gil_scoped_release release;
-      lock.lock();
-    }
-    return lock;
+    return lock_releasing_gil<std::shared_lock<std::shared_mutex>>(mutex);
   }
   void require_constrained(const char* what) const {
     if (!solver.constrained()) {
@@ -97,19 +92,11 @@ void bind_solver_type(py::module_& m, const char* name) {
       .def(
           "precompute",
           [](Locked& self, py::handle H, py::handle C, py::handle D, py::handle options) {
-            auto Hs = sparse_arg<Scalar>("H", H, {-1, "n"}, {-1, "n"});
-            const Index n = Hs.rows();
-            if (Hs.cols() != n) {
-              throw py::value_error("H: expected a square matrix of shape " + shape_text({n, "n"}, {n, "n"}) +
-                                    ", got (" + std::to_string(n) + ", " + std::to_string(Hs.cols()) + ")");
-            }
-            auto Cs = sparse_arg<Scalar>("C", C, {n, "n"}, {-1, "d"});
-            SparseMatrix<Scalar> Ds(n, 0);
-            if (!D.is_none()) Ds = sparse_arg<Scalar>("D", D, {n, "n"}, {-1, "k"});
+            const auto design = design_args<Scalar>(H, C, D);
             const auto opts = options_arg<SubspaceOptions>("options", options);
             py::gil_scoped_release release;
             std::unique_lock<std::shared_mutex> lock(self.mutex);
-            return self.solver.precompute(Hs, Cs, Ds, opts);
+            return self.solver.precompute(design.H, design.C, design.D, opts);
           },
           py::arg("H"), py::arg("C"), py::arg("D") = py::none(), py::arg("options") = py::none(),
           "precompute(H, C, D=None, options=None) -> SubspaceSummary\n\n"
