@@ -68,17 +68,20 @@ Vector<Scalar> vector_copy_arg(const char* name, py::handle value, Dim size) {
 
 template <typename Scalar>
 Eigen::Map<Vector<Scalar>> vector_view(const char* name, py::handle value, Dim size, bool writable) {
-  const std::string what = std::string(name) + ": expected a numpy.ndarray of " +
-                           dtype_name<Scalar>().template cast<std::string>() + " with shape " + shape_text(size);
+  // On the per-call path: the messages are built only when a check fails.
+  const auto expected = [&] {
+    return std::string(name) + ": expected a numpy.ndarray of " + dtype_name<Scalar>().template cast<std::string>() +
+           " with shape " + shape_text(size);
+  };
   if (!py::isinstance<py::array>(value)) {
-    throw py::type_error(what + ", got " + py::str(py::type::of(value).attr("__name__")).cast<std::string>());
+    throw py::type_error(expected() + ", got " + py::str(py::type::of(value).attr("__name__")).cast<std::string>());
   }
   auto array = py::reinterpret_borrow<py::array>(value);
-  if (!array.dtype().is(py::dtype::of<Scalar>())) {
-    throw py::type_error(what + ", got dtype " + py::str(array.dtype()).cast<std::string>());
+  if (!array.dtype().is(py::dtype::of<Scalar>()) && !array.dtype().equal(py::dtype::of<Scalar>())) {
+    throw py::type_error(expected() + ", got dtype " + py::str(value.attr("dtype")).cast<std::string>());
   }
   if (array.ndim() != 1 || array.shape(0) != size.size) {
-    throw py::value_error(what + ", got " + py::str(value.attr("shape")).cast<std::string>());
+    throw py::value_error(expected() + ", got " + py::str(value.attr("shape")).cast<std::string>());
   }
   if (size.size > 1 && array.strides(0) != static_cast<py::ssize_t>(sizeof(Scalar))) {
     throw py::value_error(std::string(name) + ": expected a contiguous array, got strides " +
@@ -87,8 +90,7 @@ Eigen::Map<Vector<Scalar>> vector_view(const char* name, py::handle value, Dim s
   if (writable && !array.writeable()) {
     throw py::value_error(std::string(name) + ": the array is read-only");
   }
-  auto* data = static_cast<Scalar*>(const_cast<void*>(array.data()));
-  Eigen::Map<Vector<Scalar>> map(data, size.size);
+  Eigen::Map<Vector<Scalar>> map(static_cast<Scalar*>(const_cast<void*>(array.data())), size.size);
   if (!writable && !map.allFinite()) {
     throw py::value_error(std::string(name) + ": contains NaN or infinite entries");
   }

@@ -17,6 +17,10 @@ namespace {
 namespace fam = qpreduce::families;
 namespace gen = qpreduce::generators;
 
+void require_size(const char* what, Index size) {
+  if (size < 0) throw py::value_error(std::string(what) + ": expected a size ≥ 0, got " + std::to_string(size));
+}
+
 void bind_families(py::module_& m) {
   py::enum_<fam::Family>(m, "Family", "The seeded QP families (families.h).")
       .value("Gmrf", fam::Family::Gmrf)
@@ -129,15 +133,34 @@ void bind_generators(py::module_& m) {
   m.def("selection", &gen::selection, py::arg("n"), py::arg("rows"), "n × d selection matrix (column j: e_rows[j]).");
   m.def("random_subset", &gen::random_subset, py::arg("n"), py::arg("count"), py::arg("seed"),
         "`count` distinct sorted indices from [0, n).");
-  m.def("gaussian_sparse", &gen::gaussian_sparse, py::arg("n"), py::arg("cols"), py::arg("seed"),
-        "n × cols standard normal (stored sparse).");
+  // The Gaussian generators take sizes unchecked (Eigen asserts only).
+  m.def(
+      "gaussian_sparse",
+      [](Index n, Index cols, std::uint64_t seed) {
+        require_size("gaussian_sparse: n", n);
+        require_size("gaussian_sparse: cols", cols);
+        return gen::gaussian_sparse(n, cols, seed);
+      },
+      py::arg("n"), py::arg("cols"), py::arg("seed"), "n × cols standard normal (stored sparse).");
   m.def("grid_trend_basis", &gen::grid_trend_basis, py::arg("nx"), py::arg("ny"), py::arg("k"),
         "n × k smooth trend basis on an nx × ny grid (k ≤ 10).");
   m.def("grid_trend_basis_3d", &gen::grid_trend_basis_3d, py::arg("nx"), py::arg("ny"), py::arg("nz"), py::arg("k"),
         "n × k trend basis on an nx × ny × nz grid (k ≤ 10).");
-  m.def("gaussian_vector", &gen::gaussian_vector, py::arg("n"), py::arg("seed"), "(n,) standard normal.");
-  m.def("gaussian_matrix", &gen::gaussian_matrix, py::arg("rows"), py::arg("cols"), py::arg("seed"),
-        "rows × cols standard normal.");
+  m.def(
+      "gaussian_vector",
+      [](Index n, std::uint64_t seed) {
+        require_size("gaussian_vector: n", n);
+        return gen::gaussian_vector(n, seed);
+      },
+      py::arg("n"), py::arg("seed"), "(n,) standard normal.");
+  m.def(
+      "gaussian_matrix",
+      [](Index rows, Index cols, std::uint64_t seed) {
+        require_size("gaussian_matrix: rows", rows);
+        require_size("gaussian_matrix: cols", cols);
+        return gen::gaussian_matrix(rows, cols, seed);
+      },
+      py::arg("rows"), py::arg("cols"), py::arg("seed"), "rows × cols standard normal.");
 
   py::enum_<gen::TheoremFamily>(m, "TheoremFamily", "Families of Theorem 4.10 trials (generators.h).")
       .value("DensePsd", gen::TheoremFamily::DensePsd)

@@ -126,3 +126,9 @@ def test_analysis_and_generators_reject_bad_input():
         qpreduce.families.parse_family("nope")
     with pytest.raises(ValueError):
         qpreduce.generators.theorem_problem(qpreduce.generators.TheoremFamily.DensePsd, 10, 0.0, 1)
+    for call, message in [(lambda: qpreduce.generators.gaussian_vector(-5, 1), "^gaussian_vector: n"),
+                          (lambda: qpreduce.generators.gaussian_matrix(2, -1, 1), "^gaussian_matrix: cols"),
+                          (lambda: qpreduce.generators.gaussian_sparse(-3, 2, 1), "^gaussian_sparse: n"),
+                          (lambda: qpreduce.generators.selection(3, [10]), "row 10 out of range")]:
+        with pytest.raises(ValueError, match=message):
+            call()
