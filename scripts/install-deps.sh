@@ -7,6 +7,7 @@ packages=(
   libeigen3-dev libopenblas-dev libsuitesparse-dev libceres-dev libspectra-dev libomp-dev
   libfmt-dev catch2 libbenchmark-dev libcli11-dev nlohmann-json3-dev zlib1g-dev
   libimgui-dev libstb-dev libglfw3-dev libgl-dev libgl1-mesa-dri xvfb xauth mesa-utils
+  pybind11-dev python3-dev python3-numpy python3-scipy python3-pytest python3-matplotlib
 )
 missing=()
 for p in "${packages[@]}"; do

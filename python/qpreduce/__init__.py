@@ -1,0 +1,83 @@
+"""qpreduce: reduced quadratic programs through linear variational subspaces.
+
+A thin layer over the C++ library (Ye & Yan, "On the Approximation Theory of
+Linear Variational Subspace Design"). For
+
+    min_X ½XᵀHX − qᵀX   s.t.  AᵀX = b     (H n×n sparse PSD, A n×m)
+
+``SubspaceSolver.precompute(H, C, D)`` builds the subspace X = N·z + UD·y from
+one factorization; ``set_constraints(A)`` and ``solve_in_D(b, Y)`` then answer
+each demand in microseconds. See docs/python.md.
+
+Bad arguments raise ValueError or TypeError naming the argument; numerical
+outcomes come back as summaries with a ``status`` (``qpreduce.Status``), and
+``summary.raise_if_failed()`` turns a failed one into ``NumericalError``.
+"""
+
+import sys as _sys
+
+from . import _qpreduce
+from ._qpreduce import (
+    Backend,
+    CompanionDemand,
+    ConstraintOptions,
+    ConstraintSummary,
+    FactorSummary,
+    FullSolveSummary,
+    Outcome,
+    PsdFactor,
+    QuotientOptions,
+    Status,
+    SubspaceOptions,
+    SubspaceSolver,
+    SubspaceSolver32,
+    SubspaceSummary,
+    TheoremBound,
+    TheoremCheck,
+    TheoremChecker,
+    TheoremSetupSummary,
+    TheoremSolutions,
+    TheoremStatus,
+    WhitenedDesign,
+    check_theorem,
+    companion_demand,
+    companion_solution,
+    factor_psd,
+    families,
+    generators,
+    h_distance,
+    solve_full,
+    subspace_companion_solution,
+    theorem_bound,
+    whiten_design,
+)
+
+# `import qpreduce.families` and `from qpreduce.generators import ...` work too.
+_sys.modules[__name__ + ".families"] = families
+_sys.modules[__name__ + ".generators"] = generators
+
+
+class NumericalError(RuntimeError):
+    """A numerical step failed: carries the step's ``status`` and ``message``."""
+
+    def __init__(self, status, message):
+        super().__init__(f"{status.name}: {message}" if message else status.name)
+        self.status = status
+        self.message = message
+
+
+def _raise_if_failed(self, allow_qualified=True):
+    """Raises NumericalError unless the step succeeded; returns self.
+
+    allow_qualified: accept qualified answers (Status.ConstraintsLeastSquares),
+    i.e. raise unless usable(); False raises unless ok().
+    """
+    if not (self.usable() if allow_qualified else self.ok()):
+        raise NumericalError(self.status, self.message)
+    return self
+
+
+Outcome.raise_if_failed = _raise_if_failed
+Outcome.check = _raise_if_failed
+
+__all__ = [name for name in dir() if not name.startswith("_") and name != "annotations"]

@@ -1,0 +1,75 @@
+"""Argument conversion for the compiled module (called from C++).
+
+Matrices handed to precompute-type calls are copied anyway, so these accept
+scipy.sparse matrices (CSC, CSR, COO, ... with any index dtype) and NumPy
+arrays of any real dtype and layout, and raise TypeError/ValueError naming
+the argument and the expected shape otherwise. Each ``dim`` is a pair
+(size, label) with size -1 for "any".
+"""
+
+import numpy as np
+import scipy.sparse
+
+_INT32_MAX = np.iinfo(np.int32).max
+
+
+def _shape_text(dims):
+    labels = ", ".join(label for _, label in dims)
+    sizes = ", ".join("any" if size < 0 else str(size) for size, _ in dims)
+    if len(dims) == 1:
+        return f"({labels},) = ({sizes},)"
+    return f"({labels}) = ({sizes})"
+
+
+def _check_kind(name, dtype, what):
+    if dtype.kind not in "fiu":
+        raise TypeError(f"{name}: expected {what} of real numbers, got dtype {dtype}")
+
+
+def _check_shape(name, shape, dims):
+    if len(shape) != len(dims) or any(size >= 0 and got != size for got, (size, _) in zip(shape, dims)):
+        raise ValueError(f"{name}: expected shape {_shape_text(dims)}, got {tuple(shape)}")
+
+
+def as_csc(name, value, rows, cols, dtype):
+    """Canonical CSC copy (sorted, no duplicates, int32 indices) of value."""
+    if scipy.sparse.issparse(value):
+        _check_kind(name, value.dtype, "a sparse matrix")
+        _check_shape(name, value.shape, (rows, cols))
+        matrix = scipy.sparse.csc_matrix(value, dtype=dtype, copy=True)
+    elif isinstance(value, np.ndarray):
+        _check_kind(name, value.dtype, "an array")
+        _check_shape(name, value.shape, (rows, cols))
+        matrix = scipy.sparse.csc_matrix(value.astype(dtype, copy=False))
+    else:
+        raise TypeError(f"{name}: expected a scipy.sparse matrix or numpy.ndarray of shape "
+                        f"{_shape_text((rows, cols))}, got {type(value).__name__}")
+    if matrix.nnz > _INT32_MAX or max(matrix.shape) > _INT32_MAX:
+        raise ValueError(f"{name}: too large for 32-bit indices ({matrix.shape}, {matrix.nnz} nonzeros)")
+    matrix.indices = matrix.indices.astype(np.int32, copy=False)
+    matrix.indptr = matrix.indptr.astype(np.int32, copy=False)
+    matrix.sum_duplicates()  # also sorts the row indices of each column
+    return matrix
+
+
+def as_dense(name, value, rows, cols, dtype):
+    """Dense Fortran-ordered copy of a 2-D array or sparse matrix."""
+    if scipy.sparse.issparse(value):
+        _check_kind(name, value.dtype, "a sparse matrix")
+        value = value.toarray()
+    elif not isinstance(value, np.ndarray):
+        raise TypeError(f"{name}: expected a numpy.ndarray or scipy.sparse matrix of shape "
+                        f"{_shape_text((rows, cols))}, got {type(value).__name__}")
+    _check_kind(name, value.dtype, "an array")
+    _check_shape(name, value.shape, (rows, cols))
+    return np.asfortranarray(value, dtype=dtype)
+
+
+def as_vector(name, value, size, dtype):
+    """Contiguous 1-D copy of an array-like of real numbers."""
+    if scipy.sparse.issparse(value):
+        raise TypeError(f"{name}: expected a 1-D array of shape {_shape_text((size,))}, got a sparse matrix")
+    array = np.asarray(value)
+    _check_kind(name, array.dtype, "an array")
+    _check_shape(name, array.shape, (size,))
+    return np.ascontiguousarray(array, dtype=dtype)

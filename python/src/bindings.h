@@ -1,0 +1,15 @@
+// The parts of the module _qpreduce, one function per header family.
+#pragma once
+
+#include <pybind11/pybind11.h>
+
+namespace qpreduce::python {
+
+namespace py = pybind11;
+
+void bind_options(py::module_& m);   // common.h enums, options and summaries
+void bind_solver(py::module_& m);    // subspace_solver.h
+void bind_analysis(py::module_& m);  // full_solve.h, quotient.h, theorem.h
+void bind_problems(py::module_& m);  // problems/families.h, problems/generators.h
+
+}  // namespace qpreduce::python

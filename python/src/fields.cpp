@@ -1,0 +1,28 @@
+#include "fields.h"
+
+#include <algorithm>
+
+namespace qpreduce::python {
+
+std::string fields_repr(py::handle self, const std::string& type_name, const std::vector<std::string>& names) {
+  std::string text = type_name + "(";
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const py::object value = self.attr(names[i].c_str());
+    const bool is_enum = py::hasattr(py::type::of(value), "__members__");
+    text += (i ? ", " : "") + names[i] + "=" + py::str(is_enum ? py::str(value) : py::repr(value)).cast<std::string>();
+  }
+  return text + ")";
+}
+
+void set_fields(py::handle self, const std::string& type_name, const std::vector<std::string>& names,
+                const py::kwargs& kwargs) {
+  for (const auto& item : kwargs) {
+    const auto key = item.first.cast<std::string>();
+    if (std::find(names.begin(), names.end(), key) == names.end()) {
+      throw py::type_error(type_name + ": unknown keyword '" + key + "'");
+    }
+    py::setattr(self, item.first, item.second);
+  }
+}
+
+}  // namespace qpreduce::python
