@@ -34,14 +34,19 @@ void FactoredPhaseOne::apply(const double* b, const double* Y, double* z, double
 
 namespace {
 
+// G = NᵀD − H_zy (d × k): Phase 1's linear term per unit of Y.
+Matrix<double> phase_one_G(const SubspaceSolver<double>& solver) {
+  const Index d = solver.d(), k = solver.k();
+  return solver.reduced_linear_map().topRows(d) - solver.reduced_hessian().topRightCorner(d, k);
+}
+
 // The fast path's per-solver part for `solver` (O(d³ + d²k)).
 std::shared_ptr<const FixedCoordinatePrep> make_prep(const SubspaceSolver<double>& solver) {
   const Index d = solver.d(), k = solver.k();
-  const Matrix<double>& Hr = solver.reduced_hessian();
   auto prep = std::make_shared<FixedCoordinatePrep>();
   prep->generation = solver.generation();
-  prep->range = prepare_range_space(Hr.topLeftCorner(d, d), solver.lift_tolerance());
-  prep->G = solver.reduced_linear_map().topRows(d) - Hr.topRightCorner(d, k);
+  prep->range = prepare_range_space(solver.reduced_hessian().topLeftCorner(d, d), solver.lift_tolerance());
+  prep->G = phase_one_G(solver);
   prep->P0.resize(d, k);
   blas_gemm(false, false, 1.0, prep->range.Minv0, prep->G, 0.0, prep->P0);
   prep->LtG.resize(prep->range.lift_cols.cols(), k);
@@ -69,14 +74,14 @@ std::shared_ptr<const PhaseOneOperator> fast_phase_one(const std::shared_ptr<con
 }
 
 // The null-space method on H_zz (qp_operators.h): M_b = M_c, M_Y = M_g·G − M_c·A_y.
+// G: phase_one_G(solver).
 std::shared_ptr<const PhaseOneOperator> null_space_phase_one(const SubspaceSolver<double>& solver,
-                                                             const Matrix<double>& Az, const Matrix<double>& Ay,
+                                                             const Matrix<double>& G, const Matrix<double>& Az,
+                                                             const Matrix<double>& Ay,
                                                              const ConstraintOptions& options,
                                                              ConstraintSummary* summary) {
   const Index d = solver.d(), k = solver.k();
-  const Matrix<double>& Hr = solver.reduced_hessian();
-  const Matrix<double> G = solver.reduced_linear_map().topRows(d) - Hr.topRightCorner(d, k);
-  QpOperators ops = qp_operators(Hr.topLeftCorner(d, d), Az, options, summary);
+  QpOperators ops = qp_operators(solver.reduced_hessian().topLeftCorner(d, d), Az, options, summary);
   Matrix<double> MY(d, k);  // through the BLAS (blas.h)
   blas_gemm(false, false, 1.0, ops.Mg, G, 0.0, MY);
   blas_gemm(false, false, -1.0, ops.Mc, Ay, 1.0, MY);
@@ -133,7 +138,12 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   }
   if (!op_) {
     summary = ConstraintSummary{};
-    op_ = detail::null_space_phase_one(solver, Az, Ay, options, &summary);
+    // G as the fast path prepared it for this solver, when it did.
+    if (prep_ && prep_->generation == solver.generation()) {
+      op_ = detail::null_space_phase_one(solver, prep_->G, Az, Ay, options, &summary);
+    } else {
+      op_ = detail::null_space_phase_one(solver, detail::phase_one_G(solver), Az, Ay, options, &summary);
+    }
   }
   scratch_.resize(op_->scratch_size());
   k_ = Ay.cols();
