@@ -11,6 +11,8 @@
 
 #include <Eigen/LU>
 
+#include <algorithm>
+
 #include <fmt/format.h>
 
 namespace qpreduce::deform {
@@ -107,6 +109,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   if (!onsite.tied_patches.empty()) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
+  summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
     summary.status = Status::NumericalFailure;

@@ -86,6 +86,9 @@ struct PrecomputeSummary : Outcome {
 struct FrameSummary : Outcome {  // Success after a frame
   int iterations = 0;
   double last_change = 0.0;        // ‖ΔS‖ of the last Phase 2
+  // The relative fixed-point residual ‖ΔS‖/‖S‖ of the last round: how far
+  // the pose is from the alternation's fixed point (0 at the fixed point).
+  double fixed_point_residual = 0.0;
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
