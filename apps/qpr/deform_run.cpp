@@ -14,6 +14,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
+#include <numeric>
 #include <cstdio>
 #include <fstream>
 #include <stdexcept>
@@ -77,7 +79,20 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
                  ->check(CLI::Range(1L, 10000000L));
   cmd->add_option("--rotational-clusters", a->rotational_clusters, "Rotational clusters (.id)")->check(CLI::ExistingFile)->excludes(rp);
   cmd->add_option("--affine-patches", a->affine_patches, "Affine patches (.id: 0 free, k > 0 patch k)")->check(CLI::ExistingFile);
-  cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame")->check(CLI::Range(1, 1000));
+  cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame (the cap with --tolerance)")
+      ->check(CLI::Range(1, 100000));
+  cmd->add_option("--tolerance", a->tolerance,
+                  "Stop a frame's rounds once the relative fixed-point residual |ΔS|/|S| is at most this (0: always "
+                  "--iterations rounds)")
+      ->check(CLI::Range(0.0, 1.0));
+  cmd->add_option("--rotation-step", a->rotation_step,
+                  "Phase 2 rotation fit: exact (the cluster's covariance with the Q-corrections: block-coordinate "
+                  "descent on E') or paper (Eq. 19, Q dropped)")
+      ->check(CLI::IsMember({"exact", "paper"}));
+  cmd->add_option("--anderson", a->anderson_window,
+                  "Anderson acceleration of the rounds with this window (1-16; energy safeguard; needs "
+                  "--rotation-step exact), 0: off")
+      ->check(CLI::Range(0, 16));
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--gamma", a->gamma, "Moving-frame penalty γ between neighbouring elements (Eq. 11), default 0")
@@ -148,6 +163,9 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   if (a.linear_proxies > 0) options.linear_proxies = a.linear_proxies;
   if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
   options.iterations = a.iterations;
+  options.tolerance = a.tolerance;
+  options.anderson_window = a.anderson_window;
+  options.rotation_fit = a.rotation_step == "paper" ? ClusterRotationFit::PaperPhase2 : ClusterRotationFit::Exact;
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
   if (a.gamma) options.energy.gamma = *a.gamma;
@@ -213,6 +231,8 @@ void progress_bar(const std::string& stage, double fraction) {
 // What the frames of a run measured, and the last pose.
 struct FrameSeries {
   std::vector<double> iter_us, recon_ms, frame_ms, residual;  // one per frame; residual / bbox diagonal
+  std::vector<int> rounds;                                     // rounds run, one per frame
+  FrameSummary last;                                           // the last frame's summary
   Vertices out;                                                // the last frame's pose
 };
 
@@ -251,6 +271,8 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
     s.iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
     s.recon_ms.push_back(1e3 * fs.reconstruct_seconds);
     s.frame_ms.push_back(1e3 * fs.total_seconds);
+    s.rounds.push_back(fs.iterations);
+    s.last = fs;
     s.residual.push_back(handle_residual(scenario, scenario.frames[f], out) / diag);
     const bool write = std::find(settings.write_frames.begin(), settings.write_frames.end(), f) !=
                            settings.write_frames.end() ||
@@ -274,6 +296,9 @@ void report_model(const Deformer& deformer, const Scenario& scenario, const Defo
   report["reduced_size"] = pre.reduced_size;
   report["frames"] = static_cast<int>(scenario.frames.size());
   report["iterations"] = options.iterations;
+  report["tolerance"] = options.tolerance;
+  report["rotation_step"] = to_string(options.rotation_fit);
+  report["anderson_window"] = options.anderson_window;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
   report["gamma"] = options.energy.gamma;
@@ -312,6 +337,8 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
   fmt::print("  {:<28}{:>12.3f} ms\n", "frame total", median(s.frame_ms));
   fmt::print("  {:<28}{:>12.2e}      (max over frames, / bbox diagonal)\n", "handle residual", report["handle_residual_max"].get<double>());
   fmt::print("  {:<28}{:>12.5g}      (last frame)\n", "ARAP energy", report["arap_energy"].get<double>());
+  fmt::print("  {:<28}{:>12.2e}      (last frame, {} rounds; |ΔS|/|S|)\n", "fixed-point residual",
+             s.last.fixed_point_residual, s.last.iterations);
 }
 
 }  // namespace
@@ -362,6 +389,14 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["frame_ms"] = median(s.frame_ms);
   report["handle_residual_max"] = *std::max_element(s.residual.begin(), s.residual.end());
   report["arap_energy"] = energy;
+  // How far the last pose is from the alternation's fixed point, and the rounds it took.
+  report["fixed_point_residual"] = s.last.fixed_point_residual;
+  report["rounds"] = s.last.iterations;
+  report["rounds_total"] = std::accumulate(s.rounds.begin(), s.rounds.end(), 0);
+  if (std::isfinite(s.last.model_energy)) {
+    report["model_energy"] = s.last.model_energy;
+    report["rejected_steps"] = s.last.rejected_steps;
+  }
   report["bounding_box_diagonal"] = diag;
 
   print_table(settings.name, scenario, pre, settings, cache_loaded, report, options.iterations, s);

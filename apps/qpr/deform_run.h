@@ -27,6 +27,9 @@ struct ScenarioArgs {
   int iterations = 8, frames = 1;
   std::optional<double> alpha, beta, gamma, psi, soft;
   std::string model;  // "", "arap" or "conformal"
+  std::string rotation_step = "exact";  // "exact" or "paper"
+  double tolerance = 0.0;
+  int anderson_window = 0;
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

@@ -10,6 +10,8 @@
 
 #include "qpreduce/support.h"
 
+#include <Eigen/QR>
+
 #include <memory>
 #include <optional>
 
@@ -88,6 +90,33 @@ std::shared_ptr<const PhaseOneOperator> null_space_phase_one(const SubspaceSolve
   return std::make_shared<ExplicitPhaseOne>(std::move(ops.Mc), std::move(MY));
 }
 
+// The multipliers of Phase 1 as affine maps of (b, y) (alternating.h,
+// form_energy_terms), with z = M_b·b + M_Y·y:
+//   hard  A_zᵀλ = G·y − H_zz·z (z-stationarity) → λ = W·(G·y − H_zz·z),
+//         W = (A_zᵀ)⁺: Λ_b = −(W·H_zz)·M_b, Λ_y = W·G − (W·H_zz)·M_Y;
+//   soft  λ = 2δ·(A_z·z + A_y·y − b): Λ_b = 2δ·(A_z·M_b − I), Λ_y = 2δ·(A_z·M_Y + A_y).
+// (With dependent hard rows λ is not unique, but (b − A_y·y)ᵀλ = (A_z·z)ᵀλ
+// is, so the pseudo-inverse's λ serves.) O(m·d·(d + k)).
+PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const PhaseOneOperator& op,
+                                const Matrix<double>& Az, const Matrix<double>& Ay, const ConstraintOptions& options) {
+  const Index m = Az.rows(), d = Az.cols(), k = Ay.cols();
+  const Matrix<double> MY = op.MY();
+  PhaseOneEnergy e;
+  e.AyLy.resize(2 * m, k);
+  e.AyLy.topRows(m) = Ay;
+  if (options.soft) {
+    const double two_delta = 2.0 * options.delta;
+    e.Lb = two_delta * (Az * op.Mb() - Matrix<double>::Identity(m, m));
+    e.AyLy.bottomRows(m) = two_delta * (Az * MY + Ay);
+    return e;
+  }
+  const Matrix<double> W = Eigen::CompleteOrthogonalDecomposition<Matrix<double>>(Az.transpose()).pseudoInverse();
+  const Matrix<double> WH = W * solver.reduced_hessian().topLeftCorner(d, d);
+  e.Lb = -WH * op.Mb();
+  e.AyLy.bottomRows(m) = W * phase_one_G(solver) - WH * MY;
+  return e;
+}
+
 }  // namespace
 
 }  // namespace detail
@@ -146,10 +175,25 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
     }
   }
   scratch_.resize(op_->scratch_size());
+  energy_.reset();
+  Az_ = Az;
+  Ay_ = Ay;
+  options_ = options;
   k_ = Ay.cols();
   summary.fast_path = op_->factored() != nullptr;
   summary.seconds = timer.seconds();
   return summary;
+}
+
+template <typename Scalar>
+void FixedCoordinateSolver<Scalar>::form_energy_terms(const SubspaceSolver<Scalar>& solver) {
+  if (!ready()) throw std::invalid_argument("FixedCoordinateSolver::form_energy_terms: no constraints set");
+  if (!solver.ready() || solver.d() != d() || solver.k() != k()) {
+    throw std::invalid_argument("FixedCoordinateSolver::form_energy_terms: not the solver the constraints were set for");
+  }
+  const detail::ScopedBlasThreads blas(options_.threads > 0 ? options_.threads : 1);
+  energy_ = std::make_shared<const detail::PhaseOneEnergy>(
+      detail::phase_one_energy(solver, *op_, Az_, Ay_, options_));
 }
 
 template <typename Scalar>

@@ -13,6 +13,7 @@
 
 #include <omp.h>
 
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <optional>
@@ -34,6 +35,13 @@ bool AlternatingOptions::is_valid(std::string* why) const {
   }
   if (parallel_min_entries < 0) {
     if (why) *why = fmt::format("parallel_min_entries must be ≥ 0, got {}", parallel_min_entries);
+    return false;
+  }
+  if (anderson_window < 0 || anderson_window > AndersonAcceleration::kMaxWindow) {
+    if (why) {
+      *why = fmt::format("anderson_window must be in [0, {}] (0: plain rounds), got {}",
+                         AndersonAcceleration::kMaxWindow, anderson_window);
+    }
     return false;
   }
   return true;
@@ -238,6 +246,65 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
   return summary;
 }
 
+// The energy (*) of alternating.h at y, with g = g(y) in W.g:
+// ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀ(λ_b + Λ_y·y), and a bound on its round-off
+// (`slack`, relative to the terms' sizes: 1e-6 with float rounds, 1e-11 in double).
+double reduced_energy(const detail::PhaseOneEnergy& E, FusedWorkspace& W, const InputProjection<double>& projection,
+                      const Eigen::Ref<const Vector<double>>& b, const Eigen::Ref<const Vector<double>>& y,
+                      bool float_rounds, double* slack) {
+  const Index m = E.Lb.rows();
+  detail::gemv(E.AyLy, y.data(), W.ay_ly.data(), false);  // [A_y·y; Λ_y·y]
+  double constraint = 0.0;
+  for (Index i = 0; i < m; ++i) constraint += (b(i) - W.ay_ly(i)) * (W.lambda_b(i) + W.ay_ly(m + i));
+  const double quadratic = projection.quadratic_term(y), linear = W.g.dot(y);
+  *slack = (float_rounds ? 1e-6 : 1e-11) * (std::abs(quadratic) + std::abs(linear) + std::abs(constraint));
+  return quadratic - 0.5 * linear - 0.5 * constraint;
+}
+
+// Accelerated rounds (AlternatingOptions::anderson_window): Anderson on the
+// fixed-point map y ← Π(g(y)) with the retraction and the energy safeguard;
+// y ends as the plain step from the last accepted iterate.
+AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                                   const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
+                                   const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+  AlternatingSummary summary;
+  const bool use_float = options.float_products;
+  auto product = [&](const Vector<double>& at) {
+    if (use_float) W.yf = at.cast<float>();
+    round_product(M, W, at.data(), use_float ? W.yf.data() : nullptr, 0, M.q(), W.scratch.data(),
+                  W.scratch_f.data());
+  };
+  detail::gemv(E.Lb, b.data(), W.lambda_b.data(), false);
+  W.anderson.restart();
+  W.y_try = y;
+  W.y_plain = y;
+  double accepted = std::numeric_limits<double>::infinity(), slack = 0.0;
+  bool extrapolated = false;  // y_try is an extrapolation (else the plain step itself)
+  for (int it = 0; it < options.iterations; ++it) {
+    product(W.y_try);
+    double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, &slack);
+    if (extrapolated && !(energy <= accepted + slack)) {  // the safeguard: back to the plain step
+      W.y_try = W.y_plain;
+      product(W.y_try);
+      energy = reduced_energy(E, W, projection, b, W.y_try, use_float, &slack);
+      W.anderson.restart();
+      ++summary.rejected;
+    }
+    accepted = energy;
+    W.y_plain = W.y_try;
+    summary.last_change = projection.project(W.g, W.y_plain);
+    summary.iterations = it + 1;
+    if (options.tolerance > 0 && summary.last_change <= options.tolerance * std::max(1.0, W.y_try.norm())) break;
+    W.anderson.step(W.y_try, W.y_plain, W.y_next);
+    extrapolated = W.anderson.history() > 0;
+    if (extrapolated) projection.retract(W.y_next);
+    W.y_try.swap(W.y_next);
+  }
+  y = W.y_plain;
+  summary.energy = accepted;
+  return summary;
+}
+
 // The serial rounds.
 AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                               const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
@@ -253,6 +320,32 @@ AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProje
       break;
   }
   return summary;
+}
+
+// Checks what accelerated rounds need and sizes their vectors (allocates
+// only when the sizes or the window change). Throws std::invalid_argument.
+void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const InputProjection<double>& projection,
+                          const AlternatingOptions& options, const Eigen::Ref<const Vector<double>>& y,
+                          FusedWorkspace& W) {
+  if (!phase1.has_energy_terms()) {
+    throw std::invalid_argument(
+        "FusedAlternation::run: accelerated rounds (anderson_window > 0) need the energy terms of Phase 1 "
+        "(FixedCoordinateSolver::form_energy_terms after set_constraints)");
+  }
+  if (!std::isfinite(projection.quadratic_term(y))) {
+    throw std::invalid_argument(
+        "FusedAlternation::run: this projection cannot be accelerated (its quadratic_term is not given)");
+  }
+  const Index k = y.size(), m = phase1.m();
+  if (W.anderson.size() != k || W.anderson_window != options.anderson_window) {
+    W.anderson.reset(k, AndersonOptions{options.anderson_window});
+    W.anderson_window = options.anderson_window;
+  }
+  W.y_try.resize(k);
+  W.y_plain.resize(k);
+  W.y_next.resize(k);
+  W.ay_ly.resize(2 * m);
+  W.lambda_b.resize(m);
 }
 
 }  // namespace
@@ -403,9 +496,14 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
   const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
                         q * k >= options.parallel_min_entries && q / block >= 2;
-  AlternatingSummary summary = parallel ? run_parallel(M, W, projection, options, std::min<Index>(threads, q / block),
-                                                       block, y)
-                                        : run_serial(M, W, projection, options, y);
+  AlternatingSummary summary;
+  if (options.anderson_window > 0) {
+    prepare_acceleration(phase1, projection, options, y, W);
+    summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, y);
+  } else {
+    summary = parallel ? run_parallel(M, W, projection, options, std::min<Index>(threads, q / block), block, y)
+                       : run_serial(M, W, projection, options, y);
+  }
   phase1.solve(b, y, z);
   summary.status = Status::Success;
   return summary;

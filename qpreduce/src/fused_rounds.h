@@ -13,6 +13,7 @@
 #include "phase_one.h"
 #include "simd_kernels.h"
 
+#include "qpreduce/anderson.h"
 #include "qpreduce/common.h"
 
 #include <algorithm>
@@ -111,6 +112,11 @@ struct FusedWorkspace {
   // (round r reads column r mod 2 and its Phase 2 writes the other).
   Matrix<double> y2;
   Matrix<float> yf2;
+  // Accelerated rounds: the iterate tried, the plain step from the last
+  // accepted one, the extrapolation (k each); [A_y·y; Λ_y·y] (2m), Λ_b·b (m).
+  AndersonAcceleration anderson;
+  int anderson_window = 0;
+  Vector<double> y_try, y_plain, y_next, ay_ly, lambda_b;
 };
 
 }  // namespace qpreduce::detail

@@ -34,6 +34,13 @@ struct FixedCoordinatePrep {
 
 class FactoredPhaseOne;
 
+// The terms of the reduced energy of one constraint set
+// (FixedCoordinateSolver::form_energy_terms): λ = Λ_b·b + Λ_y·y.
+struct PhaseOneEnergy {
+  Matrix<double> AyLy;  // [A_y; Λ_y] (2m × k): one product gives A_y·y and Λ_y·y
+  Matrix<double> Lb;    // Λ_b (m × m)
+};
+
 class PhaseOneOperator {
  public:
   virtual ~PhaseOneOperator() = default;

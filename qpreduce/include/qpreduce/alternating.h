@@ -28,6 +28,7 @@ namespace detail {
 // Private to the engine (src/phase_one.h, src/fused_rounds.h).
 struct FixedCoordinatePrep;
 class PhaseOneOperator;
+struct PhaseOneEnergy;
 struct FusedModel;
 struct FusedWorkspace;
 }  // namespace detail
@@ -79,16 +80,33 @@ class FixedCoordinateSolver {
   Index k() const { return k_; }
   Index m() const { return Mb().cols(); }
 
+  // The terms of the reduced energy for this constraint set, which
+  // accelerated rounds (AlternatingOptions::anderson_window) need: A_y and
+  // the multipliers of Phase 1's constraints, λ = Λ_b·b + Λ_y·y, so that
+  //     E(y) = ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀλ                (*)
+  // is E′ at the Phase 1 minimiser for this y (docs/engine.md, "The energy
+  // of the alternation"; N_S is the plugin's ½yᵀN_S y, g its Phase 2 input).
+  // Hard constraints: λ = W·(G·y − H_zz·z) with W = (A_zᵀ)⁺ (m × d); soft:
+  // λ = 2δ·(A_z·z + A_y·y − b). O(m·d·k) per constraint set; dropped by the
+  // next set_constraints. Precondition: ready(), and `solver` the one the
+  // constraints were set for. Throws std::invalid_argument otherwise.
+  void form_energy_terms(const SubspaceSolver<Scalar>& solver);
+  bool has_energy_terms() const { return energy_ != nullptr; }
+
   // The engine's view of the current operators and of the fast path's
   // per-solver part (opaque outside the engine; FusedAlternation reads them).
   const detail::PhaseOneOperator* phase_one_operator() const { return op_.get(); }
   const std::shared_ptr<const detail::FixedCoordinatePrep>& preparation() const { return prep_; }
+  const detail::PhaseOneEnergy* energy_terms() const { return energy_.get(); }
 
  private:
   void prepare_impl(const SubspaceSolver<Scalar>& solver);
 
   std::shared_ptr<const detail::FixedCoordinatePrep> prep_;  // per solver generation
   std::shared_ptr<const detail::PhaseOneOperator> op_;       // per constraint set
+  std::shared_ptr<const detail::PhaseOneEnergy> energy_;     // per constraint set, on request
+  Matrix<double> Az_, Ay_;                                   // this set's A_z (m × d), A_y (m × k)
+  ConstraintOptions options_;                                // this set's options
   Index k_ = 0;
   mutable Vector<double> scratch_;  // μ: R·y in the factored solve
 };
@@ -114,6 +132,16 @@ struct AlternatingOptions {
   // of g (the row split moves entries between the SIMD body and its tail).
   int threads = 1;
   Index parallel_min_entries = 256 * 256;
+  // Anderson acceleration of the rounds (anderson.h; Peng et al. 2018): the
+  // rounds are the fixed-point map y ← Π(g_b + F_y·y), extrapolated from the
+  // last `anderson_window` rounds (1–16) and retracted onto the projection's
+  // manifold, with the energy safeguard: an extrapolated y whose energy (*)
+  // (FixedCoordinateSolver::form_energy_terms) is above the last accepted
+  // one is replaced by the plain step from that one, and the history
+  // restarts. 0: plain rounds. Accelerated rounds run serially and need
+  // form_energy_terms and a projection with quadratic_term; the answer is
+  // always a plain step from an accepted iterate.
+  int anderson_window = 0;
 
   bool is_valid(std::string* why) const;
 };
@@ -121,6 +149,11 @@ struct AlternatingOptions {
 struct AlternatingSummary : Outcome {  // Success after a run
   int iterations = 0;
   double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
+  // Accelerated rounds only: the energy (*) of the last accepted y (up to
+  // the float rounds' round-off), and how many extrapolations the safeguard
+  // rejected.
+  double energy = std::numeric_limits<double>::quiet_NaN();
+  int rejected = 0;
 };
 
 // A Phase 2 projection whose input is linear in (z, y): g = G_z·z + G_y·y
@@ -140,6 +173,16 @@ class InputProjection {
   // returns Σ‖Δy_j‖² over them; it is called concurrently on disjoint ranges.
   // Override both or neither; 0 (the default) keeps the rounds serial.
   virtual Index block_size() const { return 0; }
+
+  // For accelerated rounds (AlternatingOptions::anderson_window):
+  // ½yᵀN_S y, the quadratic term in y of the energy whose Phase 2 this is
+  // (for y on the manifold), and the retraction y ← the nearest point of the
+  // manifold. NaN (the default): the projection cannot be accelerated.
+  virtual double quadratic_term(const Eigen::Ref<const Vector<Scalar>>& y) const {
+    (void)y;
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  virtual void retract(Eigen::Ref<Vector<Scalar>> y) const { (void)y; }
   virtual double project_blocks(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y,
                                 Index first, Index last) {
     (void)g, (void)y, (void)first, (void)last;

@@ -137,9 +137,14 @@ TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is 
   std::vector<std::vector<Index>> all(static_cast<size_t>(n));
   for (Index v = 0; v < n; ++v) all[v] = {v};
   model.linear = linear_proxies_from_groups(all, n);
+  // Both rotation steps: the exact one fits S to the S-coefficient of E′ at
+  // (V′, Q), Dᵀu; the paper's Eq. 19 to D_VᵀV′ (Q dropped).
+  const ClusterRotationFit fit = GENERATE(ClusterRotationFit::Exact, ClusterRotationFit::PaperPhase2);
+  CAPTURE(to_string(fit));
   DeformerOptions opts;
   opts.iterations = 1;
   opts.global_rotation = false;
+  opts.rotation_fit = fit;
   Deformer deformer;
   REQUIRE(deformer.precompute(model, opts).ok());
   Handles h;
@@ -171,13 +176,14 @@ TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is 
   const auto lu = K.fullPivLu();
   Eigen::VectorXd S(9 * d);
   for (Index i = 0; i < d; ++i) Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i).setIdentity();
-  auto phase1 = [&](const Eigen::VectorXd& Sv) {
+  auto phase1 = [&](const Eigen::VectorXd& Sv) {  // u = [V′; Q]
     Eigen::VectorXd rhs(nu + k);
     rhs << D * Sv, b;
-    return Eigen::VectorXd(lu.solve(rhs).head(3 * n));
+    return Eigen::VectorXd(lu.solve(rhs).head(nu));
   };
-  Eigen::VectorXd V1 = phase1(S);
-  const Eigen::VectorXd G = D.topRows(3 * n).transpose() * V1;
+  const Eigen::VectorXd U1 = phase1(S);
+  const Eigen::VectorXd G = fit == ClusterRotationFit::Exact ? Eigen::VectorXd(D.transpose() * U1)
+                                                             : Eigen::VectorXd(D.topRows(3 * n).transpose() * U1.head(3 * n));
   for (Index i = 0; i < d; ++i)
     Eigen::Map<Eigen::Matrix3d>(S.data() + 9 * i) = fit_rotation(Eigen::Map<const Eigen::Matrix3d>(G.data() + 9 * i));
   const Eigen::VectorXd V2 = phase1(S);

@@ -186,8 +186,9 @@ TEST_CASE("reduced E' solutions approach the full-space one as linear proxies in
         (R * c.model.V.row(picked[h]).transpose() + Eigen::Vector3d(0.3, -0.8, -0.4)).transpose();
   }
   const double diag = bounding_box_diagonal(c.model.V);
-  // The reduced alternation's Phase 2 drops Q (Eq. 19), so its limit is the
-  // fixed point of the same alternation in full space (PaperPhase2); the
+  // The reduced alternation's limit is the fixed point of the same
+  // alternation in full space: the E′ minimiser with the exact rotation step,
+  // the PaperPhase2 fixed point with the paper's (Eq. 19: Q dropped); the
   // global rotation adaptation is off so that both minimise plain E′.
   ReferenceOptions opt;
   opt.energy = ReferenceEnergy::ModifiedArap;
@@ -198,7 +199,7 @@ TEST_CASE("reduced E' solutions approach the full-space one as linear proxies in
   ReferenceSolution exact;
   REQUIRE(solve_local_global(c.model, c.handles, c.targets, opt, &exact).converged);
 
-  auto reduced = [&](Index proxies) {
+  auto reduced = [&](Index proxies, ClusterRotationFit fit) {
     DeformableMesh model = c.model;
     if (proxies < n) {
       ClusterOptions copt;
@@ -210,6 +211,7 @@ TEST_CASE("reduced E' solutions approach the full-space one as linear proxies in
     }
     DeformerOptions dopt;
     dopt.global_rotation = false;
+    dopt.rotation_fit = fit;
     dopt.iterations = 50;
     Deformer deformer;
     REQUIRE(deformer.precompute(model, dopt).ok());
@@ -221,15 +223,16 @@ TEST_CASE("reduced E' solutions approach the full-space one as linear proxies in
   };
   std::vector<double> rms;
   for (Index m : {5, 9, 17, 32}) {
-    rms.push_back(rms_distance(reduced(m), full.V) / diag);
+    rms.push_back(rms_distance(reduced(m, ClusterRotationFit::Exact), exact.V) / diag);
     CAPTURE(m, rms.back());
     if (rms.size() > 1) CHECK(rms.back() <= rms[rms.size() - 2] * 1.1 + 1e-6);
   }
   CHECK(rms.back() < 0.5 * rms.front());
   // A proxy at every vertex: the subspace is the whole space; the reduced
-  // answer (reconstructed in float) coincides with the full one.
-  const Vertices all = reduced(n);
-  CHECK(max_distance(all, full.V) < 1e-5 * diag);
+  // answer (reconstructed in float) coincides with the full one, for either
+  // rotation step.
+  CHECK(max_distance(reduced(n, ClusterRotationFit::Exact), exact.V) < 1e-5 * diag);
+  CHECK(max_distance(reduced(n, ClusterRotationFit::PaperPhase2), full.V) < 1e-5 * diag);
   // The two E′ fixed points (Eq. 19 vs the exact S-step) differ, by little.
   CHECK(max_distance(full.V, exact.V) < 0.05 * diag);
 }
@@ -324,4 +327,148 @@ TEST_CASE("local-global with weighted point handles matches pinned vertices", "[
   CHECK(sb.handle_residual < 1e-9);
   CHECK(max_distance(a.V, b.V) < 1e-7);
   CHECK(sa.energy == Approx(sb.energy).epsilon(1e-9));
+}
+
+namespace {
+
+// The reduced deformer run to its fixed point on `c` (global rotation off, so
+// that it minimises plain E′): frames of up to 200 rounds until the relative
+// fixed-point residual is below 1e-12.
+struct Converged {
+  Vertices V;
+  FrameSummary last;
+  int rounds = 0;
+};
+Converged converge_reduced(const Case& c, DeformerOptions options) {
+  options.global_rotation = false;
+  options.iterations = 200;
+  options.tolerance = 1e-12;
+  options.float_rounds = false;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(c.model, options).ok());
+  REQUIRE(deformer.set_handles(c.handles).ok());
+  Converged out;
+  for (int frame = 0; frame < 100; ++frame) {
+    out.last = deformer.frame(c.targets, &out.V);
+    REQUIRE(out.last.ok());
+    out.rounds += out.last.iterations;
+    if (out.last.fixed_point_residual < 1e-12) break;
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("exact rotation step: with an exact subspace the reduced fixed point is the full-space E' minimiser",
+          "[reference][rotation_step]") {
+  // A .sel/.def scenario holds only patches, which are columns of C: the
+  // subspace contains the full-space global step's answer for every S, so the
+  // reduced alternation IS the full-space block-coordinate descent.
+  for (const bool tet : {false, true}) {
+    CAPTURE(tet);
+    const Case c = bend_case(tet, 0.9);
+    const double diag = bounding_box_diagonal(c.model.V);
+    ReferenceOptions ro;
+    ro.energy = ReferenceEnergy::ModifiedArap;
+    ro.cluster_fit = ClusterRotationFit::Exact;
+    ReferenceSolution full;
+    const ReferenceSummary rs = solve_local_global(c.model, c.handles, c.targets, ro, &full);
+    REQUIRE(rs.converged);
+    DeformerOptions options;
+    options.linear_proxies = 6;
+    const Converged exact = converge_reduced(c, options);
+    CHECK(max_distance(exact.V, full.V) < 1e-5 * diag);
+    // The paper's Eq. 19 converges elsewhere, measurably.
+    options.rotation_fit = ClusterRotationFit::PaperPhase2;
+    const Converged paper = converge_reduced(c, options);
+    CHECK(max_distance(paper.V, full.V) > 1e-4 * diag);
+  }
+}
+
+TEST_CASE("Anderson-accelerated rounds: same fixed point, fewer rounds, energy never raised, E' value exact",
+          "[reference][anderson]") {
+  for (const bool tet : {false, true}) {
+    CAPTURE(tet);
+    const Case c = bend_case(tet, 0.9);
+    const double diag = bounding_box_diagonal(c.model.V);
+    DeformerOptions options;
+    options.linear_proxies = 6;
+    const Converged plain = converge_reduced(c, options);
+    options.anderson_window = 5;
+    const Converged fast = converge_reduced(c, options);
+    CAPTURE(plain.rounds, fast.rounds, fast.last.rejected_steps);
+    CHECK(max_distance(plain.V, fast.V) < 1e-6 * diag);
+    CHECK(fast.rounds < plain.rounds);
+    // The safeguard's energy is E′ itself: at the fixed point it equals the
+    // full-space minimiser's E′ (the subspace is exact here).
+    ReferenceOptions ro;
+    ro.energy = ReferenceEnergy::ModifiedArap;
+    ReferenceSolution full;
+    const ReferenceSummary rs = solve_local_global(c.model, c.handles, c.targets, ro, &full);
+    REQUIRE(rs.converged);
+    CHECK(fast.last.model_energy == Approx(rs.energy).epsilon(1e-7));
+
+    // From rest, k accelerated rounds for k = 1, 2, …: the energy of the
+    // answer never goes up (patch handles: the plain fallback is monotone).
+    Deformer deformer;
+    options.global_rotation = false;
+    options.float_rounds = false;
+    REQUIRE(deformer.precompute(c.model, options).ok());
+    REQUIRE(deformer.set_handles(c.handles).ok());
+    double previous = std::numeric_limits<double>::infinity();
+    for (int k = 1; k <= 25; ++k) {
+      deformer.reset_pose();
+      deformer.set_rounds(k);
+      const FrameSummary fs = deformer.frame(c.targets, nullptr);
+      CAPTURE(k, fs.model_energy, previous);
+      CHECK(fs.model_energy <= previous + 1e-9 * std::abs(previous));
+      previous = fs.model_energy;
+    }
+  }
+}
+
+TEST_CASE("accelerated rounds with point handles and the conformal model reach the plain fixed point",
+          "[reference][anderson]") {
+  Case c = bend_case(false, 0.7);
+  const Index n = c.model.V.rows();
+  c.handles.points.push_back({{n / 2}, {}});
+  c.targets.points.resize(1, 3);
+  c.targets.points.row(0) = c.model.V.row(n / 2) + Eigen::RowVector3d(0.4, 0.2, 0.0);
+  const double diag = bounding_box_diagonal(c.model.V);
+  for (const ModelKind kind : {ModelKind::Arap, ModelKind::Conformal}) {
+    DeformerOptions options;
+    options.linear_proxies = 6;
+    options.model = kind;
+    const Converged plain = converge_reduced(c, options);
+    options.anderson_window = 4;
+    const Converged fast = converge_reduced(c, options);
+    CAPTURE(static_cast<int>(kind), plain.rounds, fast.rounds);
+    CHECK(max_distance(plain.V, fast.V) < 1e-6 * diag);
+    CHECK(std::isfinite(fast.last.model_energy));
+  }
+}
+
+TEST_CASE("bad acceleration settings give clear errors", "[reference][anderson]") {
+  const Case c = bend_case(false, 0.5);
+  Deformer deformer;
+  DeformerOptions options;
+  options.anderson_window = 17;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("anderson_window must be in [0, 16]"));
+  options.anderson_window = -1;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("anderson_window"));
+  options.anderson_window = 3;
+  options.rotation_fit = ClusterRotationFit::PaperPhase2;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("needs rotation_fit Exact"));
+  options = DeformerOptions{};
+  options.tolerance = -1e-3;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("tolerance must be finite and ≥ 0"));
+  options.tolerance = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("tolerance"));
+  AlternatingOptions ao;
+  ao.anderson_window = 0;
+  CHECK(ao.is_valid(nullptr));
+  ao.anderson_window = 17;
+  std::string why;
+  CHECK_FALSE(ao.is_valid(&why));
+  CHECK(why.find("anderson_window") != std::string::npos);
 }

@@ -1,6 +1,6 @@
 // Deformer::save / Deformer::load — the precomputed model on disk.
 //
-// Layout (little-endian, version 2; docs/formats.md):
+// Layout (little-endian, version 3; docs/formats.md):
 //   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
 //   payload  records in a fixed order (below): integers as i64, labels as i32,
 //            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
@@ -36,7 +36,8 @@ namespace {
 using detail_deformer::Model;
 
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
-constexpr std::uint32_t kVersion = 2;  // 2: the model's name and parameters, Q kept or not
+// 2: the model's name and parameters, Q kept or not; 3: the rotation step
+constexpr std::uint32_t kVersion = 3;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
 constexpr std::streamoff kTrailerBytes = 8 + 4;
@@ -230,7 +231,8 @@ std::vector<std::pair<std::string, double>> result_options(const DeformationMode
           {"clustering.kmeans.tolerance", o.clustering.kmeans.tolerance},
           {"clustering.spectral.eigenvectors", static_cast<double>(o.clustering.spectral.eigenvectors)},
           {"clustering.spectral.shift_scale", o.clustering.spectral.shift_scale},
-          {"subspace.reduced_lift_tolerance", o.subspace.reduced_lift_tolerance}};
+          {"subspace.reduced_lift_tolerance", o.subspace.reduced_lift_tolerance},
+          {"rotation_fit", o.rotation_fit == ClusterRotationFit::Exact ? 0.0 : 1.0}};
   opts.insert(opts.end(), rest.begin(), rest.end());
   return opts;
 }

@@ -4,6 +4,8 @@
 // (save, load) and state.cpp (the model set-up they share).
 #include "qpreduce/deform/deformer/deformer.h"
 
+#include <qpreduce/anderson.h>
+
 #include "state.h"
 
 #include <qpreduce/support.h>
@@ -27,6 +29,16 @@ bool DeformerOptions::is_valid(std::string* why) const {
   if (rotational_proxies < 1) return fail(fmt::format("rotational_proxies must be ≥ 1, got {}", rotational_proxies));
   if (linear_proxies < 0) return fail(fmt::format("linear_proxies must be ≥ 0, got {}", linear_proxies));
   if (iterations < 1) return fail(fmt::format("iterations must be ≥ 1, got {}", iterations));
+  if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+    return fail(fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance));
+  }
+  if (anderson_window < 0 || anderson_window > AndersonAcceleration::kMaxWindow) {
+    return fail(fmt::format("anderson_window must be in [0, {}] (0: off), got {}", AndersonAcceleration::kMaxWindow,
+                            anderson_window));
+  }
+  if (anderson_window > 0 && rotation_fit != ClusterRotationFit::Exact) {
+    return fail("anderson_window needs rotation_fit Exact: the safeguard's energy is E′ at the exact Phase 2 input");
+  }
   if (round_threads < 0) return fail(fmt::format("round_threads must be ≥ 0 (0: all), got {}", round_threads));
   if (!clustering.is_valid(&sub)) return fail("clustering: " + sub);
   if (!subspace.is_valid(&sub)) return fail("subspace: " + sub);

@@ -12,6 +12,7 @@
 #include <Eigen/LU>
 
 #include <algorithm>
+#include <cmath>
 
 #include <fmt/format.h>
 
@@ -105,11 +106,18 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   rotate_clusters(model.d, r0t, pose.S, &work.s_local);
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
+  const bool tied = !onsite.tied_patches.empty();
+  if (tied) opts.anderson_window = 0;  // the energy terms assume no ties (DeformerOptions::anderson_window)
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
-  if (!onsite.tied_patches.empty()) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
+  if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
   summary.last_change = as.last_change;
   summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
+  summary.model_energy = as.energy;
+  summary.rejected_steps = as.rejected;
+  if (tied && st.settings.alternating.anderson_window > 0) {
+    summary.message = "plain rounds: this handle set ties a free Rigid patch to its cluster (no acceleration)";
+  }
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
     summary.status = Status::NumericalFailure;
@@ -144,6 +152,16 @@ void Deformer::set_round_threads(int threads) {
     throw std::invalid_argument(fmt::format("Deformer::set_round_threads: threads must be ≥ 0, got {}", threads));
   }
   state_->settings.alternating.threads = threads;
+}
+
+void Deformer::set_rounds(int iterations, double tolerance) {
+  if (iterations < 1 || !(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+    throw std::invalid_argument(fmt::format(
+        "Deformer::set_rounds: iterations must be ≥ 1 and tolerance finite and ≥ 0, got {} and {}", iterations,
+        tolerance));
+  }
+  state_->settings.alternating.iterations = iterations;
+  state_->settings.alternating.tolerance = tolerance;
 }
 
 }  // namespace qpreduce::deform

@@ -126,6 +126,10 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   const ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
   make_tie_map(model, layout, &onsite);
+  // Accelerated rounds need the energy terms; tied sets run plain (frame.cpp).
+  if (st.settings.alternating.anderson_window > 0 && layout.tied.empty() && onsite.phase1.ready()) {
+    onsite.phase1.form_energy_terms(model.solver);
+  }
   set_fused(model, !layout.tied.empty(), options.threads, st.fused_precision(), &onsite);
   onsite.tied_patches = std::move(layout.tied);
   onsite.tie_row0 = layout.tie_row0;

@@ -117,11 +117,13 @@ void check_components_pinned(const Model& model, const Groups& groups) {
 }
 
 // The energy in the control layer u: E(u, S) = ½uᵀH_u u − Sᵀ D_uᵀ u + c(S),
-// with D_V the rotational term of V′ for the Phase 2 matrices, and P.
+// with D_V the rotational term of V′ (the paper's Phase 2), K the S-term of
+// the eliminated Q (the exact Phase 2, arap_energy.h), and P.
 struct ControlSystem {
   SparseMatrix<double> Hu;  // n_u × n_u
   SparseMatrix<double> Du;  // n_u × 9d
   SparseMatrix<double> DV;  // 3n × 9d
+  SparseMatrix<double> K;   // 9d × 9d, or empty when Q is kept in u
   SparseMatrix<double> P;   // 3n × n_u
 };
 
@@ -139,6 +141,7 @@ ControlSystem eliminated_control_system(const Model& model, const ModifiedArapSy
     cs.Du = detail_deformer::parallel_product(Pt, elim.Ds);
   }
   cs.DV = std::move(elim.DV);
+  cs.K = std::move(elim.K);
   return cs;
 }
 
@@ -245,14 +248,23 @@ SubspaceOptions subspace_options(const Model& model, const DeformerOptions& opti
   return sub;
 }
 
-// The reconstruction basis P·[N UD] and the Phase 2 matrices
-// M_N, M_U = (D_Vᵀ·P)·[N UD], with the sparse 9d × n_u factor first, and the
-// float basis block by block: no 3n × p double copy of P·[N UD].
-void reduce_operators(Model& model, const SparseMatrix<double>& DV, const SparseMatrix<double>& P) {
-  const SparseMatrix<double> DVtP = SparseMatrix<double>(DV.transpose()) * P;
-  model.MN = DVtP * model.solver.subspace().N;
-  model.MU = DVtP * model.solver.subspace().UD;
-  model.make_basis(P);
+// The reconstruction basis P·[N UD] and the Phase 2 matrices, G = M_N·X + M_U·S
+// (9d × nx, 9d × 9d), for the rotation step `fit` (arap_energy.h):
+//   Exact        the S-coefficient of E′ at (V′, Q*): G = D_uᵀ·u + K·S, so
+//                M_N = D_uᵀ·N, M_U = D_uᵀ·UD + K (D_uᵀ·u = D_sᵀ·V′ with Q
+//                eliminated, D_Vᵀ·V′ + D_Qᵀ·Q with Q kept in u; K = 0 then);
+//   PaperPhase2  Eq. 19: G = D_Vᵀ·V′, so M_N, M_U = (D_Vᵀ·P)·[N UD].
+// The sparse 9d × n_u factor goes first; the float basis is made block by
+// block: no 3n × p double copy of P·[N UD].
+void reduce_operators(Model& model, const ControlSystem& system, ClusterRotationFit fit) {
+  const auto& B = model.solver.subspace();
+  const SparseMatrix<double> left = fit == ClusterRotationFit::Exact
+                                        ? SparseMatrix<double>(system.Du.transpose())
+                                        : SparseMatrix<double>(SparseMatrix<double>(system.DV.transpose()) * system.P);
+  model.MN = left * B.N;
+  model.MU = left * B.UD;
+  if (fit == ClusterRotationFit::Exact && system.K.nonZeros() > 0) model.MU += system.K;
+  model.make_basis(system.P);
 }
 
 }  // namespace
@@ -313,7 +325,7 @@ PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const Deforme
 
   report("reduction", 0.9);
   t.reset();
-  reduce_operators(model, system.DV, system.P);
+  reduce_operators(model, system, options.rotation_fit);
   summary.reduction_seconds = t.seconds();
 
   st->finish(options);

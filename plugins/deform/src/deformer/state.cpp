@@ -230,6 +230,8 @@ void Deformer::State::finish(const DeformerOptions& options) {
   pose.wf.resize(nx + 9 * d);
   work.s_local.resize(9 * d);
   settings.alternating.iterations = options.iterations;
+  settings.alternating.tolerance = options.tolerance;
+  settings.alternating.anderson_window = options.anderson_window;
   settings.alternating.float_products = options.float_rounds;
   settings.alternating.threads = options.round_threads;
   settings.global_rotation = options.global_rotation;

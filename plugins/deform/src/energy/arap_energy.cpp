@@ -458,7 +458,14 @@ EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sy
   out.H = (0.5 * (H + Ht)).pruned(1e-300);
   out.Ds = (DV - detail_deformer::parallel_product(LVQ_Binv, DQ)).pruned(1e-300);
   out.DV = DV;
+  out.K = detail_deformer::parallel_product(SparseMatrix<double>(DQ.transpose()),
+                                            detail_deformer::parallel_product(Binv, DQ))
+              .pruned(1e-300);
   return out;
+}
+
+const char* to_string(ClusterRotationFit fit) {
+  return fit == ClusterRotationFit::Exact ? "exact" : "paper";
 }
 
 double modified_arap_energy(const Vertices& V, const RotationElements& el, const std::vector<int>& cluster,

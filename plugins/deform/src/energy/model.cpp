@@ -51,7 +51,7 @@ ClusterGeometry cluster_geometry(const Vertices& V, const RotationElements& el, 
   return g;
 }
 
-double cluster_rotation_roughness(const ClusterGeometry& g, const Eigen::VectorXd& S) {
+double cluster_rotation_roughness(const ClusterGeometry& g, const Eigen::Ref<const Eigen::VectorXd>& S) {
   check_size("cluster_rotation_roughness: S", 9 * g.d, S.size());
   double rough = 0.0;
   for (Index a = 0; a < g.d; ++a)
@@ -103,6 +103,18 @@ class ScaledRotationProjection final : public ClusterProjection {
         psi = std::clamp(t.cwiseProduct(s).sum() / 3.0, 1.0 / psi_max_, psi_max_);
       s = psi * t;
     }
+  }
+
+  // ½yᵀN_S y on scaled rotations: Σ_a ½‖s_a‖²_F·C_a/3 + γ·Σ_{a<b} W_ab‖s_a − s_b‖²_F
+  // (energy() without the −tr(s_aᵀG_a) terms).
+  double quadratic_term(const Eigen::Ref<const Vector<double>>& y) const override {
+    double e = 0.0;
+    for (Index a = 0; a < g_.d; ++a) {
+      const Eigen::Map<const Eigen::Matrix3d> s(y.data() + 9 * a);
+      e += 0.5 * s.squaredNorm() * g_.stiffness(a) / 3.0;
+    }
+    if (gamma_ > 0.0) e += gamma_ * cluster_rotation_roughness(g_, y);
+    return e;
   }
 
   bool valid(const Eigen::Ref<const Eigen::VectorXd>& y, double tolerance, std::string* why) const override {

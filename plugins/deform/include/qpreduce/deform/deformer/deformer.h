@@ -21,6 +21,7 @@
 #include <qpreduce/subspace_solver.h>
 
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -50,8 +51,24 @@ struct DeformerOptions {
   Index rotational_proxies = 27;
   Index linear_proxies = 33;
   ClusterOptions clustering;
-  // Rounds of Phase 1/Phase 2 per frame (the paper uses 8).
+  // The rotation step of Phase 2 (arap_energy.h): Exact fits each cluster
+  // rotation to its exact covariance with the Q-corrections (block-coordinate
+  // descent on E′: with an exact subspace the fixed point is the full-space
+  // E′ minimiser); PaperPhase2 is Eq. 19 (Q dropped). Same cost per round.
+  ClusterRotationFit rotation_fit = ClusterRotationFit::Exact;
+  // Rounds of Phase 1/Phase 2 per frame (the paper uses 8): the cap.
   int iterations = 8;
+  // Stop a frame's rounds early once the relative fixed-point residual
+  // ‖ΔS‖/‖S‖ (FrameSummary::fixed_point_residual) is at most this; 0: always
+  // run `iterations` rounds (a frame's cost then does not depend on the pose).
+  double tolerance = 0.0;
+  // Anderson acceleration of the rounds (AlternatingOptions::anderson_window,
+  // Peng et al. 2018) with the energy safeguard: 0 off, else the window
+  // (1–16). Needs rotation_fit Exact (the safeguard's energy is E′ at the
+  // exact Phase 2 input); set_handles then also forms the energy terms
+  // (O(m·d·k) per handle set). Handle sets that tie a free Rigid patch to its
+  // cluster run plain rounds (FrameSummary::message says so).
+  int anderson_window = 0;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
   // Phase 2 inputs from a float product in each round
@@ -89,6 +106,11 @@ struct FrameSummary : Outcome {  // Success after a frame
   // The relative fixed-point residual ‖ΔS‖/‖S‖ of the last round: how far
   // the pose is from the alternation's fixed point (0 at the fixed point).
   double fixed_point_residual = 0.0;
+  // Accelerated rounds (DeformerOptions::anderson_window): E′ of the reduced
+  // model at the pose's rotations, in the frame of the global rotation (NaN
+  // for plain rounds), and how many extrapolations the safeguard rejected.
+  double model_energy = std::numeric_limits<double>::quiet_NaN();
+  int rejected_steps = 0;
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
@@ -138,6 +160,9 @@ class Deformer {
   void reset_pose();
   // Changes DeformerOptions::round_threads for the following frames (≥ 0).
   void set_round_threads(int threads);
+  // Changes DeformerOptions::iterations (≥ 1, the cap) and tolerance (finite,
+  // ≥ 0) for the following frames. Throws std::invalid_argument.
+  void set_rounds(int iterations, double tolerance = 0.0);
 
   bool ready() const;
   Index vertex_count() const;

@@ -89,7 +89,28 @@ struct EliminatedArapSystem {
   SparseMatrix<double> Ds;  // 3n × 9d = D_V − L_VQ L_QQ⁻¹ D_Q
   SparseMatrix<double> DV;  // 3n × 9d = D_V, the pure ARAP coupling: DVᵀ·V′
                             // stacks the per-cluster Σ c e′ eᵀ of Phase 2 (Eq. 19)
+  SparseMatrix<double> K;   // 9d × 9d = D_Qᵀ L_QQ⁻¹ D_Q, block diagonal (9 × 9 per
+                            // cluster): with Q* = L_QQ⁻¹(D_Q S − L_QV V′) the
+                            // S-coefficient of E′ is D_Vᵀ V′ + D_Qᵀ Q* = D_sᵀ V′ + K S
 };
+
+// The rotation step (Phase 2) for E′, in the reduced deformer and in the
+// full-space local-global reference. With Q* = L_QQ⁻¹(D_Q S − L_QV V′) the
+// minimiser over Q for the current (V′, S), E′ restricted to S is
+// −Sᵀ(D_Vᵀ V′ + D_Qᵀ Q*) + ½SᵀNS, and ½SᵀNS is constant on rotations (γ = 0).
+enum class ClusterRotationFit {
+  // s_i = nearest rotation of (D_Vᵀ V′ + D_Qᵀ Q*)_i = (D_sᵀ V′ + K S)_i:
+  // exact block-coordinate descent on E′ between (V′, Q) and S, whose fixed
+  // points are the stationary points of E′ (the minimiser Ceres finds).
+  // Linear in the reduced coordinates like the paper's form, so a reduced
+  // round costs the same.
+  Exact,
+  // The paper's Phase 2 (Eq. 19): Q dropped, s_i = nearest rotation of
+  // (D_Vᵀ V′)_i. Its fixed point is not the E′ minimiser: the two differ by
+  // the Q term, O(‖Q‖) (docs/deform.md, "The rotation step").
+  PaperPhase2,
+};
+const char* to_string(ClusterRotationFit fit);
 
 // Eliminates Q element by element (4 × 4 Schur complements):
 // H = L_VV − L_VQ L_QQ⁻¹ L_QV, D_s = D_V − L_VQ L_QQ⁻¹ D_Q. Throws

@@ -70,7 +70,7 @@ ClusterGeometry cluster_geometry(const Vertices& V, const RotationElements& elem
 // what γ (Eq. 11) penalises.
 //   geometry  the clusters' ClusterGeometry (its coupling W, d × d)
 //   S         9d cluster transforms (cluster a at 9a..9a+8, column-major 3 × 3)
-double cluster_rotation_roughness(const ClusterGeometry& geometry, const Eigen::VectorXd& S);
+double cluster_rotation_roughness(const ClusterGeometry& geometry, const Eigen::Ref<const Eigen::VectorXd>& S);
 
 // Phase 2 of a model: an InputProjection (engine) that also knows its
 // manifold, so the invariant kit (qpreduce/testing) can check it.

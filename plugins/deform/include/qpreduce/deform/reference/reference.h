@@ -57,19 +57,6 @@ namespace qpreduce::deform {
 enum class ReferenceEnergy { ClassicArap, ModifiedArap };
 const char* to_string(ReferenceEnergy energy);
 
-// The rotation step of LocalGlobalArap for ModifiedArap.
-enum class ClusterRotationFit {
-  // s_i = nearest rotation of the S-coefficient of E′ at (V′, Q), i.e. of
-  // (Dᵀu)_i: exact block-coordinate descent on E′, whose fixed points are the
-  // stationary points of E′ (the same minimiser Ceres finds).
-  Exact,
-  // The paper's Phase 2 (Eq. 19): Q dropped, s_i = nearest rotation of
-  // (D_Vᵀ V′)_i. Its fixed point is what the reduced deformer converges to
-  // when the linear proxies cover every vertex, which is not exactly the E′
-  // minimiser (the two differ by the Q term, O(‖Q‖)).
-  PaperPhase2,
-};
-
 struct ReferenceOptions {
   ReferenceEnergy energy = ReferenceEnergy::ClassicArap;
   // α, β of E′ (ModifiedArap only; β is ignored for tets, as in the deformer).
