@@ -24,8 +24,9 @@ import tempfile
 
 def run(qpr, mesh, sel, deff, iterations, tolerance, window, work):
     rep = os.path.join(work, "r.json")
+    cache = os.path.join(work, os.path.basename(mesh) + ".cache")  # one precompute per model
     cmd = [qpr, "deform", mesh, "--sel", sel, "--def", deff, "--frames", "1", "--iterations", str(iterations),
-           "--tolerance", str(tolerance), "--anderson", str(window), "--report", rep]
+           "--tolerance", str(tolerance), "--anderson", str(window), "--report", rep, "--cache", cache]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     with open(rep) as f:
         return json.load(f)

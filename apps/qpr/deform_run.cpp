@@ -91,7 +91,7 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
       ->check(CLI::IsMember({"exact", "paper"}));
   cmd->add_option("--anderson", a->anderson_window,
                   "Anderson acceleration of the rounds with this window (1-16; energy safeguard; needs "
-                  "--rotation-step exact), 0: off")
+                  "--rotation-step exact), 0: off; default 5 with exact, 0 with paper")
       ->check(CLI::Range(0, 16));
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")->check(CLI::NonNegativeNumber);
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(CLI::NonNegativeNumber);
@@ -164,8 +164,15 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
   options.iterations = a.iterations;
   options.tolerance = a.tolerance;
-  options.anderson_window = a.anderson_window;
   options.rotation_fit = a.rotation_step == "paper" ? ClusterRotationFit::PaperPhase2 : ClusterRotationFit::Exact;
+  if (a.anderson_window) {
+    if (*a.anderson_window > 0 && options.rotation_fit != ClusterRotationFit::Exact)
+      throw std::invalid_argument("--anderson " + std::to_string(*a.anderson_window) +
+                                  " needs --rotation-step exact (the safeguard's energy is E' at the exact step)");
+    options.anderson_window = *a.anderson_window;
+  } else if (options.rotation_fit != ClusterRotationFit::Exact) {
+    options.anderson_window = 0;  // the paper's step runs plain rounds
+  }
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
   if (a.gamma) options.energy.gamma = *a.gamma;

@@ -29,7 +29,7 @@ struct ScenarioArgs {
   std::string model;  // "", "arap" or "conformal"
   std::string rotation_step = "exact";  // "exact" or "paper"
   double tolerance = 0.0;
-  int anderson_window = 0;
+  std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

@@ -107,7 +107,11 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
   const bool tied = !onsite.tied_patches.empty();
-  if (tied) opts.anderson_window = 0;  // the energy terms assume no ties (DeformerOptions::anderson_window)
+  // Plain rounds when the energy terms assume no ties (DeformerOptions::
+  // anderson_window) or the model's projection gives no quadratic_term (a
+  // custom model that does not define its energy on Phase 2 outputs).
+  const bool energy_known = std::isfinite(model.projection->quadratic_term(work.s_local));
+  if (tied || !energy_known) opts.anderson_window = 0;
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
   if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
@@ -117,6 +121,8 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   summary.rejected_steps = as.rejected;
   if (tied && st.settings.alternating.anderson_window > 0) {
     summary.message = "plain rounds: this handle set ties a free Rigid patch to its cluster (no acceleration)";
+  } else if (!energy_known && st.settings.alternating.anderson_window > 0) {
+    summary.message = "plain rounds: the model's projection defines no quadratic_term (no acceleration)";
   }
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
