@@ -242,10 +242,13 @@ void BM_OP(benchmark::State& state, const ModelSpec* spec, bool fast_path) {
 // Runs frames; reports the chosen part of each as the iteration's time.
 enum class Part { Iteration, Reconstruction, Frame };
 
-// threads: DeformerOptions::round_threads for these frames (0: all).
-void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int threads) {
+// threads: DeformerOptions::round_threads for these frames (0: all);
+// window: DeformerOptions::anderson_window for these frames (−1: the
+// default), so that accelerated and plain rounds are timed in one session.
+void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int threads, int window) {
   Session& s = session(*spec);
   s.deformer.set_round_threads(threads);
+  if (window >= 0) s.deformer.set_anderson_window(window);
   std::vector<double> samples;
   for (auto _ : state) {
     const HandleTargets t = next_targets(s);
@@ -260,6 +263,7 @@ void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int
     samples.push_back(seconds);
   }
   s.deformer.set_round_threads(1);
+  s.deformer.set_anderson_window(s.options.anderson_window);
   set_median(state, std::move(samples), part == Part::Iteration ? 1e-6 : 1e-3);
   set_sizes(state, s);
 }
@@ -404,13 +408,13 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("OPNullSpace/" + n).c_str(), BM_OP, &spec, false)
         ->Unit(benchmark::kMillisecond)
         ->UseRealTime();
-    benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 1)
+    benchmark::RegisterBenchmark(("Iteration/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 1, -1)
         ->Unit(benchmark::kMicrosecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("IterationParallel/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 0)
+    benchmark::RegisterBenchmark(("IterationParallel/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 0, -1)
         ->Unit(benchmark::kMicrosecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction, 1)
+    benchmark::RegisterBenchmark(("Reconstruction/" + n).c_str(), BM_FramePart, &spec, Part::Reconstruction, 1, -1)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
     benchmark::RegisterBenchmark(("ReconstructionVsRead/" + n).c_str(), BM_ReconstructionVsRead, &spec)
@@ -422,8 +426,16 @@ int main(int argc, char** argv) {
     benchmark::RegisterBenchmark(("ReconstructionBackToBack/" + n).c_str(), BM_ReconstructionBackToBack, &spec)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
-    benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1)
+    benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1, -1)
         ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    // The same frames with plain rounds (anderson_window 0: the rounds of
+    // the paper's step cost the same), for the default's frame-time ratio.
+    benchmark::RegisterBenchmark(("FramePlain/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1, 0)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("IterationPlain/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 1, 0)
+        ->Unit(benchmark::kMicrosecond)
         ->UseManualTime();
   }
   if (found == 0) fmt::print(stderr, "bench_deform: no model found under {} (set QPREDUCE_SHARED_DATA)\n", dir);

@@ -330,3 +330,34 @@ TEST_CASE("deformer: vertices used by no element stay at rest and change nothing
   CHECK((vb.topRows(n) - va).cwiseAbs().maxCoeff() <= 1e-6 * (1 + moved));
   CHECK((vb.bottomRows(2) - loose.V.bottomRows(2)).cwiseAbs().maxCoeff() <= 1e-6);
 }
+
+TEST_CASE("deformer: the Anderson window can change between frames", "[deformer][anderson]") {
+  const DeformableMesh model = cylinder_model(6, 12);
+  Handles h;
+  for (Index v : {0, 37, 85}) h.points.push_back({{v}, {}});
+  const HandleTargets t =
+      rigid_targets(model.V, h, rotation(0.7, Eigen::Vector3d(0, 1, 0)), Eigen::Vector3d(0.2, 0.0, 0.1));
+  DeformerOptions plain_opts;
+  plain_opts.anderson_window = 0;
+  Deformer accelerated, switched;
+  REQUIRE(accelerated.precompute(model).ok());
+  REQUIRE(switched.precompute(model, plain_opts).ok());
+  REQUIRE(accelerated.set_handles(h).ok());
+  REQUIRE(switched.set_handles(h).ok());  // no energy terms formed for plain rounds
+  switched.set_anderson_window(DeformerOptions{}.anderson_window);
+  Vertices a, b;
+  const FrameSummary fa = accelerated.frame(t, &a);
+  const FrameSummary fb = switched.frame(t, &b);
+  CHECK(fa.model_energy == Approx(fb.model_energy).epsilon(1e-12));
+  CHECK((a - b).cwiseAbs().maxCoeff() == 0.0);
+  // Back to plain rounds: no energy is tracked.
+  switched.set_anderson_window(0);
+  CHECK(std::isnan(switched.frame(t, &b).model_energy));
+  CHECK_THROWS_WITH(switched.set_anderson_window(17), Catch::Contains("[0, 16]"));
+  CHECK_THROWS_WITH(switched.set_anderson_window(-1), Catch::Contains("[0, 16]"));
+  DeformerOptions paper = plain_opts;
+  paper.rotation_fit = ClusterRotationFit::PaperPhase2;
+  Deformer eq19;
+  REQUIRE(eq19.precompute(model, paper).ok());
+  CHECK_THROWS_WITH(eq19.set_anderson_window(3), Catch::Contains("rotation_fit Exact"));
+}

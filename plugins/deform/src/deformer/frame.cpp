@@ -6,6 +6,7 @@
 
 #include "state.h"
 
+#include <qpreduce/anderson.h>
 #include <qpreduce/point_reconstruction.h>
 #include <qpreduce/support.h>
 
@@ -168,6 +169,26 @@ void Deformer::set_rounds(int iterations, double tolerance) {
   }
   state_->settings.alternating.iterations = iterations;
   state_->settings.alternating.tolerance = tolerance;
+}
+
+void Deformer::set_anderson_window(int window) {
+  if (window < 0 || window > AndersonAcceleration::kMaxWindow) {
+    throw std::invalid_argument(fmt::format("Deformer::set_anderson_window: the window must be in [0, {}], got {}",
+                                            AndersonAcceleration::kMaxWindow, window));
+  }
+  State& st = *state_;
+  if (window > 0 && st.inputs.options.rotation_fit != ClusterRotationFit::Exact) {
+    throw std::invalid_argument(
+        "Deformer::set_anderson_window: accelerated rounds need rotation_fit Exact (this model was precomputed "
+        "with the paper's Eq. 19 step)");
+  }
+  // A handle set made with plain rounds has no energy terms yet.
+  detail_deformer::OnSite& onsite = st.onsite;
+  if (window > 0 && st.ready && onsite.phase1.ready() && onsite.tied_patches.empty() &&
+      !onsite.phase1.has_energy_terms()) {
+    onsite.phase1.form_energy_terms(st.model.solver);
+  }
+  st.settings.alternating.anderson_window = window;
 }
 
 }  // namespace qpreduce::deform

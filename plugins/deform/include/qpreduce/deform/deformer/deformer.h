@@ -166,6 +166,11 @@ class Deformer {
   // Changes DeformerOptions::iterations (≥ 1, the cap) and tolerance (finite,
   // ≥ 0) for the following frames. Throws std::invalid_argument.
   void set_rounds(int iterations, double tolerance = 0.0);
+  // Changes DeformerOptions::anderson_window (0–16) for the following frames;
+  // turning acceleration on forms the current handle set's energy terms
+  // (O(m·d·k)) when they are missing. Throws std::invalid_argument on a
+  // window out of range, or a window > 0 with rotation_fit PaperPhase2.
+  void set_anderson_window(int window);
 
   bool ready() const;
   Index vertex_count() const;
