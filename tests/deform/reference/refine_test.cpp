@@ -92,10 +92,8 @@ TEST_CASE("refine: from the reduced pose and from rest the same classic ARAP ene
   CHECK(max_distance(from_reduced, converged.V) < 1e-3 * diag);
 }
 
-TEST_CASE(
-    "refine: Anderson never raises the energy and reaches the plain "
-    "fixed point in fewer rounds",
-    "[reference][refine][anderson]") {
+TEST_CASE("refine: Anderson never raises the energy and reaches the plain fixed point in fewer rounds",
+          "[reference][refine][anderson]") {
   const bool tet = GENERATE(false, true);
   CAPTURE(tet);
   const Case c = bend_case(tet, 1.0);
