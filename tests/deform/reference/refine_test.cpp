@@ -120,7 +120,9 @@ TEST_CASE("refine: Anderson never raises the energy and reaches the plain fixed 
     previous = s.energy;
     rejected = s.rejected_steps;
   }
-  CHECK(rejected >= 0);
+  // The safeguard did refuse steps in these rounds, so the monotonicity
+  // above covers its fallback too.
+  CHECK(rejected > 0);
   ro.max_iterations = 20000;
   lg.set_iteration_options(ro);
   ReferenceSolution fast, plain;
