@@ -490,8 +490,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
         z.swap(gz);
       }
     } else {
-      if (accelerate) anderson.step(z, gz,
-                                    za);  // the first step returns G(z) and starts the history
+      if (accelerate) anderson.step(z, gz, za);  // the first step: G(z); starts the history
       next = rounds.local_step();
       z.swap(gz);
     }
@@ -521,10 +520,8 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   if (summary.status == Status::Success && summary.cancelled) {
     summary.message = fmt::format("cancelled after {} rounds", it);
   } else if (summary.status == Status::Success && !summary.converged) {
-    summary.message = fmt::format(
-        "iteration limit ({}) reached; last step {:.3e} of the "
-        "bounding-box diagonal",
-        st.options.max_iterations, summary.last_step / m.diagonal);
+    summary.message = fmt::format("iteration limit ({}) reached; last step {:.3e} of the bounding-box diagonal",
+                                  st.options.max_iterations, summary.last_step / m.diagonal);
   } else if (summary.status == Status::Success) {
     summary.message = fmt::format("converged in {} rounds", it);
   }
