@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "refine_run.h"
 
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/reference/reference.h>
@@ -28,6 +29,9 @@ struct CompareArgs : ScenarioArgs {
   std::string energy = "classic";  // classic | modified
   int reference_iterations = 20000;
   std::string out_dir = "qpr-compare", report;
+  bool convergence = false;
+  double convergence_tolerance = 1e-10, gap = 1e-4;
+  int anderson_window = 5;
 };
 
 nlohmann::json deviation(const Vertices& a, const Vertices& b, double diag) {
@@ -115,8 +119,9 @@ void print_comparison(const CompareArgs& a, const std::string& primary, const nl
 }
 
 int run_compare(const CompareArgs& a) {
-  if (a.reference != "ceres" && a.reference != "local-global" && a.reference != "both")
-    throw std::invalid_argument("--reference must be ceres, local-global or both, got " + a.reference);
+  if (a.reference != "ceres" && a.reference != "local-global" && a.reference != "both" && a.reference != "none")
+    throw std::invalid_argument("--reference must be ceres, local-global, both or none, got " + a.reference);
+  if (a.reference == "none" && !a.convergence) throw std::invalid_argument("--reference none needs --convergence");
   if (a.energy != "classic" && a.energy != "modified")
     throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
   LoadedScenario ls = load_scenario(a);
@@ -164,6 +169,19 @@ int run_compare(const CompareArgs& a) {
     if (primary.empty() || (which == "local-global" && !refs[primary]["converged"].get<bool>())) primary = which;
   }
   report["references"] = refs;
+  if (a.convergence) {
+    // Full-space classic ARAP from the reduced pose and from rest, plain and accelerated.
+    RefineArgs ra;
+    ra.tolerance = a.convergence_tolerance;
+    ra.anderson_window = a.anderson_window;
+    RefineOptions o = refine_options(ra);
+    o.max_iterations = a.reference_iterations;
+    report["convergence"] = convergence_study(sc, reduced.last, o, a.gap);
+  }
+  if (a.reference == "none") {
+    if (!a.report.empty()) write_json(a.report, report);
+    return 0;
+  }
   if (primary.empty()) throw std::runtime_error("no reference succeeded");
   const nlohmann::json& ref = refs[primary];
   report["reference"] = ref;
@@ -183,12 +201,23 @@ int run_compare(const CompareArgs& a) {
 void register_compare(CLI::App& app) {
   auto [cmd, a] = add_command<CompareArgs>(app, "compare", "Reduced ARAP against full-space references (Ceres, local-global)");
   add_scenario_options(cmd, a.get());
-  cmd->add_option("--reference", a->reference, "ceres, local-global or both (default both)");
+  cmd->add_option("--reference", a->reference, "ceres, local-global, both (default) or none (with --convergence)");
   cmd->add_option("--energy", a->energy,
                   "classic: references minimise classic ARAP (default); modified: the reduced model's E' with its "
                   "clusters, alpha, beta and global rotation");
   cmd->add_option("--reference-iterations", a->reference_iterations, "Iteration limit of the references")
       ->check(CLI::Range(1, 10000000));
+  cmd->add_flag("--convergence", a->convergence,
+                "Also report rounds and seconds of full-space classic ARAP from the reduced pose and from rest, "
+                "plain and Anderson-accelerated (the report's \"convergence\")");
+  cmd->add_option("--convergence-tolerance", a->convergence_tolerance,
+                  "--convergence: stop each run at this relative energy change or fixed-point residual (default "
+                  "1e-10; at most --reference-iterations rounds)");
+  cmd->add_option("--gap", a->gap,
+                  "--convergence: also time each run to this relative energy gap to the lowest energy reached "
+                  "(default 1e-4)")
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("--refine-anderson", a->anderson_window, "--convergence: Anderson window, 1-16 (default 5)");
   cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
   cmd->add_option("--report", a->report, "JSON report");
   cmd->callback([a = a]() { run_guarded("compare", [&] { return run_compare(*a); }); });

@@ -2,6 +2,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "refine_run.h"
 
 #include <CLI/CLI.hpp>
 
@@ -13,6 +14,7 @@ namespace {
 
 struct DeformArgs : ScenarioArgs {
   std::string out, report, cache;
+  RefineArgs refine;
 };
 
 int run_deform(const DeformArgs& a) {
@@ -23,6 +25,7 @@ int run_deform(const DeformArgs& a) {
   settings.out_path = a.out;
   settings.report_path = a.report;
   settings.cache_path = a.cache;
+  if (a.refine.tolerance) settings.refine = refine_options(a.refine);
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;
 }
@@ -36,6 +39,7 @@ void register_deform(CLI::App& app) {
   cmd->add_option("--report", a->report, "JSON report");
   cmd->add_option("--cache", a->cache,
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
+  add_refine_options(cmd, &a->refine);
   cmd->callback([a = a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 

@@ -1,4 +1,5 @@
 #include "deform_run.h"
+#include "refine_run.h"
 
 #include "app_support.h"
 
@@ -368,7 +369,18 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
 
   const double diag = bounding_box_diagonal(scenario.model.V);
   const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);
-  const double energy = arap_energy(scenario.model.V, deformer.elements(), s.out);
+  Vertices shown;  // the refined pose, with --refine
+  nlohmann::json refined;
+  if (settings.refine) {
+    refined = refine_last_frame(scenario, s.out, *settings.refine, &shown);
+    const int last = static_cast<int>(scenario.frames.size()) - 1;
+    const std::vector<int>& wf = settings.write_frames;
+    const bool wrote_last =
+        std::find(wf.begin(), wf.end(), last) != wf.end() || std::find(wf.begin(), wf.end(), -1) != wf.end();
+    if (wrote_last && !settings.out_path.empty())  // the refined pose replaces the reduced one
+      write_pose(frame_path(settings.out_path, last, wf.size() > 1), shown, surface, solid);
+  }
+  const double energy = arap_energy(scenario.model.V, deformer.elements(), settings.refine ? shown : s.out);
   if (outputs) {
     outputs->last = s.out;
     outputs->clusters = deformer.clusters();
@@ -405,8 +417,10 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
     report["rejected_steps"] = s.last.rejected_steps;
   }
   report["bounding_box_diagonal"] = diag;
+  if (settings.refine) report["refine"] = refined;
 
   print_table(settings.name, scenario, pre, settings, cache_loaded, report, options.iterations, s);
+  if (settings.refine) print_refine_line(refined);
   if (!settings.report_path.empty()) write_json(settings.report_path, report);
   return report;
 }

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <qpreduce/deform/io/scenario.h>
+#include <qpreduce/deform/reference/refine.h>
 
 #include <nlohmann/json.hpp>
 
@@ -73,6 +74,9 @@ struct RunSettings {
   std::string cache_path;
   bool progress = true;     // progress bar on stderr during precompute
   std::string name;         // what is deformed, for the table
+  // Set: refine the last frame's pose in full space (refine_run.h); the
+  // mesh written and arap_energy are then the refined pose's.
+  std::optional<qpreduce::deform::RefineOptions> refine;
 };
 
 // Precomputes, sets the handles, runs every frame of the scenario, prints a

@@ -3,6 +3,8 @@
 // coincides with it when the proxies cover every vertex, bad scenarios throw.
 #include <catch2/catch.hpp>
 
+#include "reference_test_util.h"
+
 #include "qpreduce/deform/mesh/geometry.h"
 #include "qpreduce/deform/reference/reference.h"
 #include "qpreduce/deform/io/scenario.h"
@@ -15,59 +17,9 @@
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
+using namespace qpreduce::deform::reference_test;
 
 namespace {
-
-// A small mesh with its bottom layer Fixed and its top layer an Affine patch
-// prescribed to rotate by `angle` about x and move sideways (a .sel/.def).
-struct Case {
-  DeformableMesh model;
-  Handles handles;
-  HandleTargets targets;
-};
-
-Case bend_case(bool tet, double angle) {
-  Case c;
-  std::vector<int> roles;
-  if (tet) {
-    const TetMesh m = shapes::box_tets(1.0, 1.0, 2.0, 2, 2, 4);
-    c.model.V = m.V;
-    c.model.T = m.T;
-  } else {
-    const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 8, 6);
-    c.model.V = m.V;
-    c.model.F = m.F;
-  }
-  const double zmax = c.model.V.col(2).maxCoeff();
-  for (Index v = 0; v < c.model.V.rows(); ++v) {
-    const double z = c.model.V(v, 2);
-    roles.push_back(z < 1e-9 ? 0 : z > zmax - 1e-9 ? 2 : 1);
-  }
-  Eigen::Matrix4d def = Eigen::Matrix4d::Identity();
-  def.topLeftCorner<3, 3>() = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitX()).toRotationMatrix();
-  def.block<3, 1>(0, 3) = Eigen::Vector3d(0.3, -0.8, -0.4);
-  const SelDefScenario sd = apply_sel_def(roles, def, &c.model);
-  c.handles = sd.handles;
-  c.targets = sd.targets;
-  // Rotational clusters for E′: slabs along z.
-  const Index r = tet ? c.model.T.rows() : c.model.V.rows();
-  c.model.clusters.resize(static_cast<size_t>(r));
-  for (Index k = 0; k < r; ++k) {
-    double z = 0.0;
-    if (tet) {
-      for (int i = 0; i < 4; ++i) z += 0.25 * c.model.V(c.model.T(k, i), 2);
-    } else {
-      z = c.model.V(k, 2);
-    }
-    c.model.clusters[k] = std::min(3, static_cast<int>(4.0 * z / zmax));
-  }
-  return c;
-}
-
-double max_distance(const Vertices& A, const Vertices& B) { return (A - B).rowwise().norm().maxCoeff(); }
-double rms_distance(const Vertices& A, const Vertices& B) {
-  return std::sqrt((A - B).rowwise().squaredNorm().mean());
-}
 
 void check_rotations(const Eigen::VectorXd& R) {
   for (Index i = 0; i < R.size() / 9; ++i) {

@@ -3,6 +3,7 @@
 #include "reference_internal.h"
 #include "deformer/control_layer.h"
 
+#include <qpreduce/anderson.h>
 #include <qpreduce/support.h>
 
 #include <Eigen/Dense>
@@ -11,6 +12,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace qpreduce::deform {
 
@@ -415,9 +417,11 @@ HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
   return summary;
 }
 
-ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial) {
+ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial,
+                                        const std::function<bool()>& cancel) {
   const State& st = *state_;
   if (!st.has_handles) throw std::invalid_argument("LocalGlobalArap::solve: call precompute and set_handles first");
+  if (out == nullptr) throw std::invalid_argument("LocalGlobalArap::solve: out is null");
   detail_reference::check_targets(st.handles, targets);
   const PreparedModel& m = st.m;
   if (initial.size() > 0) {
@@ -440,18 +444,65 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   summary.initial_energy = classic || initial.size() > 0 ? rounds.local_step() : rounds.rest_rotations_energy();
   double energy = summary.initial_energy;
   summary.status = Status::Success;
+  // The fixed-point iterate z = [vec V′; Q] (reference.h) and its image G(z).
+  const Index nx = 3 * st.n;
+  Eigen::VectorXd z(nx + rounds.Q.size()), gz(z.size()), za(z.size());
+  const auto pack = [&](Eigen::VectorXd* v) {
+    v->head(nx) = Eigen::Map<const Eigen::VectorXd>(rounds.X.data(), nx);
+    v->tail(rounds.Q.size()) = rounds.Q;
+  };
+  const auto unpack = [&](const Eigen::VectorXd& v) {
+    Eigen::Map<Eigen::VectorXd>(rounds.X.data(), nx) = v.head(nx);
+    rounds.Q = v.tail(rounds.Q.size());
+  };
+  pack(&z);
+  const bool accelerate = st.options.anderson_window > 0;
+  AndersonAcceleration anderson;
+  if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
   int it = 0;
   for (; it < st.options.max_iterations; ++it) {
-    summary.last_step = rounds.global_step(cv);
-    if (!rounds.X.allFinite()) {
-      summary.status = Status::NumericalFailure;
-      summary.message = fmt::format("non-finite positions in round {}", it + 1);
+    if (cancel && cancel()) {
+      summary.cancelled = true;
       break;
     }
-    const double next = rounds.local_step();
+    summary.last_step = rounds.global_step(cv);  // (V′, Q) = G(z)
+    if (!rounds.X.allFinite() || !rounds.Q.allFinite()) {
+      unpack(z);  // back to the last accepted pose
+      rounds.local_step();
+      summary.status = Status::NumericalFailure;
+      summary.message = fmt::format("non-finite positions in round {}; returned the pose of round {}", it + 1, it);
+      break;
+    }
+    pack(&gz);
+    summary.fixed_point_residual = (gz - z).norm() / std::max(z.norm(), std::numeric_limits<double>::min());
+    double next = 0.0;
+    if (accelerate && anderson.history() > 0) {
+      anderson.step(z, gz, za);
+      unpack(za);
+      next = rounds.local_step();
+      if (std::isfinite(next) && next <= energy && rounds.X.allFinite()) {
+        z.swap(za);
+      } else {  // the safeguard: the plain round, which never raises the energy
+        ++summary.rejected_steps;
+        anderson.restart();
+        unpack(gz);
+        next = rounds.local_step();
+        z.swap(gz);
+      }
+    } else {
+      if (accelerate) anderson.step(z, gz, za);  // the first step: G(z); starts the history
+      next = rounds.local_step();
+      z.swap(gz);
+    }
     const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
     energy = next;
-    if (summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance) {
+    summary.round_energy.push_back(energy);
+    summary.round_seconds.push_back(timer.seconds());
+    const bool reference_test =
+        summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
+    const bool refine_test = st.options.tolerance > 0 &&
+                             (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
+    if (reference_test || refine_test) {
       summary.converged = true;
       ++it;
       break;
@@ -466,17 +517,35 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
   summary.energy = energy;  // of the returned (V′, R) or (V′, Q, S)
   summary.handle_residual = handle_residual(targets_model, st.handles, targets, out->V);
-  if (summary.status == Status::Success && !summary.converged) {
+  if (summary.status == Status::Success && summary.cancelled) {
+    summary.message = fmt::format("cancelled after {} rounds", it);
+  } else if (summary.status == Status::Success && !summary.converged) {
     summary.message = fmt::format("iteration limit ({}) reached; last step {:.3e} of the bounding-box diagonal",
                                   st.options.max_iterations, summary.last_step / m.diagonal);
   } else if (summary.status == Status::Success) {
     summary.message = fmt::format("converged in {} rounds", it);
   }
-  summary.solver_report = fmt::format("local-global ({}): {} rounds, energy {:.12g} -> {:.12g}, {}",
-                                      to_string(st.options.energy), it, summary.initial_energy, summary.energy,
-                                      summary.message);
+  summary.solver_report = fmt::format(
+      "local-global ({}{}): {} rounds, energy {:.12g} -> {:.12g}, {}", to_string(st.options.energy),
+      accelerate ? fmt::format(", Anderson window {}, {} rejected", st.options.anderson_window, summary.rejected_steps)
+                 : std::string(),
+      it, summary.initial_energy, summary.energy, summary.message);
   return summary;
 }
+
+void LocalGlobalArap::set_iteration_options(const ReferenceOptions& options) {
+  State& st = *state_;
+  if (st.n == 0) throw std::invalid_argument("LocalGlobalArap::set_iteration_options: call precompute first");
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ReferenceOptions: " + why);
+  st.options.max_iterations = options.max_iterations;
+  st.options.step_tolerance = options.step_tolerance;
+  st.options.energy_tolerance = options.energy_tolerance;
+  st.options.tolerance = options.tolerance;
+  st.options.anderson_window = options.anderson_window;
+}
+
+const ReferenceOptions& LocalGlobalArap::options() const { return state_->options; }
 
 ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,

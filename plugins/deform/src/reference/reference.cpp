@@ -4,6 +4,7 @@
 
 #include "deformer/handle_checks.h"
 
+#include <qpreduce/anderson.h>
 #include <qpreduce/support.h>
 
 #include "qpreduce/deform/mesh/mesh.h"
@@ -36,12 +37,17 @@ bool ReferenceOptions::is_valid(std::string* why) const {
                                 {"energy_tolerance", energy_tolerance},
                                 {"function_tolerance", function_tolerance},
                                 {"gradient_tolerance", gradient_tolerance},
-                                {"parameter_tolerance", parameter_tolerance}}) {
+                                {"parameter_tolerance", parameter_tolerance},
+                                {"tolerance", tolerance}}) {
     if (!(v >= 0.0) || !std::isfinite(v)) return fail(fmt::format("{} must be finite and ≥ 0, got {}", name, v));
   }
   if (!frame.allFinite() || (frame.transpose() * frame - Eigen::Matrix3d::Identity()).norm() > 1e-9 ||
       frame.determinant() < 0) {
     return fail("frame must be a rotation (orthonormal, det +1)");
+  }
+  if (anderson_window < 0 || anderson_window > AndersonAcceleration::kMaxWindow) {
+    return fail(fmt::format("anderson_window must be in [0, {}] (0 = plain local-global), got {}",
+                            AndersonAcceleration::kMaxWindow, anderson_window));
   }
   if (threads < 1) return fail(fmt::format("threads must be ≥ 1, got {}", threads));
   return true;

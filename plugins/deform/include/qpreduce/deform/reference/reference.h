@@ -46,6 +46,7 @@
 
 #include <Eigen/Core>
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -77,6 +78,18 @@ struct ReferenceOptions {
   double function_tolerance = 1e-15;
   double gradient_tolerance = 1e-14;
   double parameter_tolerance = 1e-13;
+  // Local-global: also stop when the relative energy change of a round,
+  // |E_k − E_{k+1}| / E_{k+1}, or the relative fixed-point residual
+  // ‖G(z_k) − z_k‖ / ‖z_k‖ (z and G: see LocalGlobalArap) is ≤ tolerance.
+  // 0 (the default) leaves only the step/energy test above, which is meant
+  // for converged references; a refine uses e.g. 1e-6. Finite and ≥ 0.
+  double tolerance = 0.0;
+  // Local-global: Anderson acceleration (anderson.h) of the rounds with this
+  // window, in [0, 16]; 0 = the plain alternation. An accelerated pose is
+  // kept only when it does not raise the energy, otherwise the plain round
+  // is taken (ReferenceSummary::rejected_steps), so the energy still never
+  // rises.
+  int anderson_window = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
   // Factorization of the global step (local-global).
@@ -95,6 +108,12 @@ struct ReferenceSummary : Outcome {
   double energy = 0.0;       // arap_energy (classic) or E′ (modified) of the result
   double handle_residual = 0.0;  // largest constraint violation (absolute distance)
   double last_step = 0.0;    // local-global: largest vertex move of the last round
+  double fixed_point_residual = 0.0;  // local-global: ‖G(z) − z‖ / ‖z‖ of the last round
+  int rejected_steps = 0;             // local-global: accelerated poses refused by the energy safeguard
+  bool cancelled = false;             // local-global: the cancel hook stopped it (the pose is the last accepted one)
+  // Local-global: after each round, the energy of the accepted pose and the
+  // seconds since the rounds began (time-to-accuracy measurements).
+  std::vector<double> round_energy, round_seconds;
   double setup_seconds = 0.0;    // elements, assembly, factorization (local-global: per handle set)
   double solve_seconds = 0.0;    // the iterations
   std::string solver_report;     // Ceres: Solver::Summary::FullReport(); local-global: a line
@@ -125,10 +144,24 @@ struct HandleSetSummary : Outcome {
 //                               Schur complement of the point rows;
 //   solve(targets, …)           rounds of global (one back-substitution) and
 //                               local steps until converged.
+// Only the targets may change between solves: new targets reuse the
+// factorization, a new handle set needs set_handles again.
 // Global step: the control layer of deformer.h, u = [V′_free; t_s, d_s per
 // patch] (n_u), V′ = P u; minimise ½uᵀ(PᵀHP)u − uᵀPᵀq(R) subject to the
 // constraints, with H = the cotangent ARAP matrix Σ c (ξ_i − ξ_j)(ξ_i − ξ_j)ᵀ ⊗ I₃
 // (classic) or the Q-eliminated H of arap_energy.h (E′, q = D_s S).
+//
+// Anderson acceleration (ReferenceOptions::anderson_window > 0). One round
+// is the fixed-point map z ↦ G(z) = global(local(z)) on the stacked pose
+// z = [vec V′] (3n; classic) or z = [vec V′; Q] (3n + 4r; E′), not on the
+// rotations: 3n numbers against 9r (r = n for spokes-and-rims, r ≈ 5n–6n
+// for tets), so each Anderson step streams 3–18 times fewer numbers, and the
+// energy of a pose z is min_R E(z, R), which the local step computes anyway
+// (the safeguard costs nothing extra when the step is accepted). Each
+// accelerated z_{k+1} is an affine combination of global-step outputs, so
+// it meets the (affine) handle constraints and stays in the control layer.
+// Safeguard (Peng et al. 2018): if E(z_{k+1}) > E(z_k) or it is not finite,
+// take the plain G(z_k) instead (monotone) and restart the history.
 class LocalGlobalArap {
  public:
   LocalGlobalArap();
@@ -160,9 +193,21 @@ class LocalGlobalArap {
   //   targets  one row of `points` per point handle (m × 3), one 3 × 4 [A | t]
   //            per prescribed patch
   //   out      V (n × 3), the rotations and, for E′, Q (ReferenceSolution)
-  // Returns the energy, iterations, residual and whether it converged. Throws std::invalid_argument on target sizes, NaN, or conflicting
-  // targets (one vertex held at two different places by two constraints).
-  ReferenceSummary solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial = {});
+  //   cancel   optional; called once per round before the round: true stops
+  //            the solve with the last accepted pose (finite, meeting the
+  //            constraints as well as any round's pose) and
+  //            summary.cancelled = true
+  // Returns the energy, iterations, residual and whether it converged. Throws std::invalid_argument on target sizes,
+  // NaN, or conflicting targets (one vertex held at two different places by two constraints).
+  ReferenceSummary solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial = {},
+                         const std::function<bool()>& cancel = {});
+
+  // Replaces the iteration settings (max_iterations, step_tolerance,
+  // energy_tolerance, tolerance, anderson_window) and keeps the
+  // factorization. Throws std::invalid_argument on invalid options or
+  // before precompute.
+  void set_iteration_options(const ReferenceOptions& options);
+  const ReferenceOptions& options() const;
 
   const RotationElements& elements() const;
 

@@ -1,0 +1,52 @@
+// qpr — the full-space finish of a reduced pose (`qpr deform --refine`,
+// `qpr compare --convergence`). No math here: the plugin's Refiner works,
+// this file parses the options, reports and prints.
+#pragma once
+
+#include <qpreduce/deform/io/scenario.h>
+#include <qpreduce/deform/reference/refine.h>
+
+#include <nlohmann/json.hpp>
+
+#include <optional>
+
+namespace CLI {
+class App;
+}
+
+namespace qpr {
+
+// --refine[=TOL] and the Anderson settings of the refine.
+struct RefineArgs {
+  std::optional<double> tolerance;  // set: refine (the flag alone gives kDefaultTolerance)
+  int anderson_window = 5;
+  bool plain = false;  // --refine-plain: no Anderson acceleration
+  static constexpr double kDefaultTolerance = 1e-6;
+};
+
+// Registers --refine, --refine-anderson and --refine-plain on `cmd`.
+void add_refine_options(CLI::App* cmd, RefineArgs* args);
+
+// The plugin's options for these arguments. Throws std::invalid_argument on
+// a negative tolerance or a window outside [1, 16].
+qpreduce::deform::RefineOptions refine_options(const RefineArgs& args);
+
+// Refines `reduced` (the last frame's pose) under the scenario's handles at
+// its last frame's targets; writes the refined pose to *refined and returns
+// the report's "refine" object (rounds, seconds, arap_energy,
+// rms_from_reduced, max_from_reduced, …). Throws std::runtime_error when
+// the refine fails.
+nlohmann::json refine_last_frame(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::Vertices& reduced,
+                                 const qpreduce::deform::RefineOptions& options, qpreduce::deform::Vertices* refined);
+// The console table's line for that object.
+void print_refine_line(const nlohmann::json& refine);
+
+// Rounds and seconds of full-space classic ARAP from the reduced pose and
+// from rest, plain and accelerated (window), each to `tolerance` (at most
+// max_rounds rounds): to converge, and to come within `gap` (relative) of
+// the lowest energy any run reached. Returns the report's "convergence"
+// object; prints a table.
+nlohmann::json convergence_study(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::Vertices& reduced,
+                                 const qpreduce::deform::RefineOptions& options, double gap);
+
+}  // namespace qpr
