@@ -5,6 +5,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "validators.h"
 
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/reference/reference.h>
@@ -119,6 +120,7 @@ int run_compare(const CompareArgs& a) {
     throw std::invalid_argument("--reference must be ceres, local-global or both, got " + a.reference);
   if (a.energy != "classic" && a.energy != "modified")
     throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
+  if (!a.report.empty()) qpreduce::check_destination(a.report, "report");
   LoadedScenario ls = load_scenario(a);
   const OutputPaths path{a.out_dir, ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off"};
   std::filesystem::create_directories(a.out_dir);
@@ -188,7 +190,7 @@ void register_compare(CLI::App& app) {
                   "classic: references minimise classic ARAP (default); modified: the reduced model's E' with its "
                   "clusters, alpha, beta and global rotation");
   cmd->add_option("--reference-iterations", a->reference_iterations, "Iteration limit of the references")
-      ->check(CLI::Range(1, 10000000));
+      ->check(whole_number_between(1, 10000000));
   cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
   cmd->add_option("--report", a->report, "JSON report");
   cmd->callback([a = a]() { run_guarded("compare", [&] { return run_compare(*a); }); });

@@ -24,7 +24,9 @@
 #include "app_support.h"
 #include "commands.h"
 #include "guard.h"
+#include "validators.h"
 
+#include <qpreduce/atomic_file.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/problems/matrix_market.h>
 #include <qpreduce/theorem.h>
@@ -436,8 +438,12 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
 }
 
 int run_qp(const Options& opt) {
+  if (!opt.report.empty()) qpreduce::check_destination(opt.report, "report");
+  if (!opt.out.empty()) {
+    fs::create_directories(opt.out);
+    qpreduce::check_destination((fs::path(opt.out) / "X_.mtx").string(), "solutions (--out)");
+  }
   const Problem p = read_problem(opt);
-  if (!opt.out.empty()) fs::create_directories(opt.out);
 
   Solvers s;
   s.sopt.augment = !opt.no_augment;
@@ -480,7 +486,7 @@ void register_qp(CLI::App& app) {
                   "directory of A_<name>.mtx, b_<name>.mtx [, q_<name>.mtx | Y_<name>.mtx], or a JSON manifest")
       ->required();
   cmd->add_option("--soft", opt->soft, "soft constraints with weight DELTA (Eq. 18) instead of hard ones")
-      ->check(CLI::PositiveNumber);
+      ->check(number_above(0));
   cmd->add_flag("--check-full", opt->check_full,
                 "also solve every demand in full (sparse KKT): time, d_H error, Theorem 4.10 bound");
   cmd->add_flag("--baseline", opt->baseline, "also time a cached Cholesky of H plus a Schur complement per demand");

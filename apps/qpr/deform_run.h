@@ -4,12 +4,14 @@
 // and writes the meshes and the JSON report.
 #pragma once
 
+#include <qpreduce/atomic_file.h>
 #include <qpreduce/deform/io/scenario.h>
 
 #include <nlohmann/json.hpp>
 
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace CLI {
@@ -75,9 +77,19 @@ struct RunSettings {
   std::string name;         // what is deformed, for the table
 };
 
+// Checks, before anything runs or is written, that the mesh, the report and
+// the cache can be written where the settings say (qpreduce::check_destination);
+// throws qpreduce::FileError naming the output otherwise.
+inline void check_outputs(const RunSettings& settings) {
+  for (const auto& [path, what] :
+       {std::pair{&settings.out_path, "mesh"}, {&settings.report_path, "report"}, {&settings.cache_path, "cache"}})
+    if (!path->empty()) qpreduce::check_destination(*path, what);
+}
+
 // Precomputes, sets the handles, runs every frame of the scenario, prints a
 // timing table to stdout and returns the report (also written to
-// settings.report_path when set). Throws on bad input or a failed precompute.
+// settings.report_path when set). Throws on bad input or a failed precompute,
+// and before any work when an output cannot be written (check_outputs).
 // `outputs`, when given, receives the last pose and the deformer state.
 nlohmann::json run_scenario(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::TriangleMesh* surface,
                             const qpreduce::deform::TetMesh* solid, const RunSettings& settings,

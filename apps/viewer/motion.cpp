@@ -1,5 +1,7 @@
 #include "motion.h"
 
+#include <qpreduce/atomic_file.h>
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -49,9 +51,7 @@ void write_motion(const std::string& path, const HandleMotion& motion) {
     }
     j["frames"].push_back(f);
   }
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error(path + ": cannot write the recording");
-  out << j.dump(1) << "\n";
+  qpreduce::write_file_atomically(path, j.dump(1) + "\n");
 }
 
 HandleMotion read_motion(const std::string& path) {
