@@ -27,6 +27,7 @@
 #include "validators.h"
 
 #include <qpreduce/atomic_file.h>
+#include <qpreduce/deform/io/json_keys.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/problems/matrix_market.h>
 #include <qpreduce/theorem.h>
@@ -42,6 +43,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
@@ -128,9 +130,11 @@ std::vector<DemandFiles> list_directory(const fs::path& dir) {
 std::vector<DemandFiles> read_manifest(const fs::path& file) {
   std::ifstream in(file);
   if (!in) throw std::invalid_argument(fmt::format("{}: cannot open file", file.string()));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  qpreduce::deform::check_unique_json_keys(text, file.string());
   json doc;
   try {
-    doc = json::parse(in);
+    doc = json::parse(text);
   } catch (const json::parse_error& e) {
     // e.what() names the line and column.
     throw std::invalid_argument(fmt::format("{}: {}", file.string(), e.what()));
@@ -167,6 +171,10 @@ std::vector<DemandFiles> read_manifest(const fs::path& file) {
     if (!f.q.empty() && !f.Y.empty()) {
       throw std::invalid_argument(fmt::format("{}: demands[{}]: give \"q\" or \"Y\", not both", file.string(), i));
     }
+    for (const DemandFiles& earlier : out)
+      if (earlier.name == f.name)
+        throw std::invalid_argument(fmt::format("{}: demands[{}]: duplicate demand name '{}' (also demands[{}])",
+                                                file.string(), i, f.name, &earlier - out.data()));
     out.push_back(f);
     ++i;
   }

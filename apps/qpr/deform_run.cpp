@@ -200,6 +200,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   if (!a.linear_groups.empty()) {
     const VertexIds ids = read_id(a.linear_groups);
     ids.validate(n);
+    (void)linear_groups_from_ids(ids);  // the format's rule: linear-group ids are >= 0
     sc.model.linear = linear_proxies_from_ids(ids.ids, n);
   }
   if (!a.rotational_clusters.empty()) {

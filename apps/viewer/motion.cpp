@@ -1,11 +1,13 @@
 #include "motion.h"
 
 #include <qpreduce/atomic_file.h>
+#include <qpreduce/deform/io/json_keys.h>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 namespace qpr::viewer {
@@ -57,9 +59,11 @@ void write_motion(const std::string& path, const HandleMotion& motion) {
 HandleMotion read_motion(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open the recording");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  qpreduce::deform::check_unique_json_keys(text, path);
   json j;
   try {
-    in >> j;
+    j = json::parse(text);
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": not JSON: " + e.what());
   }

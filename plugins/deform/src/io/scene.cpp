@@ -1,6 +1,7 @@
 // The JSON scene reader; the schema is in docs/formats.md ("JSON scene").
 #include "qpreduce/deform/io/scene.h"
 
+#include "qpreduce/deform/io/json_keys.h"
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/tet_io.h"
 
@@ -53,6 +54,7 @@ class SceneParser {
     const std::string text = detail::read_file(path_);
     json root;
     try {
+      check_unique_json_keys(text, path_);
       root = json::parse(text);
     } catch (const json::parse_error& e) {
       detail::fail(path_, 0, fmt::format("JSON syntax error: {}", e.what()));
