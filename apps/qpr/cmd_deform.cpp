@@ -13,6 +13,7 @@ namespace {
 
 struct DeformArgs : ScenarioArgs {
   std::string out, report, cache;
+  bool strict = false;
 };
 
 int run_deform(const DeformArgs& a) {
@@ -23,6 +24,7 @@ int run_deform(const DeformArgs& a) {
   settings.out_path = a.out;
   settings.report_path = a.report;
   settings.cache_path = a.cache;
+  settings.strict = a.strict;
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;
 }
@@ -36,6 +38,8 @@ void register_deform(CLI::App& app) {
   cmd->add_option("--report", a->report, "JSON report");
   cmd->add_option("--cache", a->cache,
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
+  cmd->add_flag("--strict", a->strict,
+                "Handles that can hold only in the least-squares sense are an error instead of a warning");
   cmd->callback([a = a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 

@@ -71,6 +71,7 @@ struct Options {
   bool check_full = false;
   bool baseline = false;
   bool no_augment = false;  // H PD: factor H itself (SubspaceOptions::augment = false)
+  bool strict = false;      // warnings (least-squares constraints) are failures
   Index theorem_max_n = 3000;  // the bound is a dense analysis (n×n eigendecomposition)
 };
 
@@ -332,6 +333,7 @@ struct Row {
 
 struct Tally {
   int failures = 0, violations = 0;
+  int warnings = 0;  // demands answered by a fallback (constraints in the least-squares sense)
 };
 
 // --check-full: the full sparse KKT solve, the d_H error against it and the
@@ -390,6 +392,16 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
     fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
     return r;
   }
+  if (cs.status != qpreduce::Status::Success) {
+    // A fallback that changes what the answer means: said on stderr, not only in the report.
+    ++tally.warnings;
+    fmt::print(stderr, "qpr qp: {}: demand '{}': {} ({})\n", opt.strict ? "error" : "warning", d.name,
+               qpreduce::to_string(cs.status), cs.message);
+    if (opt.strict) {
+      ++tally.failures;
+      return r;
+    }
+  }
   const qpreduce::Timer t1;
   if (d.in_D) {
     s.solver.solve_in_D(d.b, d.Y, ws.w);
@@ -439,6 +451,7 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
                               {"kkt_residual", pre.kkt_residual}}},
               {"theorem_skipped", s.theorem_skipped.empty() ? json(nullptr) : json(s.theorem_skipped)},
               {"failures", tally.failures},
+              {"warnings", tally.warnings},
               {"violations", tally.violations},
               {"demands", records}};
   if (opt.baseline) doc["baseline"] = {{"precompute_seconds", s.baseline_precompute}, {"factor", s.baseline_note}};
@@ -502,6 +515,8 @@ void register_qp(CLI::App& app) {
                 "H is positive definite: factor H itself instead of H + ρCCᵀ (for C with long columns)");
   cmd->add_option("--theorem-max-n", opt->theorem_max_n, "largest n for the (dense) Theorem 4.10 analysis")
       ->capture_default_str();
+  cmd->add_flag("--strict", opt->strict,
+                "a demand whose constraints hold only in the least-squares sense is a failure (exit 3), not a warning");
   cmd->add_option("--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
   cmd->add_option("--out", opt->out, "write X_<name>.mtx for every demand into this directory");
   cmd->callback([opt = opt] { run_guarded("qp", [&] { return run_qp(*opt); }); });

@@ -220,6 +220,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   }
   ls.name = !a.scene.empty() ? a.scene : a.mesh;
   ls.options = deformer_options(a, ls.scenario.model_kind, tet);
+  check_scenario(ls.scenario, ls.name);
   return ls;
 }
 
@@ -364,7 +365,9 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
   const double op_ms = 1e3 * op_timer.seconds();
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
-  if (cs.status != Status::Success) std::fprintf(stderr, "  note: %s\n", cs.message.c_str());
+  if (cs.status != Status::Success && settings.strict)
+    throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
+  if (cs.status != Status::Success) std::fprintf(stderr, "  warning: %s\n", cs.message.c_str());
 
   const double diag = bounding_box_diagonal(scenario.model.V);
   const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);

@@ -74,6 +74,7 @@ struct RunSettings {
   // was made from the same inputs, else precomputed and written there.
   std::string cache_path;
   bool progress = true;     // progress bar on stderr during precompute
+  bool strict = false;      // a fallback (handles held in the least-squares sense) is an error, not a note
   std::string name;         // what is deformed, for the table
 };
 

@@ -177,6 +177,20 @@ case("meshes", "MEDIT: 2^40 vertices in a tiny file", deform(mesh="{W}/m.mesh"),
      {"m.mesh": "MeshVersionFormatted 1\nDimension 3\nVertices\n1099511627776\n0 0 0 0\nEnd\n"}, max_seconds=5)
 case("meshes", "TetGen: .node with a huge count", deform(mesh="{W}/m.node"), RUN, ["m.node"],
      {"m.node": "4000000000 3 0 0\n1 0 0 0\n", "m.ele": "1 4 0\n1 1 2 3 4\n"}, max_seconds=5)
+FAR = OFF.replace("OFF\n%d " % NV, "OFF\n%d " % (NV + 1), 1).replace(
+    "\n3 ", "\n1e300 1e300 1e300\n3 ", 1)
+case("meshes", "a far-away unreferenced vertex (was 'contains NaN' at write time)",
+     ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def", "--out", "{W}/o.off"] + SMALL,
+     RUN, ["far.off", "vertex 48 at (1e+300", "overflow"], {"far.off": FAR, "far.sel": SEL + "1\n"})
+TWO_V = OFF.splitlines()[2:2 + NV]
+TWO_F = OFF.splitlines()[2 + NV:]
+TWO = "OFF\n%d %d 0\n" % (2 * NV, 2 * len(TWO_F)) + "\n".join(
+    TWO_V + [" ".join(str(float(x) + 10) for x in v.split()) for v in TWO_V] + TWO_F +
+    ["3 " + " ".join(str(int(x) + NV) for x in f.split()[1:]) for f in TWO_F]) + "\n"
+case("meshes", "an unanchored component is named (was 'condition inf')",
+     ["deform", "{W}/two.off", "--sel", "{W}/two.sel", "--def", "{W}/tube.def"] + SMALL, RUN,
+     ["two.off", "connected component 1 (48 vertices, from vertex 48)", "nothing holds it"],
+     {"two.off": TWO, "two.sel": SEL + "1\n" * NV})
 case("meshes", "missing mesh file", deform(mesh="{W}/none.off"), RUN, ["none.off", "cannot open"])
 case("meshes", "a directory as the mesh", deform(mesh="{W}/dem"), RUN, ["dem", "unsupported"])
 
@@ -189,6 +203,10 @@ case("handles", ".def: 3 rows", deform(), RUN, ["tube.def"], {"tube.def": "1 0 0
 case("handles", ".def: NaN entry", deform(), RUN, ["tube.def", "nan"], {"tube.def": DEF.replace("0.5", "nan")})
 case("handles", ".def: overflowing entry (was 'contains NaN')", deform(), RUN, ["tube.def", "1e400"],
      {"tube.def": DEF.replace("0.5", "1e400")})
+case("handles", ".def: a translation of 1e300 (was 'contains NaN' in the engine)", deform(), RUN,
+     ["frame 0", "reaches 1e+300", "overflow"], {"tube.def": DEF.replace("0.5", "1e300")})
+case("handles", ".def: a scale of 1e200", deform(), RUN, ["frame 0", "reaches", "overflow"],
+     {"tube.def": "1e200 0 0 0\n0 1e200 0 0\n0 0 1e200 0\n0 0 0 1\n"})
 case("handles", ".def: extra data", deform(), RUN, ["tube.def", "unexpected data"], {"tube.def": DEF + "7\n"})
 case("handles", ".id: negative group for linear proxies", deform("--linear-groups", "{W}/g.id", small=NO_LINEAR), RUN,
      ["g.id", "vertex 0 has id -1", "must be >= 0"], {"g.id": "-1\n" * NV})
@@ -212,6 +230,31 @@ case("scenes", "missing mesh file", ["deform", "--scene", "{W}/s.json"], RUN, ["
      {"s.json": '{"mesh": "none.off"}'})
 case("scenes", "BOM before the object is read", ["deform", "--scene", "{W}/s.json", "--frames", "1"], RUN,
      ["s.json"], {"s.json": BOM + '{"mesh": "tube.off", "meshes": 1}'})
+
+# Handles that cannot all hold, proxies the scene asks for.
+PATCH = '"patches": [{"type": "fixed", "vertices": [0, 1, 2, 3, 4, 5, 6, 7]}]'
+TWICE = ', %s, "handles": [{"vertices": [44], "targets": [[[1, 0, 5]]]}, {"vertices": [44], "targets": [[[3, 0, 5]]]}]'
+case("scenes", "a vertex held at two places", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "vertex 44 is held at two places", "point handles 0 and 1", "bounding-box diagonals apart"],
+     {"s.json": scene(TWICE % PATCH)})
+case("scenes", "a fixed vertex moved by a handle", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "vertex 3 is in fixed patch 0", "point handle 0 moves it"],
+     {"s.json": scene(', %s, "handles": [{"vertices": [3], "targets": [[[1, 0, 5]]]}]' % PATCH)})
+case("scenes", "a group handle with all-zero weights", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "/handles/0/group", "every weight is 0"],
+     {"s.json": scene(', %s, "handles": [{"group": [[44, 0], [45, 0.0]], "targets": [[[1, 0, 5]]]}]' % PATCH)})
+case("scenes", "an affine patch count", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "/proxies/affine", "an .id file, not a count"],
+     {"s.json": scene(', "proxies": {"affine": 3}, %s' % PATCH)})
+case("scenes", "proxy counts are used (were ignored)", ["deform", "--scene", "{W}/s.json"], 0, [],
+     {"s.json": scene(', "proxies": {"linear": 9, "rotational": 3}, %s, "handles": [{"vertices": [44], '
+                      '"targets": [[[1, 0, 5]]]}]' % PATCH)}, stdout_words=["7 linear / 3 rotational proxies"])
+HELD = ', "proxies": {"linear": 9}, %s, "handles": [{"vertices": [40, 41, 42, 43, 44, 45, 46, 47], "targets": [[%s]]}]' % (
+    PATCH, ", ".join("[%d, %d, 9]" % (i % 3, i % 2) for i in range(8)))
+case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}/s.json"], 0,
+     ["warning", "least-squares sense"], {"s.json": scene(HELD)})
+case("scenes", "least-squares handles with --strict are an error", ["deform", "--scene", "{W}/s.json", "--strict"],
+     RUN, ["--strict", "constraints-least-squares"], {"s.json": scene(HELD)})
 
 # Matrix Market inputs of `qpr qp`.
 case("matrix", "2^31 x 2^31 header (was std::bad_alloc)", qp(H="{W}/h.mtx"), RUN,
@@ -243,6 +286,12 @@ case("matrix", "manifest: missing b", qp(demands="{W}/m.json"), RUN, ["m.json", 
      {"m.json": '{"demands": [{"name": "d", "A": "dem/A_d0.mtx"}]}'})
 case("matrix", "manifest: syntax error", qp(demands="{W}/m.json"), RUN, ["m.json", "parse error"],
      {"m.json": '{"demands": [}'})
+INCONSISTENT = {"dem/A_d0.mtx": "%%MatrixMarket matrix coordinate real general\n4 2 2\n2 1 1\n2 2 1\n",
+                "dem/b_d0.mtx": "%%MatrixMarket matrix array real general\n2 1\n1\n2\n"}
+case("matrix", "inconsistent demand is a warning on stderr (was only in the JSON)", qp(), 0,
+     ["warning", "demand 'd0'", "constraints-least-squares"], INCONSISTENT)
+case("matrix", "inconsistent demand with --strict fails", qp("--strict"), 3,
+     ["error", "demand 'd0'", "constraints-least-squares"], INCONSISTENT)
 case("matrix", "demand directory without demands", qp(demands="{W}/empty"), RUN, ["empty", "no demands"],
      {"empty/readme.txt": "x"})
 
@@ -332,6 +381,9 @@ def run_case(qpr, c):
         for w in c["words"]:
             if w.replace("{W}", work) not in err:
                 problems.append("stderr lacks %r" % w)
+        for w in c["stdout_words"]:
+            if w not in out:
+                problems.append("stdout lacks %r" % w)
         if c["code"] != 0 and len(err) > 2000:
             problems.append("stderr is %d characters long" % len(err))
         if c["max_seconds"] and seconds > c["max_seconds"]:
