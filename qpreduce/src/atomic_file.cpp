@@ -109,21 +109,24 @@ void AtomicFile::write(const void* data, std::size_t bytes) {
   const char* p = static_cast<const char*>(data);
   if (buffer_.size() + bytes > kBufferBytes) flush();
   if (bytes >= kBufferBytes) {
-    buffer_.assign(p, p + bytes);
-    flush();
+    write_all(p, bytes);  // a large block goes out directly, not through the buffer
     return;
   }
   buffer_.insert(buffer_.end(), p, p + bytes);
 }
 
-void AtomicFile::flush() {
+void AtomicFile::write_all(const char* data, std::size_t bytes) {
   std::size_t done = 0;
-  while (done < buffer_.size()) {
-    const ssize_t n = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
+  while (done < bytes) {
+    const ssize_t n = ::write(fd_, data + done, bytes - done);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) fail("cannot write", n < 0 ? errno : EIO);
     done += static_cast<std::size_t>(n);
   }
+}
+
+void AtomicFile::flush() {
+  write_all(buffer_.data(), buffer_.size());
   buffer_.clear();
 }
 

@@ -311,6 +311,8 @@ WRITERS = [
     ("theorem --csv", ["theorem", "--trials", "10", "--csv", "{OUT}"], ".csv"),
     ("theorem --plot", ["theorem", "--trials", "10", "--plot", "{OUT}"], ".svg"),
     ("demo --report", ["demo", "--frames", "1", "--out", "{W}/demo", "--report", "{OUT}"], ".json"),
+    ("compare --report", ["compare", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL[:4] +
+     ["--reference", "local-global", "--out-dir", "{W}/cmp", "--report", "{OUT}"], ".json"),
 ]
 EARLIER = "earlier contents\n"
 for name, args, ext in WRITERS:
@@ -325,8 +327,8 @@ for name, args, ext in WRITERS:
     CASES.append(dict(group="writers", name=name + " under a file-size limit", args=[a.replace("{OUT}", "{W}/out" + ext)
                                                                                     for a in args],
                       code=3 if name.startswith("theorem") else RUN,
-                      # demo writes its rest mesh first: the limit stops the run there.
-                      words=["File too large"] + ([] if name.startswith("demo") else ["out" + ext]),
+                      # demo and compare write meshes first: the limit stops the run there.
+                      words=["File too large"] + ([] if name.startswith(("demo", "compare")) else ["out" + ext]),
                       files={"out" + ext: EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[],
                       fsize=16, intact="out" + ext))
 # qp --out X_<name>.mtx: a file-size limit keeps the earlier solution.

@@ -54,6 +54,7 @@ class AtomicFile {
 
  private:
   void flush();
+  void write_all(const char* data, std::size_t bytes);
   [[noreturn]] void fail(const std::string& problem, int error);
   void discard() noexcept;
 
