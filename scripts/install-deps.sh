@@ -8,6 +8,7 @@ packages=(
   libfmt-dev catch2 libbenchmark-dev libcli11-dev nlohmann-json3-dev zlib1g-dev
   libimgui-dev libstb-dev libglfw3-dev libgl-dev libgl1-mesa-dri xvfb xauth mesa-utils
   pybind11-dev python3-dev python3-numpy python3-scipy python3-pytest python3-matplotlib
+  clang-14 libclang-rt-14-dev
 )
 missing=()
 for p in "${packages[@]}"; do

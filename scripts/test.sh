@@ -3,7 +3,10 @@
 #   1. the Release build and its full Catch2 suite (ctest);
 #   2. the same suite built with AddressSanitizer + UBSan (./build-asan);
 #   3. two tiny consumer projects built against the installed package config
-#      (the engine and deformer without Ceres; the reference component).
+#      (the engine and deformer without Ceres; the reference component);
+#   4. the readers' libFuzzer targets (clang-14, ./build-fuzz): the corpus of
+#      tests/fuzz replayed, then each target fuzzed for QPR_FUZZ_SECONDS
+#      (default 6) seconds (scripts/fuzz.sh, docs/robustness.md).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 jobs="$(nproc 2>/dev/null || echo 2)"
@@ -37,3 +40,6 @@ cmake -S "$root/tests/packaging/reference_consumer" -B "$root/build/reference_co
   -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
 cmake --build "$root/build/reference_consumer" -j "$jobs"
 "$root/build/reference_consumer/reference_consumer"
+
+echo "== fuzzing the readers (libFuzzer, ASan + UBSan)"
+bash "$root/scripts/fuzz.sh"

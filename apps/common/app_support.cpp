@@ -1,8 +1,9 @@
 #include "app_support.h"
 
+#include <qpreduce/atomic_file.h>
+
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <stdexcept>
 
 namespace qpr {
@@ -23,10 +24,11 @@ double upper_median(std::vector<double> samples) {
 nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
 
 void write_json(const std::string& path, const nlohmann::json& doc, const std::string& what) {
-  std::ofstream out(path, std::ios::binary);
-  out << doc.dump(2) << "\n";
-  out.close();
-  if (!out) throw std::runtime_error(path + ": cannot write the " + what);
+  try {
+    qpreduce::write_file_atomically(path, doc.dump(2) + "\n");
+  } catch (const qpreduce::FileError& e) {
+    throw qpreduce::FileError(path, 0, "cannot write the " + what + ": " + e.problem());
+  }
 }
 
 }  // namespace qpr

@@ -21,9 +21,10 @@ double upper_median(std::vector<double> samples);
 // `v` as a JSON number, or null when it is NaN or infinite (JSON has neither).
 nlohmann::json finite_or_null(double v);
 
-// Writes `doc` (indented by 2, then a newline) to `path`. Throws
-// std::runtime_error "<path>: cannot write the <what>" when the file cannot be
-// opened or written.
+// Writes `doc` (indented by 2, then a newline) to `path` through a temporary
+// file renamed on success (qpreduce::AtomicFile). Throws qpreduce::FileError
+// "<path>: cannot write the <what>: <reason>" when the file cannot be
+// written; the earlier file is then untouched.
 void write_json(const std::string& path, const nlohmann::json& doc, const std::string& what = "report");
 
 }  // namespace qpr

@@ -6,6 +6,7 @@
 #include "deform_run.h"
 #include "guard.h"
 #include "refine_run.h"
+#include "validators.h"
 
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/reference/reference.h>
@@ -124,6 +125,7 @@ int run_compare(const CompareArgs& a) {
   if (a.reference == "none" && !a.convergence) throw std::invalid_argument("--reference none needs --convergence");
   if (a.energy != "classic" && a.energy != "modified")
     throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
+  if (!a.report.empty()) qpreduce::check_destination(a.report, "report");
   LoadedScenario ls = load_scenario(a);
   const OutputPaths path{a.out_dir, ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off"};
   std::filesystem::create_directories(a.out_dir);
@@ -206,7 +208,7 @@ void register_compare(CLI::App& app) {
                   "classic: references minimise classic ARAP (default); modified: the reduced model's E' with its "
                   "clusters, alpha, beta and global rotation");
   cmd->add_option("--reference-iterations", a->reference_iterations, "Iteration limit of the references")
-      ->check(CLI::Range(1, 10000000));
+      ->check(whole_number_between(1, 10000000));
   cmd->add_flag("--convergence", a->convergence,
                 "Also report rounds and seconds of full-space classic ARAP from the reduced pose and from rest, "
                 "plain and Anderson-accelerated (the report's \"convergence\")");

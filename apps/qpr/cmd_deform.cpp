@@ -15,6 +15,7 @@ namespace {
 struct DeformArgs : ScenarioArgs {
   std::string out, report, cache;
   RefineArgs refine;
+  bool strict = false;
 };
 
 int run_deform(const DeformArgs& a) {
@@ -26,6 +27,7 @@ int run_deform(const DeformArgs& a) {
   settings.report_path = a.report;
   settings.cache_path = a.cache;
   if (a.refine.tolerance) settings.refine = refine_options(a.refine);
+  settings.strict = a.strict;
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;
 }
@@ -40,6 +42,8 @@ void register_deform(CLI::App& app) {
   cmd->add_option("--cache", a->cache,
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
   add_refine_options(cmd, &a->refine);
+  cmd->add_flag("--strict", a->strict,
+                "Handles that can hold only in the least-squares sense are an error instead of a warning");
   cmd->callback([a = a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 

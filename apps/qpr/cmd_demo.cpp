@@ -4,6 +4,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "validators.h"
 
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/mesh/shapes.h>
@@ -72,6 +73,7 @@ int run_demo(const DemoArgs& a) {
   for (int f = 0; f < a.frames; f += std::max(1, a.frames / 4)) settings.write_frames.push_back(f);
   settings.write_frames.push_back(a.frames - 1);
   settings.report_path = a.report.empty() ? a.out_dir + "/report.json" : a.report;
+  check_outputs(settings);
   write_triangle_mesh(a.out_dir + "/cylinder_rest.off", mesh);
   run_scenario(sc, &mesh, nullptr, settings);
   fmt::print("  meshes and report.json written to {}/\n", a.out_dir);
@@ -82,12 +84,15 @@ int run_demo(const DemoArgs& a) {
 
 void register_demo(CLI::App& app) {
   auto [cmd, args] = add_command<DemoArgs>(app, "demo", "Bend and twist a built-in cylinder with reduced ARAP (no files needed)");
-  cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(CLI::Range(1, 10000));
+  cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(whole_number_between(1, 10000));
   cmd->add_option("--out", args->out_dir, "Output folder for the meshes and the report");
   cmd->add_option("--report", args->report, "JSON report path (default OUT/report.json)");
-  cmd->add_option("--iterations", args->iterations, "Phase 1/Phase 2 rounds per frame")->check(CLI::Range(1, 1000));
-  cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")->check(CLI::Range(1, 100000));
-  cmd->add_option("--linear-proxies", args->linear, "Linear proxies (farthest-point samples)")->check(CLI::Range(1, 100000));
+  cmd->add_option("--iterations", args->iterations, "Phase 1/Phase 2 rounds per frame")
+      ->check(whole_number_between(1, 1000));
+  cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")
+      ->check(whole_number_between(1, 100000));
+  cmd->add_option("--linear-proxies", args->linear, "Linear proxies (farthest-point samples)")
+      ->check(whole_number_between(1, 100000));
   cmd->callback([args = args]() { run_guarded("demo", [&] { return run_demo(*args); }); });
 }
 

@@ -24,7 +24,10 @@
 #include "app_support.h"
 #include "commands.h"
 #include "guard.h"
+#include "validators.h"
 
+#include <qpreduce/atomic_file.h>
+#include <qpreduce/deform/io/json_keys.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/problems/matrix_market.h>
 #include <qpreduce/theorem.h>
@@ -40,6 +43,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
@@ -67,6 +71,7 @@ struct Options {
   bool check_full = false;
   bool baseline = false;
   bool no_augment = false;  // H PD: factor H itself (SubspaceOptions::augment = false)
+  bool strict = false;      // warnings (least-squares constraints) are failures
   Index theorem_max_n = 3000;  // the bound is a dense analysis (n×n eigendecomposition)
 };
 
@@ -126,9 +131,11 @@ std::vector<DemandFiles> list_directory(const fs::path& dir) {
 std::vector<DemandFiles> read_manifest(const fs::path& file) {
   std::ifstream in(file);
   if (!in) throw std::invalid_argument(fmt::format("{}: cannot open file", file.string()));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  qpreduce::deform::check_unique_json_keys(text, file.string());
   json doc;
   try {
-    doc = json::parse(in);
+    doc = json::parse(text);
   } catch (const json::parse_error& e) {
     // e.what() names the line and column.
     throw std::invalid_argument(fmt::format("{}: {}", file.string(), e.what()));
@@ -165,6 +172,10 @@ std::vector<DemandFiles> read_manifest(const fs::path& file) {
     if (!f.q.empty() && !f.Y.empty()) {
       throw std::invalid_argument(fmt::format("{}: demands[{}]: give \"q\" or \"Y\", not both", file.string(), i));
     }
+    for (const DemandFiles& earlier : out)
+      if (earlier.name == f.name)
+        throw std::invalid_argument(fmt::format("{}: demands[{}]: duplicate demand name '{}' (also demands[{}])",
+                                                file.string(), i, f.name, &earlier - out.data()));
     out.push_back(f);
     ++i;
   }
@@ -322,6 +333,7 @@ struct Row {
 
 struct Tally {
   int failures = 0, violations = 0;
+  int warnings = 0;  // demands answered by a fallback (constraints in the least-squares sense)
 };
 
 // --check-full: the full sparse KKT solve, the d_H error against it and the
@@ -380,6 +392,16 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
     fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
     return r;
   }
+  if (cs.status != qpreduce::Status::Success) {
+    // A fallback that changes what the answer means: said on stderr, not only in the report.
+    ++tally.warnings;
+    fmt::print(stderr, "qpr qp: {}: demand '{}': {} ({})\n", opt.strict ? "error" : "warning", d.name,
+               qpreduce::to_string(cs.status), cs.message);
+    if (opt.strict) {
+      ++tally.failures;
+      return r;
+    }
+  }
   const qpreduce::Timer t1;
   if (d.in_D) {
     s.solver.solve_in_D(d.b, d.Y, ws.w);
@@ -429,6 +451,7 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
                               {"kkt_residual", pre.kkt_residual}}},
               {"theorem_skipped", s.theorem_skipped.empty() ? json(nullptr) : json(s.theorem_skipped)},
               {"failures", tally.failures},
+              {"warnings", tally.warnings},
               {"violations", tally.violations},
               {"demands", records}};
   if (opt.baseline) doc["baseline"] = {{"precompute_seconds", s.baseline_precompute}, {"factor", s.baseline_note}};
@@ -436,8 +459,12 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
 }
 
 int run_qp(const Options& opt) {
+  if (!opt.report.empty()) qpreduce::check_destination(opt.report, "report");
+  if (!opt.out.empty()) {
+    fs::create_directories(opt.out);
+    qpreduce::check_destination((fs::path(opt.out) / "X_.mtx").string(), "solutions (--out)");
+  }
   const Problem p = read_problem(opt);
-  if (!opt.out.empty()) fs::create_directories(opt.out);
 
   Solvers s;
   s.sopt.augment = !opt.no_augment;
@@ -480,7 +507,7 @@ void register_qp(CLI::App& app) {
                   "directory of A_<name>.mtx, b_<name>.mtx [, q_<name>.mtx | Y_<name>.mtx], or a JSON manifest")
       ->required();
   cmd->add_option("--soft", opt->soft, "soft constraints with weight DELTA (Eq. 18) instead of hard ones")
-      ->check(CLI::PositiveNumber);
+      ->check(number_above(0));
   cmd->add_flag("--check-full", opt->check_full,
                 "also solve every demand in full (sparse KKT): time, d_H error, Theorem 4.10 bound");
   cmd->add_flag("--baseline", opt->baseline, "also time a cached Cholesky of H plus a Schur complement per demand");
@@ -488,6 +515,8 @@ void register_qp(CLI::App& app) {
                 "H is positive definite: factor H itself instead of H + ρCCᵀ (for C with long columns)");
   cmd->add_option("--theorem-max-n", opt->theorem_max_n, "largest n for the (dense) Theorem 4.10 analysis")
       ->capture_default_str();
+  cmd->add_flag("--strict", opt->strict,
+                "a demand whose constraints hold only in the least-squares sense is a failure (exit 3), not a warning");
   cmd->add_option("--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
   cmd->add_option("--out", opt->out, "write X_<name>.mtx for every demand into this directory");
   cmd->callback([opt = opt] { run_guarded("qp", [&] { return run_qp(*opt); }); });

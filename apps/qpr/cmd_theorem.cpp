@@ -8,9 +8,11 @@
 #include "commands.h"
 #include "guard.h"
 #include "svg_plot.h"
+#include "validators.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/atomic_file.h>
 #include <qpreduce/problems/generators.h>
+#include <qpreduce/support.h>
 #include <qpreduce/theorem.h>
 
 #include <CLI/CLI.hpp>
@@ -20,10 +22,10 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace qpr {
@@ -37,6 +39,10 @@ using qpreduce::TheoremStatus;
 const std::vector<double> kEpsilons = {0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 0.1, 0.3, 1.0};
 // Requested sizes, cycled over groups (grids round to s² or s³ vertices).
 const std::vector<qpreduce::Index> kSizes = {40, 64, 100, 150};
+
+// The most trials one run accepts: every trial's record is kept for --csv
+// and --plot (a few hundred bytes each), and a million take hours already.
+constexpr int kMaxTrials = 1000000;
 
 // The subcommand's help line.
 constexpr const char* kAbout =
@@ -133,11 +139,10 @@ nlohmann::json stats_json(const Stats& s) {
 }
 
 bool write_text(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  out.close();
-  if (!out) {
-    fmt::print(stderr, "qpr theorem: cannot write {}\n", path);
+  try {
+    qpreduce::write_file_atomically(path, text);
+  } catch (const qpreduce::FileError& e) {
+    fmt::print(stderr, "qpr theorem: error: {}\n", e.what());
     return false;
   }
   return true;
@@ -225,8 +230,7 @@ std::string plot_svg(const std::vector<Record>& records, const std::vector<gen::
 // one checker (H factored once). `first_failure` names the first failed trial.
 std::vector<Record> run_trials(const Options& opt, const std::vector<gen::TheoremFamily>& families,
                                std::string* first_failure) {
-  std::vector<Record> records;
-  records.reserve(static_cast<size_t>(opt.trials));
+  std::vector<Record> records;  // grows with the trials run (a huge --trials must not reserve up front)
   const int per_group = static_cast<int>(kEpsilons.size());
   for (int g = 0; static_cast<int>(records.size()) < opt.trials; ++g) {
     const gen::TheoremFamily family = families[static_cast<size_t>(g) % families.size()];
@@ -315,6 +319,14 @@ bool write_files(const Options& opt, const std::vector<Record>& records,
 }
 
 int run_theorem(const Options& opt) {
+  // The outputs are checked before the trials, which may run for hours.
+  try {
+    for (const auto& [path, what] : {std::pair{&opt.json, "--json"}, {&opt.csv, "--csv"}, {&opt.plot, "--plot"}})
+      if (!path->empty()) qpreduce::check_destination(*path, what);
+  } catch (const qpreduce::FileError& e) {
+    fmt::print(stderr, "qpr theorem: error: {}\n", e.what());
+    return 3;
+  }
   const qpreduce::Timer timer;
   const std::vector<gen::TheoremFamily> families = gen::theorem_families();
   std::string first_failure;
@@ -348,16 +360,15 @@ int run_theorem(const Options& opt) {
 void register_theorem(CLI::App& app) {
   auto [cmd, opt] = add_command<Options>(app, "theorem", kAbout);
   cmd->add_option("--trials", opt->trials, "number of trials (groups of 10 values of ε share H, C, D)")
-      ->check(CLI::PositiveNumber)
+      ->check(whole_number_between(1, kMaxTrials))
       ->capture_default_str();
-  cmd->add_option("--seed", opt->seed, "base seed of the trials")->capture_default_str();
+  cmd->add_option("--seed", opt->seed, "base seed of the trials")
+      ->check(unsigned_whole_number())
+      ->capture_default_str();
   cmd->add_option("--json", opt->json, "write the summary (overall and per family) as JSON");
   cmd->add_option("--csv", opt->csv, "write one row per trial as CSV");
   cmd->add_option("--plot", opt->plot, "write an SVG figure: error vs bound, and the histogram of η");
-  cmd->callback([opt = opt] {
-    const int code = run_theorem(*opt);
-    if (code != 0) throw CLI::RuntimeError(code);
-  });
+  cmd->callback([opt = opt] { run_guarded("theorem", [&] { return run_theorem(*opt); }); });
 }
 
 }  // namespace qpr

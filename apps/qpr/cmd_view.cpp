@@ -3,6 +3,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "validators.h"
 
 #include <viewer.h>
 
@@ -12,6 +13,7 @@
 
 #include <map>
 #include <memory>
+#include <utility>
 
 namespace qpr {
 
@@ -23,6 +25,11 @@ struct ViewArgs : ScenarioArgs {
 };
 
 int run_view(ViewArgs& a) {
+  for (const auto& [path, what] : {std::pair{&a.view.screenshot, "screenshot"},
+                                   {&a.view.out_mesh, "mesh"},
+                                   {&a.view.stats_json, "stats"},
+                                   {&a.view.window_screenshot, "window screenshot"}})
+    if (!path->empty()) qpreduce::check_destination(*path, what);
   LoadedScenario ls = load_scenario(a);
   viewer::ViewerOptions& o = a.view;
   if (std::sscanf(a.size.c_str(), "%dx%d", &o.width, &o.height) != 2)
@@ -53,23 +60,26 @@ void register_view(CLI::App& app) {
   add_scenario_options(cmd, a.get());
   cmd->add_option("--screenshot", a->view.screenshot, "Headless: run the scenario's frames, write this PNG and exit");
   cmd->add_option("--size", a->size, "Window / image size WIDTHxHEIGHT (default 1280x800)");
-  cmd->add_option("--samples", a->view.samples, "MSAA samples (default 4)")->check(CLI::Range(0, 16));
+  cmd->add_option("--samples", a->view.samples, "MSAA samples (default 4)")->check(whole_number_between(0, 16));
   cmd->add_option("--reconstruction", a->reconstruction, "gpu (default; CPU fallback when it does not fit) or cpu")
       ->check(CLI::IsMember({"gpu", "cpu"}));
   cmd->add_option("--color", a->color, "clusters (default), linear, patches or deviation")
       ->check(CLI::IsMember({"clusters", "linear", "patches", "deviation"}));
-  cmd->add_option("--deviation-scale", a->view.deviation_scale, "Deviation shown at the top of the ramp, / bbox diagonal (0.1)")
-      ->check(CLI::PositiveNumber);
+  cmd->add_option("--deviation-scale", a->view.deviation_scale,
+                  "Deviation shown at the top of the ramp, / bbox diagonal (0.1)")
+      ->check(number_above(0));
   cmd->add_option("--up", a->up, "World axis shown upwards: x, y (default) or z")->check(CLI::IsMember({"x", "y", "z"}));
-  cmd->add_option("--yaw", a->view.yaw_deg, "Camera yaw about the up axis, degrees (0)");
-  cmd->add_option("--pitch", a->view.pitch_deg, "Camera elevation, degrees (15)")->check(CLI::Range(-89.0, 89.0));
-  cmd->add_option("--zoom", a->view.zoom, "Zoom steps, > 0 closer (0)");
+  cmd->add_option("--yaw", a->view.yaw_deg, "Camera yaw about the up axis, degrees (0)")
+      ->check(number_between(-360.0, 360.0));
+  cmd->add_option("--pitch", a->view.pitch_deg, "Camera elevation, degrees (15)")->check(number_between(-89.0, 89.0));
+  cmd->add_option("--zoom", a->view.zoom, "Zoom steps, > 0 closer (0)")->check(number_between(-100.0, 100.0));
   cmd->add_flag("!--no-handles", a->view.show_handles, "Do not draw the handle vertices");
   cmd->add_option("--out", a->view.out_mesh, "Headless: also write the last pose (mesh)");
   cmd->add_option("--stats", a->view.stats_json, "Headless: JSON with timings, the path used and GPU/CPU agreement");
   cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")->check(CLI::NonNegativeNumber);
+  cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")
+      ->check(whole_number_between(0, 1000000000));
   cmd->add_option("--window-screenshot", a->view.window_screenshot,
                   "Interactive with --max-frames: save the whole window (panels too) at the last frame");
   cmd->callback([a = a]() { run_guarded("view", [&] { return run_view(*a); }); });

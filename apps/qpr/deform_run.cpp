@@ -2,6 +2,7 @@
 #include "refine_run.h"
 
 #include "app_support.h"
+#include "validators.h"
 
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/io/file_kind.h>
@@ -72,20 +73,23 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   cmd->add_option("--def", a->def, "Botsch–Sorkine 4×4 handle transform")->check(CLI::ExistingFile)->needs(sel);
   cmd->add_option("--anim", a->anim, "Recorded handle poses (.anim)")->check(CLI::ExistingFile);
   cmd->add_option("--scene", a->scene, "JSON scene (mesh, handles, patches, proxies, parameters)")->check(CLI::ExistingFile);
-  cmd->add_option("--frames", a->frames, "With --sel/--def: frames from rest to the .def pose")->check(CLI::Range(1, 100000));
-  auto* lp = cmd->add_option("--linear-proxies", a->linear_proxies, "Linear proxies (farthest-point samples), default 33")
-                 ->check(CLI::Range(1L, 10000000L));
+  cmd->add_option("--frames", a->frames, "With --sel/--def: frames from rest to the .def pose")
+      ->check(whole_number_between(1, 100000));
+  auto* lp =
+      cmd->add_option("--linear-proxies", a->linear_proxies, "Linear proxies (farthest-point samples), default 33")
+          ->check(whole_number_between(1, 10000000));
   cmd->add_option("--linear-groups", a->linear_groups, "Linear proxies as vertex groups (.id)")->check(CLI::ExistingFile)->excludes(lp);
-  auto* rp = cmd->add_option("--rotational-proxies", a->rotational_proxies, "Rotational clusters (spectral k-means), default 27")
-                 ->check(CLI::Range(1L, 10000000L));
+  auto* rp = cmd->add_option("--rotational-proxies", a->rotational_proxies,
+                             "Rotational clusters (spectral k-means), default 27")
+                 ->check(whole_number_between(1, 10000000));
   cmd->add_option("--rotational-clusters", a->rotational_clusters, "Rotational clusters (.id)")->check(CLI::ExistingFile)->excludes(rp);
   cmd->add_option("--affine-patches", a->affine_patches, "Affine patches (.id: 0 free, k > 0 patch k)")->check(CLI::ExistingFile);
   cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame (the cap with --tolerance)")
-      ->check(CLI::Range(1, 100000));
+      ->check(whole_number_between(1, 100000));
   cmd->add_option("--tolerance", a->tolerance,
                   "Stop a frame's rounds once the relative fixed-point residual |ΔS|/|S| is at most this (0: always "
                   "--iterations rounds)")
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(number_between(0.0, 1.0));
   cmd->add_option("--rotation-step", a->rotation_step,
                   "Phase 2 rotation fit: exact (the cluster's covariance with the Q-corrections: block-coordinate "
                   "descent on E') or paper (Eq. 19, Q dropped)")
@@ -93,16 +97,17 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   cmd->add_option("--anderson", a->anderson_window,
                   "Anderson acceleration of the rounds with this window (1-16; energy safeguard; needs "
                   "--rotation-step exact), 0: off; default 5 with exact, 0 with paper")
-      ->check(CLI::Range(0, 16));
-  cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")->check(CLI::NonNegativeNumber);
-  cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(CLI::NonNegativeNumber);
+      ->check(whole_number_between(0, 16));
+  cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")
+      ->check(number_between(0, kMaxPenalty));
+  cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(number_between(0, kMaxPenalty));
   cmd->add_option("--gamma", a->gamma, "Moving-frame penalty γ between neighbouring elements (Eq. 11), default 0")
-      ->check(CLI::NonNegativeNumber);
+      ->check(number_between(0, kMaxPenalty));
   cmd->add_option("--model", a->model, "Deformation model: arap (rotations) or conformal (scaled rotations, Eq. 48–49)")
       ->check(CLI::IsMember({"arap", "conformal"}));
-  cmd->add_option("--psi", a->psi, "Conformal model: scales within [1/ψ, ψ], default 2")
-      ->check(CLI::Range(1.0 + 1e-9, 1e6));
-  cmd->add_option("--soft", a->soft, "Soft handle constraints with weight δ (Eq. 18) instead of hard ones")->check(CLI::PositiveNumber);
+  cmd->add_option("--psi", a->psi, "Conformal model: scales within [1/ψ, ψ], default 2")->check(number_above(1.0, 1e6));
+  cmd->add_option("--soft", a->soft, "Soft handle constraints with weight δ (Eq. 18) instead of hard ones")
+      ->check(number_above(0));
 }
 
 namespace {
@@ -203,6 +208,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   if (!a.linear_groups.empty()) {
     const VertexIds ids = read_id(a.linear_groups);
     ids.validate(n);
+    (void)linear_groups_from_ids(ids);  // the format's rule: linear-group ids are >= 0
     sc.model.linear = linear_proxies_from_ids(ids.ids, n);
   }
   if (!a.rotational_clusters.empty()) {
@@ -222,6 +228,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   }
   ls.name = !a.scene.empty() ? a.scene : a.mesh;
   ls.options = deformer_options(a, ls.scenario.model_kind, tet);
+  check_scenario(ls.scenario, ls.name);
   return ls;
 }
 
@@ -353,6 +360,7 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
 
 nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
                             const RunSettings& settings, RunOutputs* outputs) {
+  check_outputs(settings);
   DeformerOptions options = settings.options;
   apply_scenario_options(scenario, &options);
 
@@ -365,7 +373,9 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
   const double op_ms = 1e3 * op_timer.seconds();
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
-  if (cs.status != Status::Success) std::fprintf(stderr, "  note: %s\n", cs.message.c_str());
+  if (cs.status != Status::Success && settings.strict)
+    throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
+  if (cs.status != Status::Success) std::fprintf(stderr, "  warning: %s\n", cs.message.c_str());
 
   const double diag = bounding_box_diagonal(scenario.model.V);
   const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);

@@ -4,6 +4,7 @@
 // and writes the meshes and the JSON report.
 #pragma once
 
+#include <qpreduce/atomic_file.h>
 #include <qpreduce/deform/io/scenario.h>
 #include <qpreduce/deform/reference/refine.h>
 
@@ -11,6 +12,7 @@
 
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace CLI {
@@ -73,15 +75,26 @@ struct RunSettings {
   // was made from the same inputs, else precomputed and written there.
   std::string cache_path;
   bool progress = true;     // progress bar on stderr during precompute
+  bool strict = false;      // a fallback (handles held in the least-squares sense) is an error, not a note
   std::string name;         // what is deformed, for the table
   // Set: refine the last frame's pose in full space (refine_run.h); the
   // mesh written and arap_energy are then the refined pose's.
   std::optional<qpreduce::deform::RefineOptions> refine;
 };
 
+// Checks, before anything runs or is written, that the mesh, the report and
+// the cache can be written where the settings say (qpreduce::check_destination);
+// throws qpreduce::FileError naming the output otherwise.
+inline void check_outputs(const RunSettings& settings) {
+  for (const auto& [path, what] :
+       {std::pair{&settings.out_path, "mesh"}, {&settings.report_path, "report"}, {&settings.cache_path, "cache"}})
+    if (!path->empty()) qpreduce::check_destination(*path, what);
+}
+
 // Precomputes, sets the handles, runs every frame of the scenario, prints a
 // timing table to stdout and returns the report (also written to
-// settings.report_path when set). Throws on bad input or a failed precompute.
+// settings.report_path when set). Throws on bad input or a failed precompute,
+// and before any work when an output cannot be written (check_outputs).
 // `outputs`, when given, receives the last pose and the deformer state.
 nlohmann::json run_scenario(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::TriangleMesh* surface,
                             const qpreduce::deform::TetMesh* solid, const RunSettings& settings,

@@ -9,21 +9,31 @@
 #include <exception>
 #include <functional>
 #include <memory>
+#include <new>
 #include <string>
 #include <utility>
 
 namespace qpr {
 
 // body returns the exit code; 0 returns normally. Exceptions other than
-// CLI11's own print "qpr <name>: error: <what>" and exit with code 2.
+// CLI11's own print "qpr <name>: error: <what>" and exit with code 2; running
+// out of memory says so in words ("out of memory …") instead of
+// "std::bad_alloc". Every subcommand's callback goes through here.
 inline void run_guarded(const char* name, const std::function<int()>& body) {
   int code = 0;
   try {
     code = body();
   } catch (const CLI::Error&) {
     throw;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "qpr %s: error: out of memory (the inputs or options ask for more than this machine has)\n",
+                 name);
+    throw CLI::RuntimeError(2);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "qpr %s: error: %s\n", name, e.what());
+    throw CLI::RuntimeError(2);
+  } catch (...) {
+    std::fprintf(stderr, "qpr %s: error: unknown exception\n", name);
     throw CLI::RuntimeError(2);
   }
   if (code != 0) throw CLI::RuntimeError(code);

@@ -4,7 +4,12 @@
 
 #include <CLI/CLI.hpp>
 
+#include <csignal>
+
 int main(int argc, char** argv) {
+  // Past a file-size limit a write then fails with EFBIG, which the writers
+  // report (leaving the earlier file), instead of SIGXFSZ ending the process.
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"qpr — interactive solves of constrained QPs through linear variational subspaces (qpreduce)"};
   app.name("qpr");
   app.require_subcommand(1);

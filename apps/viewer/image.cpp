@@ -1,5 +1,6 @@
 #include "image.h"
 
+#include <qpreduce/atomic_file.h>
 #include <stb_image.h>
 #include <stb_image_write.h>
 
@@ -11,8 +12,13 @@ namespace qpr::viewer {
 void write_png(const std::string& path, const Image& image) {
   if (image.width <= 0 || image.height <= 0 || image.rgb.size() != 3u * image.width * image.height)
     throw std::invalid_argument(path + ": image has inconsistent size");
-  if (stbi_write_png(path.c_str(), image.width, image.height, 3, image.rgb.data(), 3 * image.width) == 0)
-    throw std::runtime_error(path + ": cannot write the PNG");
+  std::string png;
+  const auto append = [](void* context, void* data, int size) {
+    static_cast<std::string*>(context)->append(static_cast<const char*>(data), static_cast<std::size_t>(size));
+  };
+  if (stbi_write_png_to_func(append, &png, image.width, image.height, 3, image.rgb.data(), 3 * image.width) == 0)
+    throw std::runtime_error(path + ": cannot encode the PNG");
+  qpreduce::write_file_atomically(path, png);
 }
 
 Image read_png(const std::string& path) {

@@ -1,9 +1,13 @@
 #include "motion.h"
 
+#include <qpreduce/atomic_file.h>
+#include <qpreduce/deform/io/json_keys.h>
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <fstream>
+#include <iterator>
 #include <stdexcept>
 
 namespace qpr::viewer {
@@ -49,17 +53,17 @@ void write_motion(const std::string& path, const HandleMotion& motion) {
     }
     j["frames"].push_back(f);
   }
-  std::ofstream out(path);
-  if (!out) throw std::runtime_error(path + ": cannot write the recording");
-  out << j.dump(1) << "\n";
+  qpreduce::write_file_atomically(path, j.dump(1) + "\n");
 }
 
 HandleMotion read_motion(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw std::runtime_error(path + ": cannot open the recording");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  qpreduce::deform::check_unique_json_keys(text, path);
   json j;
   try {
-    in >> j;
+    j = json::parse(text);
   } catch (const std::exception& e) {
     throw std::runtime_error(path + ": not JSON: " + e.what());
   }

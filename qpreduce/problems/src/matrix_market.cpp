@@ -1,5 +1,7 @@
 #include "qpreduce/problems/matrix_market.h"
 
+#include "qpreduce/atomic_file.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -7,6 +9,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <vector>
@@ -36,8 +39,23 @@ struct Entry {
 enum class Field { Real, Integer, Pattern };
 enum class Symmetry { General, Symmetric };
 
+// What a header may declare against the size of its file, so that no
+// allocation exceeds a small multiple of what the file can hold: a value of
+// array storage takes at least 2 bytes ("0\n"), an entry of coordinate
+// storage at least 4 ("1 1\n"); a dimension costs memory even when its rows
+// or columns are empty, so rows and columns may each be at most
+// kDimensionsPerByte per byte of the file or kFreeDimension, whichever is
+// larger — unless the caller's options expect that very size.
+constexpr Index kMinValueBytes = 2;
+constexpr Index kMinEntryBytes = 4;
+constexpr Index kDimensionsPerByte = 16;
+constexpr Index kFreeDimension = Index(1) << 22;
+
+Index dimension_limit(Index file_bytes) { return std::max(kFreeDimension, kDimensionsPerByte * file_bytes); }
+
 struct Parsed {
   Index rows = 0, cols = 0;
+  Index file_bytes = 0;
   Symmetry symmetry = Symmetry::General;
   long size_line = 0;
   std::vector<Entry> entries;  // 0-based, as stored (one triangle for symmetric)
@@ -143,6 +161,30 @@ Header read_header(LineReader& r, const std::string& path) {
   return header;
 }
 
+// Rejects sizes the file cannot back (see kMinValueBytes): before anything is
+// reserved, so that a forged header fails at once instead of exhausting memory.
+void check_declared_sizes(LineReader& r, const MarketReadOptions& options, Index declared, bool array,
+                          const Parsed& p) {
+  const Index limit = dimension_limit(p.file_bytes);
+  if (options.rows < 0 && p.rows > limit)
+    r.fail(fmt::format("size line: {} rows is more than a file of {} bytes can describe (at most {})", p.rows,
+                       p.file_bytes, limit));
+  if (options.cols < 0 && p.cols > limit)
+    r.fail(fmt::format("size line: {} columns is more than a file of {} bytes can describe (at most {})", p.cols,
+                       p.file_bytes, limit));
+  const Index most_entries = p.file_bytes / (array ? kMinValueBytes : kMinEntryBytes);
+  if (array) {
+    // rows·cols without overflow: compare rows against most_entries / cols.
+    const bool sym = p.symmetry == Symmetry::Symmetric;
+    const Index cols = sym ? (p.cols + 1) / 2 : p.cols;
+    if (cols > 0 && p.rows > most_entries / cols)
+      r.fail(fmt::format("size line: {} × {} values cannot fit in a file of {} bytes", p.rows, p.cols, p.file_bytes));
+  } else if (declared > most_entries) {
+    r.fail(fmt::format("size line: {} entries cannot fit in a file of {} bytes (at most {})", declared, p.file_bytes,
+                       most_entries));
+  }
+}
+
 // Reads the size line into p (rows, cols, size_line), checks it against the
 // header and the options, and returns the declared entry count (0 for array).
 Index read_size_line(LineReader& r, const Header& header, const MarketReadOptions& options, Parsed& p) {
@@ -166,6 +208,7 @@ Index read_size_line(LineReader& r, const Header& header, const MarketReadOption
   if (options.cols >= 0 && p.cols != options.cols) {
     r.fail(fmt::format("expected {} columns, got {}", options.cols, p.cols));
   }
+  check_declared_sizes(r, options, declared, array, p);
   if (p.symmetry == Symmetry::Symmetric && p.rows != p.cols) {
     r.fail(fmt::format("symmetric storage needs a square matrix, got {} × {}", p.rows, p.cols));
   }
@@ -266,6 +309,9 @@ Parsed parse(const std::string& path, const MarketReadOptions& options) {
   const Header header = read_header(r, path);
   Parsed p;
   p.symmetry = header.symmetry;
+  std::error_code ec;
+  p.file_bytes = static_cast<Index>(std::filesystem::file_size(path, ec));
+  if (ec) p.file_bytes = 0;
   const Index declared = read_size_line(r, header, options, p);
   if (header.array) read_array_values(r, header.field, p);
   else read_coordinate_entries(r, header.field, declared, p);
@@ -297,6 +343,15 @@ SparseMatrix<double> read_market_sparse(const std::string& path, const MarketRea
 
 Matrix<double> read_market_dense(const std::string& path, const MarketReadOptions& options) {
   const Parsed p = parse(path, options);
+  // Coordinate storage read densely: rows·cols doubles however few entries
+  // the file holds, so the product is bounded too unless both were expected.
+  const Index limit = dimension_limit(p.file_bytes);
+  if ((options.rows < 0 || options.cols < 0) && p.cols > 0 && p.rows > limit / p.cols) {
+    throw MatrixMarketError(path, p.size_line,
+                            fmt::format("a dense {} × {} matrix is more than a file of {} bytes can describe "
+                                        "(rows × columns at most {})",
+                                        p.rows, p.cols, p.file_bytes, limit));
+  }
   Matrix<double> M = Matrix<double>::Zero(p.rows, p.cols);
   for (const Entry& e : p.entries) {
     M(e.row, e.col) = e.value;
@@ -306,33 +361,53 @@ Matrix<double> read_market_dense(const std::string& path, const MarketReadOption
 }
 
 namespace {
-void finish(std::ofstream& out, const std::string& path) {
-  out.close();
-  if (!out) throw MatrixMarketError(path, 0, "cannot write file");
+// Writes what `fill` puts in the buffer through an AtomicFile, a chunk at a
+// time; failures as MatrixMarketError, the earlier file untouched.
+template <typename Fill>
+void write_through(const std::string& path, const Fill& fill) {
+  try {
+    AtomicFile file(path);
+    fmt::memory_buffer out;
+    const auto drain = [&] {
+      file.write(out.data(), out.size());
+      out.clear();
+    };
+    fill(out, drain);
+    drain();
+    file.commit();
+  } catch (const FileError& e) {
+    throw MatrixMarketError(path, 0, e.problem());
+  }
 }
+// Bytes gathered before they are handed to the file.
+constexpr std::size_t kChunkBytes = std::size_t(1) << 16;
 }  // namespace
 
 void write_market(const std::string& path, const SparseMatrix<double>& M, bool symmetric) {
-  std::ofstream out(path, std::ios::binary);
-  if (!out) throw MatrixMarketError(path, 0, "cannot open file for writing");
-  Index count = 0;
-  for (Index j = 0; j < M.outerSize(); ++j)
-    for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it) count += !symmetric || it.row() >= it.col();
-  out << "%%MatrixMarket matrix coordinate real " << (symmetric ? "symmetric" : "general") << "\n";
-  out << M.rows() << " " << M.cols() << " " << count << "\n";
-  for (Index j = 0; j < M.outerSize(); ++j)
-    for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it)
-      if (!symmetric || it.row() >= it.col()) out << fmt::format("{} {} {:.17g}\n", it.row() + 1, it.col() + 1, it.value());
-  finish(out, path);
+  write_through(path, [&](fmt::memory_buffer& out, const auto& drain) {
+    Index count = 0;
+    for (Index j = 0; j < M.outerSize(); ++j)
+      for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it) count += !symmetric || it.row() >= it.col();
+    fmt::format_to(std::back_inserter(out), "%%MatrixMarket matrix coordinate real {}\n{} {} {}\n",
+                   symmetric ? "symmetric" : "general", M.rows(), M.cols(), count);
+    for (Index j = 0; j < M.outerSize(); ++j)
+      for (SparseMatrix<double>::InnerIterator it(M, j); it; ++it) {
+        if (symmetric && it.row() < it.col()) continue;
+        fmt::format_to(std::back_inserter(out), "{} {} {:.17g}\n", it.row() + 1, it.col() + 1, it.value());
+        if (out.size() > kChunkBytes) drain();
+      }
+  });
 }
 
 void write_market(const std::string& path, const Matrix<double>& M) {
-  std::ofstream out(path, std::ios::binary);
-  if (!out) throw MatrixMarketError(path, 0, "cannot open file for writing");
-  out << "%%MatrixMarket matrix array real general\n" << M.rows() << " " << M.cols() << "\n";
-  for (Index j = 0; j < M.cols(); ++j)
-    for (Index i = 0; i < M.rows(); ++i) out << fmt::format("{:.17g}\n", M(i, j));
-  finish(out, path);
+  write_through(path, [&](fmt::memory_buffer& out, const auto& drain) {
+    fmt::format_to(std::back_inserter(out), "%%MatrixMarket matrix array real general\n{} {}\n", M.rows(), M.cols());
+    for (Index j = 0; j < M.cols(); ++j)
+      for (Index i = 0; i < M.rows(); ++i) {
+        fmt::format_to(std::back_inserter(out), "{:.17g}\n", M(i, j));
+        if (out.size() > kChunkBytes) drain();
+      }
+  });
 }
 
 }  // namespace qpreduce

@@ -18,6 +18,7 @@
 
 #include "state.h"
 
+#include <qpreduce/atomic_file.h>
 #include <qpreduce/support.h>
 
 #include <fmt/format.h>
@@ -52,8 +53,9 @@ std::uint32_t crc_update(std::uint32_t crc, const char* data, std::size_t bytes)
 
 class Writer {
  public:
-  explicit Writer(std::string path) : path_(std::move(path)), out_(path_, std::ios::binary | std::ios::trunc) {
-    if (!out_) throw IoError(path_, 0, "cannot open for writing");
+  // Writes through a temporary file that close() renames over `path`
+  // (AtomicFile): a failure leaves the earlier cache untouched, no temporary.
+  explicit Writer(std::string path) : path_(std::move(path)), out_(path_) {
     out_.write(kMagic, sizeof kMagic);
     raw(kVersion);
     raw(kByteOrder);
@@ -82,8 +84,7 @@ class Writer {
   void close() {
     raw(static_cast<std::uint64_t>(payload_));
     raw(crc_);
-    out_.close();
-    if (!out_) throw IoError(path_, 0, "write failed (disk full?)");
+    out_.commit();
   }
 
  private:
@@ -95,11 +96,10 @@ class Writer {
     out_.write(data, static_cast<std::streamsize>(n));
     crc_ = crc_update(crc_, data, n);
     payload_ += n;
-    if (!out_) throw IoError(path_, 0, "write failed (disk full?)");
   }
 
   std::string path_;
-  std::ofstream out_;
+  AtomicFile out_;
   std::uint32_t crc_ = 0;
   std::uint64_t payload_ = 0;
 };
@@ -362,9 +362,8 @@ void Deformer::save(const std::string& path) const {
   const State& st = *state_;
   if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
   const Model& model = st.model;
-  const std::string tmp = path + ".tmp";
-  {
-    Writer w(tmp);
+  try {
+    Writer w(path);
     // Inputs.
     w.put_matrix(model.rest);
     w.put_matrix(st.inputs.F);
@@ -389,10 +388,8 @@ void Deformer::save(const std::string& path) const {
     w.put_matrix(model.MN);
     w.put_matrix(model.MU);
     w.close();
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw IoError(path, 0, "cannot replace the file with the new cache");
+  } catch (const FileError& e) {
+    throw IoError(path, 0, e.problem());
   }
 }
 

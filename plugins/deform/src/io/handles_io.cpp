@@ -124,7 +124,7 @@ Eigen::Matrix4d read_def(const std::string& path) {
   Eigen::Matrix4d M;
   for (int i = 0; i < 4; ++i)
     for (int j = 0; j < 4; ++j) M(i, j) = cur.read_double("matrix entry (4 x 4, row-major)");
-  if (!cur.at_end()) cur.fail(fmt::format("unexpected data after the 4 x 4 matrix ('{}')", cur.next()));
+  if (!cur.at_end()) cur.fail(fmt::format("unexpected data after the 4 x 4 matrix ({})", detail::shown(cur.next())));
   // The files print the last row exactly ("0.000000 … 1.000000"), so compare exactly.
   if (M.row(3) != Eigen::RowVector4d(0.0, 0.0, 0.0, 1.0))
     detail::fail(path, 0, fmt::format("last row is ({} {} {} {}), expected 0 0 0 1 (an affine map)", M(3, 0),
@@ -219,7 +219,8 @@ HandleAnimation read_anim(const std::string& path) {
       out.push_back(M);
     }
   }
-  if (!cur.at_end()) cur.fail(fmt::format("unexpected data after the last of the header's items ('{}')", cur.next()));
+  if (!cur.at_end())
+    cur.fail(fmt::format("unexpected data after the last of the header's items ({})", detail::shown(cur.next())));
   return anim;
 }
 

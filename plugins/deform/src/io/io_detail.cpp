@@ -2,6 +2,8 @@
 // buffered output shared by the readers and writers; see io_detail.h.
 #include "io_detail.h"
 
+#include "qpreduce/atomic_file.h"
+
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
@@ -33,11 +35,11 @@ std::string read_file(const std::string& path) {
 }
 
 void write_file(const std::string& path, std::string_view bytes) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) fail(path, 0, fmt::format("cannot create file ({})", std::strerror(errno)));
-  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  out.close();
-  if (!out) fail(path, 0, "write error");
+  try {
+    write_file_atomically(path, bytes);
+  } catch (const FileError& e) {
+    fail(e.file(), e.line(), e.problem());
+  }
 }
 
 std::string lower_extension(const std::string& path) {
@@ -60,7 +62,25 @@ bool file_exists(const std::string& path) {
 // ---- TextCursor ----
 
 TextCursor::TextCursor(std::string file, std::string_view text, long first_line, char comment)
-    : file_(std::move(file)), text_(text), line_(first_line), token_line_(first_line), comment_(comment) {}
+    : file_(std::move(file)), text_(text), line_(first_line), token_line_(first_line), comment_(comment) {
+  // A UTF-8 byte-order mark (editors on Windows write one) is not data.
+  constexpr std::string_view kBom = "\xEF\xBB\xBF";
+  if (text_.substr(0, kBom.size()) == kBom) pos_ = kBom.size();
+}
+
+std::string shown(std::string_view token) {
+  constexpr std::size_t kShownBytes = 40;  // a longer token is cut: a 1 MB line must not fill the terminal
+  std::string s;
+  for (std::size_t i = 0; i < token.size() && i < kShownBytes; ++i) {
+    const unsigned char c = static_cast<unsigned char>(token[i]);
+    if (c >= 0x20 && c < 0x7f)
+      s += static_cast<char>(c);
+    else
+      s += fmt::format("\\x{:02X}", c);
+  }
+  if (token.size() > kShownBytes) return fmt::format("'{}…' ({} bytes)", s, token.size());
+  return "'" + s + "'";
+}
 
 void TextCursor::skip_blanks_on_line() {
   while (pos_ < text_.size()) {
@@ -152,10 +172,10 @@ double TextCursor::to_double(std::string_view token, const char* what) const {
   double value = 0.0;
   const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
   if (ec == std::errc::result_out_of_range)
-    fail(fmt::format("number '{}' out of the range of double ({})", token, what));
+    fail(fmt::format("number {} out of the range of double ({})", shown(token), what));
   if (ec != std::errc() || end != t.data() + t.size())
-    fail(fmt::format("malformed number '{}' (expected {})", token, what));
-  if (!std::isfinite(value)) fail(fmt::format("non-finite value '{}' ({})", token, what));
+    fail(fmt::format("malformed number {} (expected {})", shown(token), what));
+  if (!std::isfinite(value)) fail(fmt::format("non-finite value {} ({})", shown(token), what));
   return value;
 }
 
@@ -164,9 +184,9 @@ long long TextCursor::to_int(std::string_view token, const char* what) const {
   if (t.size() > 1 && t[0] == '+') t.remove_prefix(1);
   long long value = 0;
   const auto [end, ec] = std::from_chars(t.data(), t.data() + t.size(), value);
-  if (ec == std::errc::result_out_of_range) fail(fmt::format("integer '{}' out of range ({})", token, what));
+  if (ec == std::errc::result_out_of_range) fail(fmt::format("integer {} out of range ({})", shown(token), what));
   if (ec != std::errc() || end != t.data() + t.size())
-    fail(fmt::format("malformed integer '{}' (expected {})", token, what));
+    fail(fmt::format("malformed integer {} (expected {})", shown(token), what));
   return value;
 }
 

@@ -17,7 +17,9 @@ namespace qpreduce::deform::detail {
 
 // The whole file; IoError "<path>: cannot open file (<reason>)" when missing.
 std::string read_file(const std::string& path);
-// Writes `bytes` to `path`; IoError when the file cannot be written.
+// Writes `bytes` to `path` through a temporary file renamed on success
+// (qpreduce::AtomicFile); IoError when the file cannot be written, the
+// earlier file then untouched.
 void write_file(const std::string& path, std::string_view bytes);
 // ".obj" for "dir/Mesh.OBJ"; "" without an extension.
 std::string lower_extension(const std::string& path);
@@ -26,6 +28,9 @@ std::string strip_extension(const std::string& path);
 bool file_exists(const std::string& path);
 
 [[noreturn]] void fail(const std::string& file, long line, const std::string& problem);
+// `token` quoted for a message: bytes outside printable ASCII as \xHH, cut
+// after 40 bytes with its length ("'\xEF\xBB\xBFOFF'", "'aaaa…' (1048576 bytes)").
+std::string shown(std::string_view token);
 
 // Reads whitespace-separated tokens from `text`, counting lines. The comment
 // character (none if '\0') hides the rest of its line. Two ways to use it:

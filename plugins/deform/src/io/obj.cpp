@@ -9,7 +9,7 @@ namespace {
 // Relative indices (< 0) resolve against the `vertices_so_far`.
 int obj_corner(const detail::TextCursor& cur, std::string_view token, Index vertices_so_far) {
   const std::string_view head = token.substr(0, token.find('/'));
-  if (head.empty()) cur.fail(fmt::format("face corner '{}' has no vertex index", token));
+  if (head.empty()) cur.fail(fmt::format("face corner {} has no vertex index", detail::shown(token)));
   const long long i = cur.to_int(head, "vertex index");
   if (i == 0) cur.fail("vertex index 0 (OBJ indices start at 1; negative ones are relative)");
   const long long zero_based = i > 0 ? i - 1 : vertices_so_far + i;

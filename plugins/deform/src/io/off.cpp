@@ -9,14 +9,14 @@ namespace {
 void check_off_keyword(const detail::TextCursor& cur, std::string_view key) {
   const std::string_view tail = "OFF";
   if (key.size() < tail.size() || key.substr(key.size() - tail.size()) != tail)
-    cur.fail(fmt::format("not an OFF file (first token '{}', expected OFF or COFF)", key));
+    cur.fail(fmt::format("not an OFF file (first token {}, expected OFF or COFF)", detail::shown(key)));
   std::string_view prefix = key.substr(0, key.size() - tail.size());
   if (prefix.find('4') != std::string_view::npos || prefix.find('n') != std::string_view::npos)
-    cur.fail(fmt::format("'{}': only 3-dimensional OFF is supported", key));
+    cur.fail(fmt::format("{}: only 3-dimensional OFF is supported", detail::shown(key)));
   if (prefix.substr(0, 2) == "ST") prefix.remove_prefix(2);
   if (!prefix.empty() && prefix[0] == 'C') prefix.remove_prefix(1);
   if (!prefix.empty() && prefix[0] == 'N') prefix.remove_prefix(1);
-  if (!prefix.empty()) cur.fail(fmt::format("unknown OFF variant '{}'", key));
+  if (!prefix.empty()) cur.fail(fmt::format("unknown OFF variant {}", detail::shown(key)));
 }
 
 }  // namespace

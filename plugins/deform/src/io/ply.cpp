@@ -53,7 +53,7 @@ PlyType parse_type(const detail::TextCursor& cur, std::string_view name) {
       {"float", "float32", PlyType::Float32}, {"double", "float64", PlyType::Float64}};
   for (const Entry& e : table)
     if (name == e.a || name == e.b) return e.t;
-  cur.fail(fmt::format("unknown PLY property type '{}'", name));
+  cur.fail(fmt::format("unknown PLY property type {}", detail::shown(name)));
 }
 
 std::string_view required(detail::TextCursor& cur, const char* what) {
@@ -76,7 +76,7 @@ PlyHeader parse_header(const std::string& path, const std::string& text) {
       if (format == "binary_big_endian")
         cur.fail("binary_big_endian PLY is not supported (only ascii and binary_little_endian)");
       if (format != "ascii" && format != "binary_little_endian")
-        cur.fail(fmt::format("unknown PLY format '{}'", format));
+        cur.fail(fmt::format("unknown PLY format {}", detail::shown(format)));
       h.binary = format == "binary_little_endian";
       have_format = true;
     } else if (key == "comment" || key == "obj_info") {
@@ -107,7 +107,7 @@ PlyHeader parse_header(const std::string& path, const std::string& text) {
       h.body_line = cur.line() + 1;
       return h;
     } else {
-      cur.fail(fmt::format("unexpected PLY header line starting with '{}'", key));
+      cur.fail(fmt::format("unexpected PLY header line starting with {}", detail::shown(key)));
     }
   }
   detail::fail(path, 0, "PLY header has no end_header line");
@@ -128,7 +128,8 @@ class AsciiBody {
   [[noreturn]] void fail(const std::string& problem) const { cur_.fail(problem); }
   long line() const { return cur_.line(); }
   void finish() {
-    if (!cur_.at_end()) cur_.fail(fmt::format("unexpected data after the last element ('{}')", cur_.next()));
+    if (!cur_.at_end())
+      cur_.fail(fmt::format("unexpected data after the last element ({})", detail::shown(cur_.next())));
   }
 
  private:

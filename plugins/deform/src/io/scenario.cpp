@@ -1,11 +1,14 @@
 // Scenarios from .sel/.def, .anim and JSON scenes (docs/formats.md); see scenario.h.
 #include <qpreduce/support.h>
 #include "qpreduce/deform/io/scenario.h"
+#include "qpreduce/deform/mesh/geometry.h"
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <map>
+#include <string>
 
 namespace qpreduce::deform {
 
@@ -75,6 +78,10 @@ void apply_scene_settings(const Scene& scene, Scenario* sc) {
   sc->psi = scene.psi;
   if (scene.model) sc->model_kind = *scene.model == "conformal" ? ModelKind::Conformal : ModelKind::Arap;
   sc->iterations = scene.iterations;
+  if (scene.linear_proxies.count > 0 && scene.linear_proxies.id_file.empty())
+    sc->linear_proxies = scene.linear_proxies.count;
+  if (scene.rotational_clusters.count > 0 && scene.rotational_clusters.id_file.empty())
+    sc->rotational_proxies = scene.rotational_clusters.count;
   if (scene.constraints == ConstraintMode::Soft) {
     sc->constraints.soft = true;
     if (scene.delta) sc->constraints.delta = *scene.delta;
@@ -139,7 +146,118 @@ HandleTargets scene_targets(const Scene& scene, const std::vector<Index>& patch_
   return t;
 }
 
+// Two targets closer than this (relative to the bounding-box diagonal) are one
+// place: round-off of the same transform applied twice, not a conflict.
+constexpr double kSamePlace = 1e-9;
+
+// A vertex pinned by two point handles to different places, or pinned inside
+// a fixed patch away from its rest position, cannot hold: the solve would
+// split the difference (a handle far from its target). Throws naming both.
+void check_conflicting_pins(const Scenario& sc, const std::string& source) {
+  const Vertices& V = sc.model.V;
+  const double diag = V.rows() > 0 ? (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm() : 0.0;
+  const double tol = kSamePlace * std::max(diag, 1.0);
+  std::map<int, Index> first_pin;  // vertex → its first single-vertex point handle
+  for (Index k = 0; k < static_cast<Index>(sc.handles.points.size()); ++k) {
+    const PointHandle& h = sc.handles.points[static_cast<size_t>(k)];
+    if (h.vertices.size() != 1 || !h.weights.empty()) continue;
+    const int v = static_cast<int>(h.vertices[0]);
+    const auto [it, fresh] = first_pin.emplace(v, k);
+    const int patch = static_cast<size_t>(v) < sc.model.patch_of_vertex.size() ? sc.model.patch_of_vertex[v] : -1;
+    const bool in_fixed = patch >= 0 && sc.model.patch_types[static_cast<size_t>(patch)] == PatchType::Fixed;
+    for (size_t f = 0; f < sc.frames.size(); ++f) {
+      const Eigen::RowVector3d target = sc.frames[f].points.row(k);
+      const double to_other = fresh ? 0.0 : (target - sc.frames[f].points.row(it->second)).norm();
+      const double to_rest = in_fixed ? (target - V.row(v)).norm() : 0.0;
+      if (to_other > tol)
+        throw std::invalid_argument(fmt::format(
+            "{}: vertex {} is held at two places by point handles {} and {} (frame {}: {:.3g} bounding-box "
+            "diagonals apart)",
+            source, v, it->second, k, f, to_other / std::max(diag, 1e-300)));
+      if (to_rest > tol)
+        throw std::invalid_argument(fmt::format(
+            "{}: vertex {} is in fixed patch {} but point handle {} moves it (frame {}: {:.3g} bounding-box "
+            "diagonals from rest)",
+            source, v, patch, k, f, to_rest / std::max(diag, 1e-300)));
+    }
+  }
+}
+
 }  // namespace
+
+namespace {
+
+// The largest |coordinate| of handle targets in frame f, and where.
+std::pair<double, std::string> frame_reach(const Scenario& sc, size_t f) {
+  const HandleTargets& t = sc.frames[f];
+  double reach = t.points.size() > 0 ? t.points.cwiseAbs().maxCoeff() : 0.0;
+  std::string where = "a point handle's target";
+  for (size_t k = 0; k < t.patch_transforms.size() && k < sc.handles.patches.size(); ++k) {
+    const Eigen::Matrix<double, 3, 4>& T = t.patch_transforms[k];
+    for (size_t v = 0; v < sc.model.patch_of_vertex.size(); ++v) {
+      if (sc.model.patch_of_vertex[v] != sc.handles.patches[k]) continue;
+      const double r = (T.leftCols<3>() * sc.model.V.row(static_cast<Index>(v)).transpose() + T.col(3))
+                           .cwiseAbs()
+                           .maxCoeff();
+      if (!(r <= reach)) {
+        reach = r;
+        where = fmt::format("vertex {} moved by patch {}'s transform", v, sc.handles.patches[k]);
+      }
+    }
+  }
+  return {reach, where};
+}
+
+// True for a vertex the handles hold: in a point handle, a fixed patch or a prescribed patch.
+std::vector<char> anchored_vertices(const Scenario& sc) {
+  std::vector<char> anchored(static_cast<size_t>(sc.model.V.rows()), 0);
+  for (const PointHandle& h : sc.handles.points)
+    for (Index v : h.vertices) anchored[static_cast<size_t>(v)] = 1;
+  for (size_t v = 0; v < sc.model.patch_of_vertex.size(); ++v) {
+    const int p = sc.model.patch_of_vertex[v];
+    if (p < 0) continue;
+    const bool prescribed = std::find(sc.handles.patches.begin(), sc.handles.patches.end(), p) !=
+                            sc.handles.patches.end();
+    if (prescribed || sc.model.patch_types[static_cast<size_t>(p)] == PatchType::Fixed) anchored[v] = 1;
+  }
+  return anchored;
+}
+
+}  // namespace
+
+void check_scenario(const Scenario& sc, const std::string& source) {
+  const Vertices& V = sc.model.V;
+  for (Index v = 0; v < V.rows(); ++v)
+    if (!(V.row(v).cwiseAbs().maxCoeff() <= kMaxCoordinate))
+      throw std::invalid_argument(fmt::format("{}: vertex {} at ({:g}, {:g}, {:g}): coordinates beyond {:g} overflow "
+                                              "in the energy",
+                                              source, v, V(v, 0), V(v, 1), V(v, 2), kMaxCoordinate));
+  for (size_t f = 0; f < sc.frames.size(); ++f) {
+    const auto [reach, where] = frame_reach(sc, f);
+    if (!(reach <= kMaxCoordinate))
+      throw std::invalid_argument(fmt::format("{}: frame {}: {} reaches {:g}: handle targets beyond {:g} overflow in "
+                                              "the energy (check the transform or target)",
+                                              source, f, where, reach, kMaxCoordinate));
+  }
+  const MeshComponents components = sc.model.is_tet() ? connected_components(V.rows(), sc.model.T)
+                                                       : connected_components(V.rows(), sc.model.F);
+  const std::vector<char> anchored = anchored_vertices(sc);
+  std::vector<char> held(static_cast<size_t>(components.element_components), 0);
+  std::vector<Index> size(held.size(), 0), first(held.size(), -1);
+  for (Index v = 0; v < V.rows(); ++v) {
+    const int c = components.vertex_component[static_cast<size_t>(v)];
+    if (c >= components.element_components) continue;  // unreferenced: kept, not deformed
+    held[c] |= anchored[static_cast<size_t>(v)];
+    if (first[c] < 0) first[c] = v;
+    ++size[c];
+  }
+  for (size_t c = 0; c < held.size(); ++c)
+    if (!held[c])
+      throw std::invalid_argument(fmt::format(
+          "{}: connected component {} ({} vertices, from vertex {}) has no handle, fixed vertex or prescribed patch: "
+          "nothing holds it in place, so its pose is not determined",
+          source, c, size[c], first[c]));
+}
 
 Scenario scenario_from_sel_def(const Vertices& V, const Selection& sel, const Eigen::Matrix4d& def, int frames) {
   sel.validate(V.rows());
@@ -192,6 +310,7 @@ Scenario scenario_from_scene(const Scene& scene) {
   sc.handles = handles_from_scene(scene, patch_of_handle);
   const Index frames = std::max<Index>(1, scene.frames);
   for (Index f = 0; f < frames; ++f) sc.frames.push_back(scene_targets(scene, patch_of_handle, sc, f));
+  check_conflicting_pins(sc, scene.source);
   return sc;
 }
 
@@ -206,6 +325,8 @@ void apply_scenario_options(const Scenario& sc, DeformerOptions* options) {
   if (sc.model_kind) options->model = *sc.model_kind;
   if (sc.psi) options->conformal_bound = *sc.psi;
   if (sc.iterations) options->iterations = *sc.iterations;
+  if (sc.linear_proxies) options->linear_proxies = *sc.linear_proxies;
+  if (sc.rotational_proxies) options->rotational_proxies = *sc.rotational_proxies;
 }
 
 }  // namespace qpreduce::deform

@@ -1,6 +1,7 @@
 // The JSON scene reader; the schema is in docs/formats.md ("JSON scene").
 #include "qpreduce/deform/io/scene.h"
 
+#include "qpreduce/deform/io/json_keys.h"
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/tet_io.h"
 
@@ -53,6 +54,7 @@ class SceneParser {
     const std::string text = detail::read_file(path_);
     json root;
     try {
+      check_unique_json_keys(text, path_);
       root = json::parse(text);
     } catch (const json::parse_error& e) {
       detail::fail(path_, 0, fmt::format("JSON syntax error: {}", e.what()));
@@ -209,6 +211,7 @@ class SceneParser {
       const std::string where = fmt::format("/proxies/{}", key);
       const json& v = j[key];
       if (v.is_number()) {
+        if (std::string(key) == "affine") fail(where, "affine patches are given by an .id file, not a count");
         const long long count = integer(v, where);
         if (count < 1) fail(where, "a proxy count must be >= 1");
         spec->count = static_cast<Index>(count);
@@ -318,6 +321,8 @@ class SceneParser {
         h.vertices.push_back(vertex(group[i][0], at + "/0"));
         h.weights.push_back(number(group[i][1], at + "/1"));
       }
+      if (std::all_of(h.weights.begin(), h.weights.end(), [](double w) { return w == 0.0; }))
+        fail(where + "/group", "every weight is 0: the handle would hold no point");
     } else {
       h.vertices = vertex_set(j, where);
     }

@@ -102,7 +102,7 @@ TetMesh read_medit(const std::string& path, MeshReadInfo* info) {
           std::find_if(std::begin(kSkipped), std::end(kSkipped),
                        [&](const SkippedSection& s) { return same_keyword(key, s.name); });
       if (skip == std::end(kSkipped))
-        cur.fail(fmt::format("unknown MEDIT section '{}' (cannot skip it: record size unknown)", key));
+        cur.fail(fmt::format("unknown MEDIT section {} (cannot skip it: record size unknown)", detail::shown(key)));
       const long long n = section_count(cur, key);
       for (long long i = 0; i < n; ++i) {
         require_more(cur, i, n, skip->name);

@@ -61,7 +61,9 @@ Matrix<double> read_market_dense(const std::string& path, const MarketReadOption
 // Writers: coordinate real general (sparse; symmetric=true stores the lower
 // triangle of a matrix the caller guarantees symmetric) and array real
 // general (dense), 17 significant digits so that values round-trip exactly.
-// Throw MatrixMarketError (line 0) when the file cannot be written.
+// Throw MatrixMarketError (line 0) when the file cannot be written; they write
+// through a temporary file renamed on success (AtomicFile), so a failure leaves
+// the earlier file untouched.
 void write_market(const std::string& path, const SparseMatrix<double>& M, bool symmetric = false);
 void write_market(const std::string& path, const Matrix<double>& M);
 

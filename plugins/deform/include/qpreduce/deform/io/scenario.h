@@ -23,9 +23,23 @@ struct Scenario {
   std::optional<double> alpha, beta, gamma, psi;
   std::optional<ModelKind> model_kind;
   std::optional<int> iterations;
+  // Proxy counts a scene gives as numbers (not as .id files).
+  std::optional<Index> linear_proxies, rotational_proxies;
 };
 
-// Applies the scenario's overrides (α, β, γ, model, ψ, iterations) to `options`.
+// Checks what would otherwise surface deep in the solve as "contains NaN" or
+// "not strictly convex … condition inf": every mesh coordinate and every
+// handle target (points, and patches moved by their transforms) within
+// kMaxCoordinate in magnitude, and every connected component of the elements
+// anchored by a point handle, a fixed patch or a prescribed patch. Throws
+// std::invalid_argument "<source>: …" naming the vertex, frame or component.
+void check_scenario(const Scenario& scenario, const std::string& source);
+// Coordinates beyond this overflow once squared and summed (1e308 is the
+// largest double); real meshes are many orders of magnitude smaller.
+inline constexpr double kMaxCoordinate = 1e100;
+
+// Applies the scenario's overrides (α, β, γ, model, ψ, iterations, proxy
+// counts) to `options`.
 void apply_scenario_options(const Scenario& scenario, DeformerOptions* options);
 
 // .sel/.def: a Fixed patch (role 0) and an Affine handle patch (role 2) moved

@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# Fuzzes every reader with libFuzzer under AddressSanitizer + UBSan:
+#   1. builds the targets of tests/fuzz (clang-14) in ./build-fuzz;
+#   2. replays tests/fuzz/corpus/<target>/ (seeds and the inputs that once
+#      crashed: regressions) — any failure stops the script;
+#   3. fuzzes each target for QPR_FUZZ_SECONDS seconds (default 6) from that
+#      corpus and ../shared/data files of its kind, with allocations capped
+#      (a reader must not reserve what its file cannot hold).
+# A finding is written to build-fuzz/findings/<target>-crash-*; copy it into
+# tests/fuzz/corpus/<target>/ once fixed. Usage: scripts/fuzz.sh [target ...]
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+jobs="$(nproc 2>/dev/null || echo 2)"
+seconds="${QPR_FUZZ_SECONDS:-6}"
+build="$root/build-fuzz"
+all=(off obj ply medit tetgen sel def id anim scene mtx_sparse mtx_dense manifest cache)
+targets=("$@")
+[ $# -eq 0 ] && targets=("${all[@]}")
+
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+cmake -S "$root" -B "$build" -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
+  -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
+  -DQPREDUCE_SANITIZE=ON -DQPREDUCE_FUZZ=ON -DQPREDUCE_BUILD_TESTS=OFF -DQPREDUCE_BUILD_BENCH=OFF \
+  -DQPREDUCE_BUILD_APPS=OFF -DQPREDUCE_BUILD_EXAMPLES=OFF -DQPREDUCE_BUILD_VIEWER=OFF \
+  -DQPREDUCE_BUILD_PYTHON=OFF "${launcher[@]}" >/dev/null
+cmake --build "$build" -j "$jobs" --target "${targets[@]/#/fuzz_}"
+
+# Files of ../shared/data a target takes as seeds (by extension).
+seeds_of() {
+  case "$1" in
+    off) echo "off" ;; obj) echo "obj" ;; ply) echo "ply" ;; medit) echo "mesh" ;; tetgen) echo "node" ;;
+    sel) echo "sel" ;; def) echo "def" ;; id) echo "id" ;; anim) echo "anim" ;; *) echo "" ;;
+  esac
+}
+
+mkdir -p "$build/findings"
+export ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0"
+export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
+for t in "${targets[@]}"; do
+  bin="$build/tests/fuzz/fuzz_$t"
+  corpus="$root/tests/fuzz/corpus/$t"
+  work="$build/corpus/$t"
+  mkdir -p "$work"
+  echo "== fuzz_$t: replay $(ls "$corpus" | wc -l) inputs"
+  "$bin" -runs=0 -rss_limit_mb=2048 -malloc_limit_mb=256 "$corpus" >"$build/findings/$t.replay.log" 2>&1 ||
+    { tail -40 "$build/findings/$t.replay.log"; exit 1; }
+  ext="$(seeds_of "$t")"
+  extra=()
+  if [ -n "$ext" ] && [ -d "$root/../shared/data" ]; then
+    seed_dir="$build/seeds/$t"
+    mkdir -p "$seed_dir"
+    find "$root/../shared/data" -iname "*.$ext" -size -4M -exec cp -t "$seed_dir" {} + 2>/dev/null || true
+    extra=("$seed_dir")
+  fi
+  echo "== fuzz_$t: ${seconds} s"
+  "$bin" -max_total_time="$seconds" -max_len=16384 -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=256 \
+    -print_final_stats=1 -artifact_prefix="$build/findings/$t-" "$work" "$corpus" "${extra[@]}" \
+    >"$build/findings/$t.log" 2>&1 || { tail -60 "$build/findings/$t.log"; exit 1; }
+  grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "$build/findings/$t.log" | tr '\n' ' '
+  echo
+done

@@ -1,0 +1,431 @@
+#!/usr/bin/env python3
+"""Bad-input suite for the qpr command line (docs/robustness.md).
+
+Every case runs qpr on a small input made here and asserts the exit code and
+words of the message; the writer cases also assert that an earlier output
+file is left intact and that no temporary file stays behind. Run:
+
+    bad_input.py QPR_BINARY [--group NAME] [--list]
+
+Groups: options, meshes, handles, scenes, matrix, writers. Exit status 0 when
+every case of the selected groups passed; a failing case prints its command,
+exit code and stderr.
+"""
+import argparse
+import os
+import re
+import resource
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+# ---------------------------------------------------------------- inputs
+
+
+def tube(rings=6, around=8):
+    """An open tube (rings × around vertices) as OFF text, its .sel and a .def."""
+    import math
+    V, F = [], []
+    for r in range(rings):
+        for a in range(around):
+            t = 2 * math.pi * a / around
+            V.append((math.cos(t), math.sin(t), 0.8 * r))
+    for r in range(rings - 1):
+        for a in range(around):
+            i, j = r * around + a, r * around + (a + 1) % around
+            k, l = i + around, j + around
+            F += [(i, j, l), (i, l, k)]
+    off = "OFF\n%d %d 0\n" % (len(V), len(F))
+    off += "".join("%g %g %g\n" % v for v in V)
+    off += "".join("3 %d %d %d\n" % f for f in F)
+    sel = "".join("%d\n" % (0 if v[2] < 0.1 else 2 if v[2] > 0.8 * (rings - 1) - 0.1 else 1) for v in V)
+    return off, sel, len(V)
+
+
+OFF, SEL, NV = tube()
+DEF = "0 -1 0 0\n1 0 0 0\n0 0 1 0.5\n0 0 0 1\n"
+OBJ = "".join("v " + " ".join(l.split()) + "\n" for l in OFF.splitlines()[2:2 + NV])
+OBJ += "".join("f %d %d %d\n" % tuple(int(x) + 1 for x in l.split()[1:])
+               for l in OFF.splitlines()[2 + NV:])
+SMALL = ["--linear-proxies", "6", "--rotational-proxies", "4", "--frames", "1"]
+NO_LINEAR = ["--rotational-proxies", "4", "--frames", "1"]
+NO_ROTATIONAL = ["--linear-proxies", "6", "--frames", "1"]
+
+# A tiny QP: H = I (4×4), C = e1, one demand x2 = 1.
+H = "%%MatrixMarket matrix coordinate real symmetric\n4 4 4\n1 1 1\n2 2 1\n3 3 1\n4 4 1\n"
+C = "%%MatrixMarket matrix coordinate real general\n4 1 1\n1 1 1\n"
+A = "%%MatrixMarket matrix coordinate real general\n4 1 1\n2 1 1\n"
+B = "%%MatrixMarket matrix array real general\n1 1\n1\n"
+
+
+def base_files():
+    return {
+        "tube.off": OFF, "tube.sel": SEL, "tube.def": DEF, "tube.obj": OBJ,
+        "H.mtx": H, "C.mtx": C, "dem/A_d0.mtx": A, "dem/b_d0.mtx": B,
+    }
+
+
+def deform(*extra, mesh="{W}/tube.off", small=SMALL):
+    return ["deform", mesh, "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + small + list(extra)
+
+
+def qp(*extra, H="{W}/H.mtx", demands="{W}/dem"):
+    return ["qp", "--H", H, "--C", "{W}/C.mtx", "--demands", demands] + list(extra)
+
+
+def scene(body):
+    """A JSON scene on tube.off; `body` is the text after the mesh entry."""
+    return '{"mesh": "tube.off"' + body + "}"
+
+
+# ---------------------------------------------------------------- cases
+
+CASES = []
+
+
+def case(group, name, args, code, words, files=None, max_seconds=None, stdout_words=None):
+    CASES.append(dict(group=group, name=name, args=args, code=code, words=words, files=files or {},
+                      max_seconds=max_seconds, stdout_words=stdout_words or []))
+
+
+OPT = 105  # CLI11's exit code for a value that fails its check
+RUN = 2    # qpr's exit code for bad input found while running
+
+# Options: every numeric option refuses NaN, infinities, out-of-range values,
+# with the rule in words.
+case("options", "theorem --trials 0", ["theorem", "--trials", "0"], OPT, ["--trials", "whole number from 1 to"])
+case("options", "theorem --trials 1e8 (was bad_alloc)", ["theorem", "--trials", "100000000"], OPT,
+     ["--trials", "from 1 to 1000000"])
+case("options", "theorem --trials -3", ["theorem", "--trials", "-3"], OPT, ["--trials", "got '-3'"])
+case("options", "theorem --trials abc", ["theorem", "--trials", "abc"], OPT, ["--trials", "got 'abc'"])
+case("options", "theorem --trials 2.5", ["theorem", "--trials", "2.5"], OPT, ["--trials", "whole number"])
+case("options", "theorem --seed -1 (was 2^64-1)", ["theorem", "--seed", "-1"], OPT, ["--seed", "got '-1'"])
+case("options", "theorem --seed 2^64", ["theorem", "--seed", "18446744073709551616"], OPT, ["--seed"])
+case("options", "theorem --trials with a 100 kB token", ["theorem", "--trials", "9" * 100000], OPT,
+     ["--trials", "(100000 characters)"])
+case("options", "qp --soft nan (was a silent hard solve)", qp("--soft", "nan"), OPT, ["--soft", "NaN"])
+case("options", "qp --soft inf", qp("--soft", "inf"), OPT, ["--soft", "finite"])
+case("options", "qp --soft 0", qp("--soft", "0"), OPT, ["--soft", "greater than 0"])
+case("options", "qp --soft -1", qp("--soft", "-1"), OPT, ["--soft", "greater than 0"])
+case("options", "qp --soft 1e400", qp("--soft", "1e400"), OPT, ["--soft", "finite"])
+case("options", "deform --alpha nan", deform("--alpha", "nan"), OPT, ["--alpha", "NaN"])
+case("options", "deform --alpha 1e308 (was 'contains NaN')", deform("--alpha", "1e308"), OPT,
+     ["--alpha", "between 0 and 1e+12"])
+case("options", "deform --alpha -1", deform("--alpha", "-1"), OPT, ["--alpha", "between 0 and"])
+case("options", "deform --beta inf", deform("--beta", "inf"), OPT, ["--beta", "finite"])
+case("options", "deform --gamma -0.5", deform("--gamma", "-0.5"), OPT, ["--gamma", "between 0 and"])
+case("options", "deform --psi 1", deform("--model", "conformal", "--psi", "1"), OPT, ["--psi", "greater than 1"])
+case("options", "deform --psi nan", deform("--model", "conformal", "--psi", "nan"), OPT, ["--psi", "NaN"])
+case("options", "deform --tolerance 2", deform("--tolerance", "2"), OPT, ["--tolerance", "between 0 and 1"])
+case("options", "deform --tolerance nan", deform("--tolerance", "nan"), OPT, ["--tolerance", "NaN"])
+case("options", "deform --iterations 0", deform("--iterations", "0"), OPT, ["--iterations", "from 1 to"])
+case("options", "deform --anderson 17", deform("--anderson", "17"), OPT, ["--anderson", "from 0 to 16"])
+case("options", "deform --frames 0", deform("--frames", "0"), OPT, ["--frames", "from 1 to"])
+case("options", "deform --linear-proxies 0", deform("--linear-proxies", "0"), OPT, ["--linear-proxies"])
+case("options", "deform --soft nan", deform("--soft", "nan"), OPT, ["--soft", "NaN"])
+case("options", "demo --frames 0", ["demo", "--frames", "0"], OPT, ["--frames", "from 1 to 10000"])
+case("options", "demo --iterations 1001", ["demo", "--iterations", "1001"], OPT, ["--iterations", "from 1 to 1000"])
+case("options", "deform --rotational-proxies 1e3x", deform("--rotational-proxies", "1e3x"), OPT,
+     ["--rotational-proxies", "got '1e3x'"])
+
+# Mesh files: each refused with the file, the line where there is one, and the problem.
+BOM = "\ufeff"
+case("meshes", "OFF: empty file", deform(mesh="{W}/m.off"), RUN, ["m.off", "empty file"], {"m.off": ""})
+case("meshes", "OFF: wrong keyword", deform(mesh="{W}/m.off"), RUN, ["m.off:1", "not an OFF file"],
+     {"m.off": "PLY\n3 1 0\n"})
+case("meshes", "OFF: keyword after a BOM is read", deform("--out", "{W}/bom_out.off", mesh="{W}/m.off"), 0, [],
+     {"m.off": BOM + OFF})
+case("meshes", "OFF: a BOM elsewhere is shown, not invisible", deform(mesh="{W}/m.off"), RUN,
+     ["\\xEF\\xBB\\xBF"], {"m.off": OFF.replace("\n1 0 0\n", "\n" + BOM + "1 0 0\n", 1)})
+case("meshes", "OFF: 2^31 vertices in a tiny file", deform(mesh="{W}/m.off"), RUN, ["m.off", "end of file"],
+     {"m.off": "OFF\n2147483648 1 0\n0 0 0\n"}, max_seconds=5)
+case("meshes", "OFF: negative count", deform(mesh="{W}/m.off"), RUN, ["m.off", "negative"],
+     {"m.off": "OFF\n-3 1 0\n"})
+case("meshes", "OFF: NaN coordinate", deform(mesh="{W}/m.off"), RUN, ["m.off", "non-finite", "nan"],
+     {"m.off": OFF.replace("\n1 0 0\n", "\nnan 0 0\n", 1)})
+case("meshes", "OFF: overflowing coordinate", deform(mesh="{W}/m.off"), RUN, ["m.off", "out of the range"],
+     {"m.off": OFF.replace("\n1 0 0\n", "\n1e999 0 0\n", 1)})
+case("meshes", "OFF: index out of range", deform(mesh="{W}/m.off"), RUN, ["m.off", "vertex index 999 out of range"],
+     {"m.off": OFF.replace("3 0 1 9", "3 0 1 999", 1)})
+case("meshes", "OFF: face with 2 corners", deform(mesh="{W}/m.off"), RUN, ["m.off", "2 corner"],
+     {"m.off": OFF.replace("3 0 1 9", "2 0 1", 1)})
+case("meshes", "OFF: 1 MB token is cut in the message", deform(mesh="{W}/m.off"), RUN,
+     ["m.off", "…' (1048577 bytes)"], {"m.off": OFF.replace("\n1 0 0\n", "\n" + "7" * 1048576 + "x 0 0\n", 1)})
+case("meshes", "OFF: data after the last face", deform(mesh="{W}/m.off"), RUN, ["m.off"],
+     {"m.off": OFF + "3 0 1 2\n"})
+case("meshes", "OBJ: index 0", deform(mesh="{W}/m.obj"), RUN, ["m.obj", "0"],
+     {"m.obj": OBJ.replace("f 1 2 10", "f 0 2 10", 1)})
+case("meshes", "OBJ: malformed number", deform(mesh="{W}/m.obj"), RUN, ["m.obj", "malformed number '1.0.0'"],
+     {"m.obj": OBJ.replace("v 1 0 0", "v 1.0.0 0 0", 1)})
+case("meshes", "OBJ: no faces", deform(mesh="{W}/m.obj"), RUN, ["m.obj", "no faces"], {"m.obj": "v 0 0 0\n"})
+case("meshes", "PLY: unknown format", deform(mesh="{W}/m.ply"), RUN, ["m.ply", "unknown PLY format 'ascii2'"],
+     {"m.ply": "ply\nformat ascii2 1.0\nend_header\n"})
+case("meshes", "PLY: big-endian", deform(mesh="{W}/m.ply"), RUN, ["m.ply", "big"],
+     {"m.ply": "ply\nformat binary_big_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n"})
+case("meshes", "PLY: binary with 2^31 vertices in a tiny file", deform(mesh="{W}/m.ply"), RUN, ["m.ply"],
+     {"m.ply": "ply\nformat binary_little_endian 1.0\nelement vertex 2147483647\nproperty float x\nproperty float y\n"
+               "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\0\0\0\0"},
+     max_seconds=5)
+case("meshes", "PLY: unknown property type", deform(mesh="{W}/m.ply"), RUN, ["m.ply", "property type 'quad'"],
+     {"m.ply": "ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n"})
+case("meshes", "MEDIT: unknown section", deform(mesh="{W}/m.mesh"), RUN, ["m.mesh", "unknown MEDIT section"],
+     {"m.mesh": "MeshVersionFormatted 1\nDimension 3\nWhatever 3\nEnd\n"})
+case("meshes", "MEDIT: 2^40 vertices in a tiny file", deform(mesh="{W}/m.mesh"), RUN, ["m.mesh"],
+     {"m.mesh": "MeshVersionFormatted 1\nDimension 3\nVertices\n1099511627776\n0 0 0 0\nEnd\n"}, max_seconds=5)
+case("meshes", "TetGen: .node with a huge count", deform(mesh="{W}/m.node"), RUN, ["m.node"],
+     {"m.node": "4000000000 3 0 0\n1 0 0 0\n", "m.ele": "1 4 0\n1 1 2 3 4\n"}, max_seconds=5)
+FAR = OFF.replace("OFF\n%d " % NV, "OFF\n%d " % (NV + 1), 1).replace(
+    "\n3 ", "\n1e300 1e300 1e300\n3 ", 1)
+case("meshes", "a far-away unreferenced vertex (was 'contains NaN' at write time)",
+     ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def", "--out", "{W}/o.off"] + SMALL,
+     RUN, ["far.off", "vertex 48 at (1e+300", "overflow"], {"far.off": FAR, "far.sel": SEL + "1\n"})
+TWO_V = OFF.splitlines()[2:2 + NV]
+TWO_F = OFF.splitlines()[2 + NV:]
+TWO = "OFF\n%d %d 0\n" % (2 * NV, 2 * len(TWO_F)) + "\n".join(
+    TWO_V + [" ".join(str(float(x) + 10) for x in v.split()) for v in TWO_V] + TWO_F +
+    ["3 " + " ".join(str(int(x) + NV) for x in f.split()[1:]) for f in TWO_F]) + "\n"
+case("meshes", "an unanchored component is named (was 'condition inf')",
+     ["deform", "{W}/two.off", "--sel", "{W}/two.sel", "--def", "{W}/tube.def"] + SMALL, RUN,
+     ["two.off", "connected component 1 (48 vertices, from vertex 48)", "nothing holds it"],
+     {"two.off": TWO, "two.sel": SEL + "1\n" * NV})
+case("meshes", "missing mesh file", deform(mesh="{W}/none.off"), RUN, ["none.off", "cannot open"])
+case("meshes", "a directory as the mesh", deform(mesh="{W}/dem"), RUN, ["dem", "unsupported"])
+
+# Handle files.
+case("handles", ".sel: wrong count", deform(), RUN, ["tube.sel", "expected %d entries" % NV],
+     {"tube.sel": SEL + "1\n"})
+case("handles", ".sel: value 3", deform(), RUN, ["tube.sel", "3"], {"tube.sel": "3\n" + SEL.split("\n", 1)[1]})
+case("handles", ".sel: no handle", deform(), RUN, ["handle"], {"tube.sel": SEL.replace("2", "1")})
+case("handles", ".def: 3 rows", deform(), RUN, ["tube.def"], {"tube.def": "1 0 0 0\n0 1 0 0\n0 0 1 0\n"})
+case("handles", ".def: NaN entry", deform(), RUN, ["tube.def", "nan"], {"tube.def": DEF.replace("0.5", "nan")})
+case("handles", ".def: overflowing entry (was 'contains NaN')", deform(), RUN, ["tube.def", "1e400"],
+     {"tube.def": DEF.replace("0.5", "1e400")})
+case("handles", ".def: a translation of 1e300 (was 'contains NaN' in the engine)", deform(), RUN,
+     ["frame 0", "reaches 1e+300", "overflow"], {"tube.def": DEF.replace("0.5", "1e300")})
+case("handles", ".def: a scale of 1e200", deform(), RUN, ["frame 0", "reaches", "overflow"],
+     {"tube.def": "1e200 0 0 0\n0 1e200 0 0\n0 0 1e200 0\n0 0 0 1\n"})
+case("handles", ".def: extra data", deform(), RUN, ["tube.def", "unexpected data"], {"tube.def": DEF + "7\n"})
+case("handles", ".id: negative group for linear proxies", deform("--linear-groups", "{W}/g.id", small=NO_LINEAR), RUN,
+     ["g.id", "vertex 0 has id -1", "must be >= 0"], {"g.id": "-1\n" * NV})
+case("handles", ".id: wrong count", deform("--rotational-clusters", "{W}/g.id", small=NO_ROTATIONAL), RUN, ["g.id", "expected"],
+     {"g.id": "0\n" * (NV - 1)})
+case("handles", ".anim: negative header count", ["deform", "{W}/tube.off", "--anim", "{W}/a.anim"] + SMALL[:4],
+     RUN, ["a.anim", "negative"], {"a.anim": "1 -1 %d 1 0 0 0\n" % NV})
+case("handles", ".anim: weights_per_handle not the vertex count", ["deform", "{W}/tube.off", "--anim", "{W}/a.anim"]
+     + SMALL[:4], RUN, ["a.anim"], {"a.anim": "1 1 3 1 0 0 0\n1 0 0\n0 0 0\n"})
+
+# JSON scenes.
+case("scenes", "syntax error", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "syntax"],
+     {"s.json": '{"mesh": "tube.off",}'})
+case("scenes", "duplicate key", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "duplicate key", "mesh"],
+     {"s.json": '{"mesh": "tube.off", "mesh": "other.off"}'})
+case("scenes", "unknown key", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "unknown key 'meshes'"],
+     {"s.json": '{"mesh": "tube.off", "meshes": 1}'})
+case("scenes", "vertex out of range", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "out of range"],
+     {"s.json": scene(', "handles": [{"vertices": [9999], "targets": [[[0, 0, 0]]]}]')})
+case("scenes", "missing mesh file", ["deform", "--scene", "{W}/s.json"], RUN, ["none.off"],
+     {"s.json": '{"mesh": "none.off"}'})
+case("scenes", "BOM before the object is read", ["deform", "--scene", "{W}/s.json", "--frames", "1"], RUN,
+     ["s.json"], {"s.json": BOM + '{"mesh": "tube.off", "meshes": 1}'})
+
+# Handles that cannot all hold, proxies the scene asks for.
+PATCH = '"patches": [{"type": "fixed", "vertices": [0, 1, 2, 3, 4, 5, 6, 7]}]'
+TWICE = ', %s, "handles": [{"vertices": [44], "targets": [[[1, 0, 5]]]}, {"vertices": [44], "targets": [[[3, 0, 5]]]}]'
+case("scenes", "a vertex held at two places", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "vertex 44 is held at two places", "point handles 0 and 1", "bounding-box diagonals apart"],
+     {"s.json": scene(TWICE % PATCH)})
+case("scenes", "a fixed vertex moved by a handle", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "vertex 3 is in fixed patch 0", "point handle 0 moves it"],
+     {"s.json": scene(', %s, "handles": [{"vertices": [3], "targets": [[[1, 0, 5]]]}]' % PATCH)})
+case("scenes", "a group handle with all-zero weights", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "/handles/0/group", "every weight is 0"],
+     {"s.json": scene(', %s, "handles": [{"group": [[44, 0], [45, 0.0]], "targets": [[[1, 0, 5]]]}]' % PATCH)})
+case("scenes", "an affine patch count", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "/proxies/affine", "an .id file, not a count"],
+     {"s.json": scene(', "proxies": {"affine": 3}, %s' % PATCH)})
+case("scenes", "proxy counts are used (were ignored)", ["deform", "--scene", "{W}/s.json"], 0, [],
+     {"s.json": scene(', "proxies": {"linear": 9, "rotational": 3}, %s, "handles": [{"vertices": [44], '
+                      '"targets": [[[1, 0, 5]]]}]' % PATCH)}, stdout_words=["7 linear / 3 rotational proxies"])
+HELD = ', "proxies": {"linear": 9}, %s, "handles": [{"vertices": [40, 41, 42, 43, 44, 45, 46, 47], "targets": [[%s]]}]' % (
+    PATCH, ", ".join("[%d, %d, 9]" % (i % 3, i % 2) for i in range(8)))
+case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}/s.json"], 0,
+     ["warning", "least-squares sense"], {"s.json": scene(HELD)})
+case("scenes", "least-squares handles with --strict are an error", ["deform", "--scene", "{W}/s.json", "--strict"],
+     RUN, ["--strict", "constraints-least-squares"], {"s.json": scene(HELD)})
+
+# Matrix Market inputs of `qpr qp`.
+case("matrix", "2^31 x 2^31 header (was std::bad_alloc)", qp(H="{W}/h.mtx"), RUN,
+     ["h.mtx:2", "2147483648 rows", "more than a file of"],
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n2147483648 2147483648 1\n1 1 1\n"}, max_seconds=3)
+case("matrix", "2^28 rows (was 3 GB and 9 s)", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "268435456 rows"],
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n268435456 268435456 1\n1 1 1\n"}, max_seconds=3)
+case("matrix", "more entries than the file holds", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "cannot fit"],
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n4 4 1000000000\n1 1 1\n"}, max_seconds=3)
+case("matrix", "dense array larger than the file", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "cannot fit"],
+     {"h.mtx": "%%MatrixMarket matrix array real general\n100000 100000\n1\n"}, max_seconds=3)
+case("matrix", "NaN value", qp(H="{W}/h.mtx"), RUN, ["h.mtx:3", "not finite"], {"h.mtx": H.replace("1 1 1", "1 1 nan")})
+case("matrix", "duplicate entry", qp(H="{W}/h.mtx"), RUN, ["h.mtx", "duplicate entry (2, 2)"],
+     {"h.mtx": H.replace("4 4 4", "4 4 5") + "2 2 1\n"})
+case("matrix", "not symmetric", qp(H="{W}/h.mtx"), RUN, ["h.mtx", "not symmetric"],
+     {"h.mtx": H.replace("symmetric", "general").replace("4 4 4", "4 4 5") + "1 2 1\n"})
+case("matrix", "wrong header", qp(H="{W}/h.mtx"), RUN, ["h.mtx:1", "%%MatrixMarket"], {"h.mtx": "hello\n"})
+case("matrix", "row out of range", qp(H="{W}/h.mtx"), RUN, ["h.mtx", "row 9 out of range"],
+     {"h.mtx": H.replace("4 4 1", "9 4 1")})
+case("matrix", "b of the wrong size", qp(), RUN, ["b_d0.mtx", "expected 1 rows, got 2"],
+     {"dem/b_d0.mtx": "%%MatrixMarket matrix array real general\n2 1\n1\n1\n"})
+case("matrix", "manifest: duplicate demand names", qp(demands="{W}/m.json"), RUN,
+     ["m.json", "duplicate", "'d'"],
+     {"m.json": '{"demands": [{"name": "d", "A": "dem/A_d0.mtx", "b": "dem/b_d0.mtx"},'
+                ' {"name": "d", "A": "dem/A_d0.mtx", "b": "dem/b_d0.mtx"}]}'})
+case("matrix", "manifest: duplicate JSON key", qp(demands="{W}/m.json"), RUN, ["m.json", "/demands/0: duplicate key 'b'"],
+     {"m.json": '{"demands": [{"name": "d", "A": "dem/A_d0.mtx", "b": "dem/b_d0.mtx", "b": "x.mtx"}]}'})
+case("matrix", "manifest: missing b", qp(demands="{W}/m.json"), RUN, ["m.json", "missing \"b\""],
+     {"m.json": '{"demands": [{"name": "d", "A": "dem/A_d0.mtx"}]}'})
+case("matrix", "manifest: syntax error", qp(demands="{W}/m.json"), RUN, ["m.json", "parse error"],
+     {"m.json": '{"demands": [}'})
+INCONSISTENT = {"dem/A_d0.mtx": "%%MatrixMarket matrix coordinate real general\n4 2 2\n2 1 1\n2 2 1\n",
+                "dem/b_d0.mtx": "%%MatrixMarket matrix array real general\n2 1\n1\n2\n"}
+case("matrix", "inconsistent demand is a warning on stderr (was only in the JSON)", qp(), 0,
+     ["warning", "demand 'd0'", "constraints-least-squares"], INCONSISTENT)
+case("matrix", "inconsistent demand with --strict fails", qp("--strict"), 3,
+     ["error", "demand 'd0'", "constraints-least-squares"], INCONSISTENT)
+case("matrix", "demand directory without demands", qp(demands="{W}/empty"), RUN, ["empty", "no demands"],
+     {"empty/readme.txt": "x"})
+
+# ---------------------------------------------------------------- writers
+# Each writer against /dev/full, a missing directory and a file-size limit:
+# non-zero exit, the message, the earlier file intact, no temporary left.
+
+WRITERS = [
+    # (name, args with {OUT}, extension, message words of the failure)
+    ("deform --out .off", deform("--out", "{OUT}"), ".off"),
+    ("deform --out .obj", deform("--out", "{OUT}"), ".obj"),
+    ("deform --out .ply", deform("--out", "{OUT}"), ".ply"),
+    ("deform --report", deform("--report", "{OUT}"), ".json"),
+    ("deform --cache", deform("--cache", "{OUT}"), ".qpr"),
+    ("qp --report", qp("--report", "{OUT}"), ".json"),
+    ("theorem --json", ["theorem", "--trials", "10", "--json", "{OUT}"], ".json"),
+    ("theorem --csv", ["theorem", "--trials", "10", "--csv", "{OUT}"], ".csv"),
+    ("theorem --plot", ["theorem", "--trials", "10", "--plot", "{OUT}"], ".svg"),
+    ("demo --report", ["demo", "--frames", "1", "--out", "{W}/demo", "--report", "{OUT}"], ".json"),
+    ("compare --report", ["compare", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL[:4] +
+     ["--reference", "local-global", "--out-dir", "{W}/cmp", "--report", "{OUT}"], ".json"),
+]
+EARLIER = "earlier contents\n"
+for name, args, ext in WRITERS:
+    # Mesh writers pick the format by extension: /dev/full through a link "full.off".
+    CASES.append(dict(group="writers", name=name + " to /dev/full",
+                      args=[a.replace("{OUT}", "{W}/full" + ext) for a in args],
+                      code=3 if name.startswith("theorem") else RUN, words=["full" + ext, "No space left on device"],
+                      files={}, max_seconds=None, stdout_words=[], links={"full" + ext: "/dev/full"}))
+    case("writers", name + " into a missing directory",
+         [a.replace("{OUT}", "{W}/missing/out" + ext) for a in args], 3 if name.startswith("theorem") else RUN,
+         ["missing/out" + ext, "does not exist"])
+    CASES.append(dict(group="writers", name=name + " under a file-size limit", args=[a.replace("{OUT}", "{W}/out" + ext)
+                                                                                    for a in args],
+                      code=3 if name.startswith("theorem") else RUN,
+                      # demo and compare write meshes first: the limit stops the run there.
+                      words=["File too large"] + ([] if name.startswith(("demo", "compare")) else ["out" + ext]),
+                      files={"out" + ext: EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[],
+                      fsize=16, intact="out" + ext))
+# qp --out X_<name>.mtx: a file-size limit keeps the earlier solution.
+CASES.append(dict(group="writers", name="qp --out under a file-size limit", args=qp("--out", "{W}/sol"),
+                  code=RUN, words=["X_d0.mtx", "File too large"], files={"sol/X_d0.mtx": EARLIER + "x" * 4096},
+                  max_seconds=None, stdout_words=[], fsize=16, intact="sol/X_d0.mtx"))
+# A run whose --report directory is missing must not rewrite --out first.
+CASES.append(dict(group="writers", name="deform: missing --report directory leaves --out untouched",
+                  args=deform("--out", "{W}/keep.off", "--report", "{W}/missing/r.json"), code=RUN,
+                  words=["missing/r.json", "does not exist"], files={"keep.off": EARLIER}, max_seconds=None,
+                  stdout_words=[], intact="keep.off"))
+
+# ---------------------------------------------------------------- runner
+
+
+def temporaries(root):
+    found = []
+    for d, _, names in os.walk(root):
+        found += [os.path.join(d, n) for n in names if re.match(r"^\..*\.tmp\.\d+\.\d+$", n) or n.endswith(".tmp")]
+    return found
+
+
+def run_case(qpr, c):
+    work = tempfile.mkdtemp(prefix="qpr_bad_input_")
+    try:
+        files = base_files()
+        files.update(c["files"])
+        for rel, text in files.items():
+            path = os.path.join(work, rel)
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            with open(path, "w", encoding="utf-8", newline="") as f:
+                f.write(text)
+        for rel, target in c.get("links", {}).items():
+            os.symlink(target, os.path.join(work, rel))
+        args = [qpr] + [a.replace("{W}", work) for a in c["args"]]
+        fsize = c.get("fsize")
+
+        def limit():
+            if fsize:
+                signal.signal(signal.SIGXFSZ, signal.SIG_DFL)  # qpr itself must ignore it
+                resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+
+        start = time.monotonic()
+        p = subprocess.run(args, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=limit,
+                           timeout=300)
+        seconds = time.monotonic() - start
+        err = p.stderr.decode("utf-8", "replace")
+        out = p.stdout.decode("utf-8", "replace")
+        problems = []
+        if p.returncode != c["code"]:
+            problems.append("exit code %d, expected %d" % (p.returncode, c["code"]))
+        for w in c["words"]:
+            if w.replace("{W}", work) not in err:
+                problems.append("stderr lacks %r" % w)
+        for w in c["stdout_words"]:
+            if w not in out:
+                problems.append("stdout lacks %r" % w)
+        if c["code"] != 0 and len(err) > 2000:
+            problems.append("stderr is %d characters long" % len(err))
+        if c["max_seconds"] and seconds > c["max_seconds"]:
+            problems.append("took %.1f s (at most %g)" % (seconds, c["max_seconds"]))
+        if c.get("intact"):
+            with open(os.path.join(work, c["intact"]), encoding="utf-8") as f:
+                if f.read() != files[c["intact"]]:
+                    problems.append("the earlier %s was changed" % c["intact"])
+        left = temporaries(work)
+        if left:
+            problems.append("temporary files left: %s" % ", ".join(os.path.relpath(t, work) for t in left))
+        return problems, " ".join(args)[:300], p.returncode, err[-1500:]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("qpr")
+    ap.add_argument("--group", action="append")
+    ap.add_argument("--list", action="store_true")
+    a = ap.parse_args()
+    cases = [c for c in CASES if not a.group or c["group"] in a.group]
+    if a.list:
+        for c in cases:
+            print("%-8s %s" % (c["group"], c["name"]))
+        print("%d cases" % len(cases))
+        return 0
+    failed = 0
+    for c in cases:
+        problems, cmd, code, err = run_case(a.qpr, c)
+        if problems:
+            failed += 1
+            print("FAIL [%s] %s: %s\n  $ %s\n  exit %d, stderr:\n    %s" %
+                  (c["group"], c["name"], "; ".join(problems), cmd, code, err.strip().replace("\n", "\n    ")))
+        else:
+            print("ok   [%s] %s" % (c["group"], c["name"]))
+    print("%d of %d cases passed" % (len(cases) - failed, len(cases)))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
