@@ -140,6 +140,16 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   return summary;
 }
 
+FrameSummary Deformer::frame(const HandleTargets& targets, Eigen::Map<Vertices> out) {
+  if (state_->ready) check_size("Deformer::frame: out rows (vertices)", state_->model.n, out.rows());
+  FrameSummary summary = frame(targets, nullptr);
+  const Timer t;
+  reconstruct_points(state_->model.basis, state_->pose.wf, state_->pose.r0.cast<float>(), out);
+  summary.reconstruct_seconds = t.seconds();
+  summary.total_seconds += summary.reconstruct_seconds;
+  return summary;
+}
+
 void Deformer::reset_pose() {
   Pose& pose = state_->pose;
   for (Index i = 0; i < state_->model.d; ++i) Eigen::Map<Eigen::Matrix3d>(pose.S.data() + 9 * i).setIdentity();
