@@ -158,10 +158,13 @@ PointHandle point_handle_arg(py::handle item, size_t index) {
 
 void bind_handles(py::module_& m) {
   py::class_<PointHandle>(m, "PointHandle", "One vertex, or the weighted point Σ w_i v_i of a group.")
-      .def(py::init([](std::vector<Index> vertices, std::vector<double> weights) {
-             return PointHandle{std::move(vertices), std::move(weights)};
-           }),
-           py::arg("vertices"), py::arg("weights") = std::vector<double>{})
+      .def(
+          py::init([](std::vector<Index> vertices, std::vector<double> weights) {
+            return PointHandle{std::move(vertices), std::move(weights)};
+          }),
+          py::arg("vertices"), py::arg("weights") = std::vector<double>{},
+          "PointHandle(vertices, weights=[])\n\nvertices: g vertex indices; weights: g weights (the point Σ w_i v_i),\n"
+          "or [] for a single vertex.")
       .def_readwrite("vertices", &PointHandle::vertices, "Vertex indices (g).")
       .def_readwrite("weights", &PointHandle::weights, "g weights, or [] for a single vertex.")
       .def("__repr__", [](const PointHandle& h) {
@@ -172,18 +175,21 @@ void bind_handles(py::module_& m) {
                       "The handle set of the on-site step: point handles and prescribed patches.\n\n"
                       "Handles(points=[...], patches=[...]): each point an int (a vertex), a pair\n"
                       "(vertices, weights) or a PointHandle; patches are patch indices.")
-      .def(py::init([](py::iterable points, std::vector<Index> patches) {
-             Handles handles;
-             size_t i = 0;
-             for (py::handle item : points) {
-               handles.points.push_back(py::isinstance<PointHandle>(item) ? item.cast<PointHandle>()
-                                                                          : point_handle_arg(item, i));
-               ++i;
-             }
-             handles.patches = std::move(patches);
-             return handles;
-           }),
-           py::arg("points") = py::list(), py::arg("patches") = std::vector<Index>{})
+      .def(
+          py::init([](py::iterable points, std::vector<Index> patches) {
+            Handles handles;
+            size_t i = 0;
+            for (py::handle item : points) {
+              handles.points.push_back(py::isinstance<PointHandle>(item) ? item.cast<PointHandle>()
+                                                                         : point_handle_arg(item, i));
+              ++i;
+            }
+            handles.patches = std::move(patches);
+            return handles;
+          }),
+          py::arg("points") = py::list(), py::arg("patches") = std::vector<Index>{},
+          "Handles(points=[], patches=[])\n\npoints: h items, each a vertex index, a pair (vertices (g,), weights (g,))\n"
+          "or a PointHandle; patches: s indices of the prescribed (non-fixed) patches.")
       .def_readwrite("points", &Handles::points, "List of PointHandle.")
       .def_readwrite("patches", &Handles::patches, "Prescribed patch indices.")
       .def("__repr__", [](const Handles& h) {
@@ -200,7 +206,9 @@ void bind_handles(py::module_& m) {
              return t;
            }),
            py::arg("points") = py::array_t<double>(std::vector<py::ssize_t>{0, 3}),
-           py::arg("patch_transforms") = std::vector<Eigen::Matrix<double, 3, 4>>{})
+           py::arg("patch_transforms") = std::vector<Eigen::Matrix<double, 3, 4>>{},
+           "HandleTargets(points=(0, 3) array, patch_transforms=[])\n\npoints: (h, 3), one row per point handle;\n"
+           "patch_transforms: s arrays (3, 4) [A | t], one per prescribed patch. Copied.")
       .def_readwrite("points", &HandleTargets::points, "(h, 3)")
       .def_readwrite("patch_transforms", &HandleTargets::patch_transforms, "List of (3, 4) [A | t].");
 }
@@ -261,6 +269,7 @@ void bind_model(py::module_& m) {
       [](const DeformableMesh& model, const Handles& handles, const HandleTargets& targets, py::handle deformed) {
         const auto Vp = matrix_view<double>("deformed", deformed, {model.V.rows(), "n"}, {3, "3"}, false);
         const Vertices copy = Vp;
+        py::gil_scoped_release release;
         return handle_residual(model, handles, targets, copy);
       },
       py::arg("model"), py::arg("handles"), py::arg("targets"), py::arg("deformed"),
@@ -533,6 +542,7 @@ void bind_deformer_class(py::module_& m) {
           "reconstruction_basis",
           [](PyDeformer& s) {
             const auto lock = s.lock();
+            py::gil_scoped_release release;  // 3n·p floats
             return Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>(
                 s.deformer.reconstruction_basis());
           },
@@ -547,6 +557,7 @@ void bind_deformer_class(py::module_& m) {
             const auto lock = s.lock();
             const auto Vp = matrix_view<double>("deformed", deformed, {s.model.V.rows(), "n"}, {3, "3"}, false);
             const Vertices copy = Vp;
+            py::gil_scoped_release release;
             return handle_residual(s.model, s.handles, s.targets, copy);
           },
           py::arg("deformed"),
