@@ -144,6 +144,14 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size) {
   return py::reinterpret_borrow<py::array_t<Scalar>>(out);
 }
 
+void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
+  if (summary.usable()) return;
+  py::object error = py::module_::import("qpreduce").attr("NumericalError")(summary.status, summary.message);
+  error.attr("summary") = summary_object;
+  PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
+  throw py::error_already_set();
+}
+
 #define QPREDUCE_PYTHON_ARGUMENTS(Scalar)                                                          \
   template SparseMatrix<Scalar> sparse_arg<Scalar>(const char*, py::handle, Dim, Dim);             \
   template SparseMatrix<Scalar> square_sparse_arg<Scalar>(const char*, py::handle);                 \

@@ -76,6 +76,10 @@ RowMap<Scalar> matrix_view(const char* name, py::handle value, Dim rows, Dim col
 template <typename Scalar>
 py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size);
 
+// Raises qpreduce.NumericalError(status, message) with .summary = `summary_object`
+// (the Python view of `summary`) unless summary.usable().
+void raise_if_unusable(const Outcome& summary, py::handle summary_object);
+
 // Options argument: the default T{} for None, else a T (TypeError otherwise).
 template <typename T>
 T options_arg(const char* name, py::handle value) {

@@ -236,7 +236,14 @@ DeformableMesh model_arg(py::handle V, py::handle elements, py::handle clusters,
     model.patch_of_vertex =
         convert.attr("as_labels")("patch_of_vertex", patch_of_vertex, n, "n").cast<std::vector<int>>();
   }
-  if (!patch_types.is_none()) model.patch_types = patch_types.cast<std::vector<PatchType>>();
+  if (!patch_types.is_none()) {
+    try {
+      model.patch_types = patch_types.cast<std::vector<PatchType>>();
+    } catch (const py::cast_error&) {
+      throw py::type_error("patch_types: expected a list of qpreduce.deform.PatchType, got " +
+                           py::repr(patch_types).cast<std::string>());
+    }
+  }
   return model;
 }
 
@@ -277,16 +284,9 @@ void bind_model(py::module_& m) {
       "Largest distance between where the handles are in deformed (n, 3) and their targets.");
 }
 
-void raise_numerical(const Outcome& summary, py::object summary_object) {
-  py::object error = py::module_::import("qpreduce").attr("NumericalError")(summary.status, summary.message);
-  error.attr("summary") = std::move(summary_object);
-  PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
-  throw py::error_already_set();
-}
-
 template <typename Summary>
 Summary checked(Summary summary) {
-  if (!summary.usable()) raise_numerical(summary, py::cast(summary));
+  if (!summary.usable()) raise_if_unusable(summary, py::cast(summary));
   return summary;
 }
 

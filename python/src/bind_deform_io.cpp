@@ -219,6 +219,7 @@ void bind_references(py::module_& m) {
         py::gil_scoped_release release;
         summary = solver(model, handles, targets, opts, &solution, init);
       }
+      raise_if_unusable(summary, py::cast(summary));
       return py::make_tuple(solution.V, summary);
     };
   };
@@ -226,7 +227,8 @@ void bind_references(py::module_& m) {
         py::arg("options") = py::none(), py::arg("initial") = py::none(),
         "solve_local_global(model, handles, targets, options=None, initial=None) -> (V′ (n, 3), ReferenceSummary)\n\n"
         "Full-space Sorkine–Alexa local-global ARAP with the deformer's constraints (hard), from the rest\n"
-        "pose or initial (n, 3). Releases the GIL.");
+        "pose or initial (n, 3). Raises NumericalError when the solve fails (e.g. a singular global step).\n"
+        "Releases the GIL.");
   m.def("solve_ceres_reference", solve(&solve_ceres_reference), py::arg("model"), py::arg("handles"),
         py::arg("targets"), py::arg("options") = py::none(), py::arg("initial") = py::none(),
         "solve_ceres_reference(model, handles, targets, options=None, initial=None) -> (V′, ReferenceSummary)\n\n"

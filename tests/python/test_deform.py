@@ -294,6 +294,8 @@ def test_bad_meshes_name_the_argument_and_shape():
     expect(ValueError, r"^clusters: expected shape \(n,\) = \(322,\)",
            lambda: deform.Deformer(V, F, clusters=np.zeros(5, dtype=int)))
     expect(TypeError, r"^options: expected DeformerOptions", lambda: deform.Deformer(V, F, options=3))
+    expect(TypeError, r"^patch_types: expected a list of qpreduce.deform.PatchType",
+           lambda: deform.Model(V, F, patch_of_vertex=np.zeros(len(V), dtype=int), patch_types=["fixed"]))
     expect(ValueError, "", lambda: deform.Deformer(V, F + len(V)).precompute())  # indices out of range
     expect(ValueError, "DeformerOptions", lambda: deform.Deformer(V, F, deform.DeformerOptions(iterations=0)).precompute())
     expect(TypeError, r"^progress: expected a callable", lambda: deform.Deformer(V, F).precompute(progress=1))
@@ -389,3 +391,13 @@ def test_every_public_function_has_a_docstring_beyond_its_signature():
                     and len(lines) < 2:
                 missing.append(full)
     assert not missing, missing
+
+
+def test_a_failed_reference_solve_raises_numerical_error():
+    _, scenario = make_deformer(frames=1)
+    # The handle patch left free: its flat cap does not determine its affine
+    # map (the normal column), so the global step is singular.
+    with pytest.raises(qpreduce.NumericalError) as raised:
+        deform.solve_local_global(scenario.model, deform.Handles(), deform.HandleTargets())
+    assert raised.value.status == qpreduce.Status.NumericalFailure
+    assert raised.value.summary.status == raised.value.status and raised.value.message
