@@ -14,7 +14,9 @@
 
 #include <pybind11/stl.h>
 
+#include <atomic>
 #include <mutex>
+#include <thread>
 
 namespace qpreduce::python {
 
@@ -33,8 +35,19 @@ struct PyDeformer {
   HandleTargets targets;
   FrameSummary last_frame;
   std::mutex mutex;
+  // The thread running precompute, while it calls the progress callable:
+  // a call from there would wait for the lock its own thread holds.
+  std::atomic<std::thread::id> reporting{};
 
-  std::unique_lock<std::mutex> lock() { return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex); }
+  void refuse_reentry() const {
+    if (reporting.load() == std::this_thread::get_id()) {
+      throw py::value_error("Deformer: called from its own precompute's progress callable");
+    }
+  }
+  std::unique_lock<std::mutex> lock() {
+    refuse_reentry();
+    return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex);
+  }
 };
 
 // Thrown through precompute when the progress callable raised; the Python
@@ -386,16 +399,23 @@ void bind_deformer_class(py::module_& m) {
           "precompute",
           [](PyDeformer& self, py::handle progress) {
             const ProgressFn fn = progress_arg(progress);
+            self.refuse_reentry();
             PrecomputeSummary summary;
             {
               py::gil_scoped_release release;
               std::lock_guard<std::mutex> lock(self.mutex);
+              self.reporting = std::this_thread::get_id();
               try {
                 summary = self.deformer.precompute(self.model, self.options, fn);
               } catch (const ProgressRaised&) {
+                self.reporting = std::thread::id{};
                 py::gil_scoped_acquire gil;
                 throw py::error_already_set();
+              } catch (...) {
+                self.reporting = std::thread::id{};
+                throw;
               }
+              self.reporting = std::thread::id{};
             }
             return checked(summary);
           },
@@ -403,11 +423,13 @@ void bind_deformer_class(py::module_& m) {
           "precompute(progress=None) -> PrecomputeSummary\n\n"
           "Clusters, proxies, one factorization and the reduction (O(n) memory for B, 3n×p float).\n"
           "progress(stage: str, fraction: float) is called between stages (an exception it raises\n"
-          "aborts the precompute and leaves the deformer as it was). Raises ValueError on a bad model\n"
+          "aborts the precompute and leaves the deformer as it was; a call of this deformer from it\n"
+          "raises ValueError: the precompute holds its lock). Raises ValueError on a bad model\n"
           "or options, NumericalError when a numerical step fails. Releases the GIL.")
       .def(
           "save",
           [](PyDeformer& self, const std::string& path) {
+            self.refuse_reentry();
             py::gil_scoped_release release;
             std::lock_guard<std::mutex> lock(self.mutex);
             self.deformer.save(path);
@@ -418,6 +440,7 @@ void bind_deformer_class(py::module_& m) {
       .def(
           "load",
           [](PyDeformer& self, const std::string& path) {
+            self.refuse_reentry();
             PrecomputeSummary summary;
             {
               py::gil_scoped_release release;
@@ -432,6 +455,7 @@ void bind_deformer_class(py::module_& m) {
       .def(
           "set_handles",
           [](PyDeformer& self, py::handle handles, py::handle patches, py::handle options) {
+            self.refuse_reentry();
             Handles h = handles_arg(handles, patches);
             const auto opts = options_arg<ConstraintOptions>("options", options);
             ConstraintSummary summary;

@@ -117,6 +117,16 @@ def test_a_progress_callback_that_raises_aborts_precompute():
     assert not deformer.ready
 
 
+def test_a_progress_callback_calling_its_deformer_is_refused_not_deadlocked():
+    V, F, _ = small_cylinder()
+    deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS))
+    with pytest.raises(ValueError, match="its own precompute's progress"):
+        deformer.precompute(progress=lambda stage, fraction: deformer.ready)
+    assert not deformer.ready  # the lock is free again
+    other = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS))
+    assert deformer.precompute(progress=lambda stage, fraction: other.ready).ok()
+
+
 def test_frame_writes_the_callers_array_without_a_copy():
     deformer, scenario = make_deformer()
     n = deformer.vertex_count
