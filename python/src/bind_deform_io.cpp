@@ -168,6 +168,19 @@ void bind_scenarios(py::module_& m) {
       ".def path or (4, 4) matrix. A Fixed patch and an Affine handle patch moved by def over\n"
       "`frames` frames from rest.");
   m.def(
+      "anim_scenario",
+      [](py::handle V, py::handle F, const std::string& path) {
+        const Vertices rest = vertices_arg("V", V);
+        Triangles triangles = elements_arg<Triangles>("F", F);
+        Scenario sc = without_gil([&] { return scenario_from_anim(rest, read_anim(path)); });
+        sc.model.F = std::move(triangles);
+        return sc;
+      },
+      py::arg("V"), py::arg("F"), py::arg("path"),
+      "anim_scenario(V, F, path) -> Scenario\n\n"
+      "The paper demo's .anim: one point handle per animation handle (its weighted vertices), one frame\n"
+      "per recorded point list. V (n, 3), F (m, 3); IoError when the file does not fit the mesh.");
+  m.def(
       "read_scene",
       [](const std::string& path) { return without_gil([&] { return scenario_from_scene(read_scene(path)); }); },
       py::arg("path"),

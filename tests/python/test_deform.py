@@ -278,6 +278,23 @@ def test_json_scene(tmp_path):
     assert np.allclose(Vp[tip], [0, 2, 11], atol=1e-4)
 
 
+def test_anim_scenario(tmp_path):
+    V, F, _ = small_cylinder()
+    base, tip = int(np.argmin(V[:, 2])), int(np.argmax(V[:, 2]))
+    weights = np.zeros((2, len(V)))
+    weights[0, base] = weights[1, tip] = 1.0
+    targets = [[V[base], V[tip] + [0.5, 0, 0]], [V[base], V[tip] + [1.0, 0, -0.5]]]
+    text = "2 2 %d 2 0 0 0\n" % len(V)
+    text += "\n".join(" ".join(repr(w) for w in row) for row in weights) + "\n"
+    text += "\n".join(" ".join(repr(float(x)) for p in frame for x in p) for frame in targets) + "\n"
+    (tmp_path / "c.anim").write_text(text)
+    scenario = deform.anim_scenario(V, F, str(tmp_path / "c.anim"))
+    assert len(scenario.handles.points) == 2 and len(scenario.frames) == 2
+    assert np.allclose(scenario.frames[1].points, targets[1])
+    with pytest.raises(deform.IoError, match="c.anim"):
+        deform.anim_scenario(V[:100], F[:10], str(tmp_path / "c.anim"))
+
+
 # ---- errors: each bad input raises the named exception ----
 
 
