@@ -79,7 +79,8 @@ def main(argv=None):
 
         t = time.perf_counter()
         KKT = scipy.sparse.bmat([[H, A], [A.T, None]], format="csc")
-        X_full = scipy.sparse.linalg.spsolve(KKT, np.concatenate([np.zeros(n), b]))[:n]
+        # MMD on AᵀA + A: the KKT matrix is symmetric (the default COLAMD fills far more).
+        X_full = scipy.sparse.linalg.spsolve(KKT, np.concatenate([np.zeros(n), b]), permc_spec="MMD_AT_PLUS_A")[:n]
         full = time.perf_counter() - t
 
         error = np.linalg.norm(X - X_full) / np.linalg.norm(X_full)
