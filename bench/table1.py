@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The paper's Table 1 from bench_deform's JSON output, beside the paper's numbers.
 
-Usage: bench/table1.py RESULT.json [RECON.json]
+Usage: bench/table1.py RESULT.json [RECON.json] [--chart FIGURE.png]
 
 RESULT.json comes from
     build/bin/bench_deform --benchmark_out=RESULT.json --benchmark_out_format=json
@@ -18,6 +18,8 @@ back to back), and the issue-3 targets, each marked met / missed.
 With RECON.json (a second run, e.g.
 --benchmark_filter='^(Reconstruction|StreamRead)'), the reconstruction and
 streaming-read figures come from it (ReconstructionVsRead included).
+With --chart, a matplotlib figure of the same measurements beside the
+paper's (iteration, frame, precompute, OP; log scale) is written too.
 """
 import json
 import sys
@@ -36,7 +38,33 @@ PAPER = {
 }
 
 
-def main(path, recon_path=None):
+def chart(path, measured):
+    """Grouped bars, ours against the paper's, one panel per Table 1 column.
+    measured: [(model, iteration µs, frame ms, precompute s, OP ms)]."""
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+
+    columns = [("iteration (µs)", 1, 0), ("frame (ms)", 2, 2), ("precompute (s)", 3, 3), ("OP (ms)", 4, 5)]
+    models = [m[0] for m in measured]
+    fig, axes = plt.subplots(1, len(columns), figsize=(4.2 * len(columns), 4.2))
+    for ax, (title, ours, theirs) in zip(axes, columns):
+        x = range(len(models))
+        ax.bar([i - 0.2 for i in x], [m[ours] for m in measured], 0.4, label="qpreduce (this machine)")
+        ax.bar([i + 0.2 for i in x], [PAPER[m[0]][theirs] for m in measured], 0.4, label="paper (i7-2670QM)")
+        ax.set_xticks(list(x))
+        ax.set_xticklabels(models, rotation=45, ha="right", fontsize=8)
+        lowest = min(min(m[ours] for m in measured), min(PAPER[m[0]][theirs] for m in measured))
+        ax.set(yscale="log", title=title, ylim=(lowest / 3, None))  # every bar visibly above the axis
+    axes[0].legend(fontsize=8)
+    fig.suptitle("Table 1: reduced ARAP deformer, ours against the paper's", fontweight="bold")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(path, recon_path=None, chart_path=None):
     runs = json.load(open(path))["benchmarks"]
     if recon_path:
         runs = [r for r in runs if not r["name"].startswith(("Reconstruction", "StreamRead"))]
@@ -52,7 +80,7 @@ def main(path, recon_path=None):
     print("| model | vertices | linear / rot. | iteration µs | reconstruction ms | stream read ms | recon ÷ read "
           "| frame ms | precompute s | peak GB | OP ms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    targets = []
+    targets, measured = [], []
     for model, paper in PAPER.items():
         row = rows.get(model)
         if not row or "Precompute" not in row:
@@ -72,6 +100,7 @@ def main(path, recon_path=None):
               f"| {it:.1f} ({paper[0]}) | {rec:.2f} ({paper[1]}) | {rd:.2f} | {ratio:.2f} "
               f"| {fr:.2f} ({paper[2]}) | {pre_s:.1f} ({paper[3]}) | {peak_gb:.2f} ({paper[4]}) "
               f"| {op:.2f} ({paper[5]}) |")
+        measured.append((model, it, fr, pre_s, op))
         targets.append((f"{model}: OP ≤ 1 ms", op, op <= 1))
         targets.append((f"{model}: reconstruction ≤ 1.3 × streaming read", ratio, ratio <= 1.3))
         if model == "BumpyPlane":
@@ -98,9 +127,19 @@ def main(path, recon_path=None):
     print("|---|---|---|")
     for name, value, ok in targets:
         print(f"| {name} | {value:.3g} | {'met' if ok else '**missed**'} |")
+    if chart_path and measured:
+        chart(chart_path, measured)
 
 
 if __name__ == "__main__":
-    if len(sys.argv) not in (2, 3):
+    args = sys.argv[1:]
+    chart_path = None
+    if "--chart" in args:
+        i = args.index("--chart")
+        if i + 1 >= len(args):
+            sys.exit(__doc__)
+        chart_path = args[i + 1]
+        del args[i : i + 2]
+    if len(args) not in (1, 2):
         sys.exit(__doc__)
-    main(*sys.argv[1:])
+    main(*args, chart_path=chart_path)

@@ -2,7 +2,7 @@
 """Quality study of the reduced ARAP deformer against full-space references.
 
 One command regenerates the measured tables of docs/quality.md (between the
-`<!-- quality_study:NAME -->` markers) and the figures docs/figures/quality_*.svg:
+`<!-- quality_study:NAME -->` markers) and the figures docs/figures/quality_*.png:
 
     python3 scripts/quality_study.py             # full study, serially, under `nice -n 10`
     python3 scripts/quality_study.py --quick     # smoke run: cylinder only, short settings,
@@ -11,8 +11,8 @@ One command regenerates the measured tables of docs/quality.md (between the
 Every number comes from `qpr compare --report` (reduced vs the full-space
 references) or `qpr deform --report` plus the vertex distance of its last pose
 to the reference mesh `qpr compare` wrote (sweeps: the reference is solved once
-per scenario, not once per setting). Only the Python standard library is used;
-the SVG plots are written by hand.
+per scenario, not once per setting). The figures are drawn with matplotlib
+(python3-matplotlib, scripts/plots.py).
 
 Runs are kept in the work directory (default /tmp/qpreduce-quality): with
 --resume a run whose command line is unchanged is not repeated.
@@ -32,7 +32,7 @@ import sys
 import time
 
 from quality_tables import TARGET_RATIO, TARGET_RMS, TARGET_SPEEDUP, fragments, label, short  # noqa: E402
-from svg_plot import PALETTE, svg_plot  # noqa: E402
+from plots import PALETTE, line_plot  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -447,22 +447,22 @@ class Study:
 
 
 # ---------------------------------------------------------------------------
-# Output: markdown fragments and SVG figures
+# Output: markdown fragments and the figures (matplotlib)
 # ---------------------------------------------------------------------------
 def figures(st, figdir):
     R = st.results
     made = []
     for what, xlabel, logx, fname, title in (
-            ("rot", "rotational proxies d", True, "quality_rotational_proxies.svg", "Rotational proxy sweep (Fig. 4)"),
-            ("lin", "linear proxies m (point handles)", True, "quality_linear_proxies.svg", "Linear proxy sweep"),
-            ("alpha", "α", True, "quality_alpha.svg", "α sweep (Fig. 3)")):
+            ("rot", "rotational proxies d", True, "quality_rotational_proxies.png", "Rotational proxy sweep (Fig. 4)"),
+            ("lin", "linear proxies m (point handles)", True, "quality_linear_proxies.png", "Linear proxy sweep"),
+            ("alpha", "α", True, "quality_alpha.png", "α sweep (Fig. 3)")):
         if what not in R:
             continue
         names = [short(k, n) for (k, n) in R[what]]
         ratio = {short(k, n): [(p["value"], p["ratio"]) for p in pts] for (k, n), pts in R[what].items()}
         rms = {short(k, n): [(p["value"], 100 * p["rms"]) for p in pts] for (k, n), pts in R[what].items()}
         path = os.path.join(figdir, fname)
-        svg_plot(path, title, xlabel, [("energy ratio (reduced / reference)", ratio, "auto"),
+        line_plot(path, title, xlabel, [("energy ratio (reduced / reference)", ratio, "auto"),
                                        ("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=logx,
                  hlines={0: TARGET_RATIO, 1: 100 * TARGET_RMS})
         made.append(path)
@@ -476,8 +476,8 @@ def figures(st, figdir):
                 names.append(nm)
                 styles[nm] = (PALETTE[si % len(PALETTE)], ii > 0)
                 rms[nm] = [(p["frames"], 100 * p["rms"]) for p in pts if p["iterations"] == it]
-        path = os.path.join(figdir, "quality_frames.svg")
-        svg_plot(path, "Frames to the pose (warm start)", "frames from rest to the pose",
+        path = os.path.join(figdir, "quality_frames.png")
+        line_plot(path, "Frames to the pose (warm start)", "frames from rest to the pose",
                  [("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=True, hlines={0: 100 * TARGET_RMS},
                  styles=styles)
         made.append(path)

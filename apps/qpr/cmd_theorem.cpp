@@ -7,7 +7,6 @@
 #include "app_support.h"
 #include "commands.h"
 #include "guard.h"
-#include "svg_plot.h"
 #include "validators.h"
 
 #include <qpreduce/atomic_file.h>
@@ -41,7 +40,7 @@ const std::vector<double> kEpsilons = {0.0, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 
 const std::vector<qpreduce::Index> kSizes = {40, 64, 100, 150};
 
 // The most trials one run accepts: every trial's record is kept for --csv
-// and --plot (a few hundred bytes each), and a million take hours already.
+// (a few hundred bytes each), and a million take hours already.
 constexpr int kMaxTrials = 1000000;
 
 // The subcommand's help line.
@@ -52,7 +51,7 @@ constexpr const char* kAbout =
 struct Options {
   int trials = 200;
   std::uint64_t seed = 1;
-  std::string json, csv, plot;
+  std::string json, csv;
 };
 
 struct Record {
@@ -166,66 +165,6 @@ std::string csv_table(const std::vector<Record>& records) {
   return s;
 }
 
-std::string plot_svg(const std::vector<Record>& records, const std::vector<gen::TheoremFamily>& families,
-                     const Stats& all) {
-  namespace svg = qpr::svg;
-  svg::Panel scatter;
-  scatter.title = "Theorem 4.10: true error vs bound";
-  scatter.note = "engine answer X*, ε > 0, ρ < 1; above the line the bound holds";
-  scatter.x = {"true error d_H(X*, X_min)", true};
-  scatter.y = {"bound (Eq. 39)", true};
-  scatter.legend = svg::Corner::BottomRight;
-  double lo = std::numeric_limits<double>::infinity(), hi = 0.0;
-  for (size_t f = 0; f < families.size(); ++f) {
-    svg::Series s{gen::to_string(families[f]), svg::palette(f), svg::Mark::Points, {}, {}};
-    for (const Record& r : records) {
-      const qpreduce::TheoremCheck& c = r.check;
-      if (r.family != families[f] || r.epsilon == 0.0 || c.status != TheoremStatus::Applies) continue;
-      if (!(c.practical_error > 0.0) || !(c.bound.bound > 0.0) || !std::isfinite(c.bound.bound)) continue;
-      s.x.push_back(c.practical_error);
-      s.y.push_back(c.bound.bound);
-      lo = std::min({lo, c.practical_error, c.bound.bound});
-      hi = std::max({hi, c.practical_error, c.bound.bound});
-    }
-    scatter.series.push_back(std::move(s));
-  }
-  if (hi > 0.0) {
-    const double dlo = std::pow(10.0, std::floor(std::log10(lo))), dhi = std::pow(10.0, std::ceil(std::log10(hi)));
-    scatter.x.lo = scatter.y.lo = dlo;
-    scatter.x.hi = scatter.y.hi = dhi;
-    scatter.series.push_back({"bound = error", "#333", svg::Mark::Line, {dlo, dhi}, {dlo, dhi}, true});
-  }
-
-  svg::Panel hist;
-  hist.title = "η = bound / error";
-  hist.note = fmt::format("{} trials with ε > 0, ρ < 1: median {:.3g}, min {:.3g}, max {:.3g}", all.eta.size(), all.eta_quantile(0.5),
-                          all.eta_min(), all.eta_max());
-  hist.x = {"η (log scale, 4 bins per decade)", true};
-  hist.y = {"trials", false};
-  hist.legend = svg::Corner::TopLeft;
-  if (!all.eta.empty()) {
-    constexpr int kBinsPerDecade = 4;
-    // The range reaches below η = 1 so that the reference line is visible.
-    const double emin = std::min(0.5, all.eta_min()), emax = std::max(10.0, all.eta_max());
-    const int b0 = static_cast<int>(std::floor(std::log10(emin) * kBinsPerDecade));
-    const int b1 = static_cast<int>(std::ceil(std::log10(emax) * kBinsPerDecade));
-    svg::Series bars{"trials", svg::palette(0), svg::Mark::Bars, {}, {}};
-    for (int b = b0; b <= b1; ++b) bars.x.push_back(std::pow(10.0, double(b) / kBinsPerDecade));
-    bars.y.assign(bars.x.size() - 1, 0.0);
-    for (double e : all.eta) {
-      const int b = static_cast<int>(std::floor(std::log10(e) * kBinsPerDecade)) - b0;
-      if (b >= 0 && b < static_cast<int>(bars.y.size())) bars.y[static_cast<size_t>(b)] += 1.0;
-    }
-    const double top = *std::max_element(bars.y.begin(), bars.y.end());
-    hist.y.hi = 1.3 * top;  // headroom for the legend
-    hist.x.lo = std::pow(10.0, std::floor(std::log10(emin)));
-    hist.x.hi = std::pow(10.0, std::ceil(std::log10(emax)));
-    hist.series.push_back(std::move(bars));
-    hist.series.push_back({"η = 1 (bound = error)", "#e15759", svg::Mark::Line, {1.0, 1.0}, {0.0, 1.3 * top}, true});
-  }
-  return svg::render({scatter, hist});
-}
-
 // The trials: groups over (family, size, seed), each sweeping kEpsilons with
 // one checker (H factored once). `first_failure` names the first failed trial.
 std::vector<Record> run_trials(const Options& opt, const std::vector<gen::TheoremFamily>& families,
@@ -294,7 +233,7 @@ void print_table(const Options& opt, const std::vector<gen::TheoremFamily>& fami
       all.galerkin_violations, all.theorem_violations, all.refined_violations);
 }
 
-// --json, --csv, --plot; false when one could not be written.
+// --json, --csv; false when one could not be written.
 bool write_files(const Options& opt, const std::vector<Record>& records,
                  const std::vector<gen::TheoremFamily>& families, std::map<gen::TheoremFamily, Stats>& by_family,
                  const Stats& all, double seconds) {
@@ -314,14 +253,13 @@ bool write_files(const Options& opt, const std::vector<Record>& records,
     written = write_text(opt.json, j.dump(2) + "\n") && written;
   }
   if (!opt.csv.empty()) written = write_text(opt.csv, csv_table(records)) && written;
-  if (!opt.plot.empty()) written = write_text(opt.plot, plot_svg(records, families, all)) && written;
   return written;
 }
 
 int run_theorem(const Options& opt) {
   // The outputs are checked before the trials, which may run for hours.
   try {
-    for (const auto& [path, what] : {std::pair{&opt.json, "--json"}, {&opt.csv, "--csv"}, {&opt.plot, "--plot"}})
+    for (const auto& [path, what] : {std::pair{&opt.json, "--json"}, {&opt.csv, "--csv"}})
       if (!path->empty()) qpreduce::check_destination(*path, what);
   } catch (const qpreduce::FileError& e) {
     fmt::print(stderr, "qpr theorem: error: {}\n", e.what());
@@ -366,8 +304,7 @@ void register_theorem(CLI::App& app) {
       ->check(unsigned_whole_number())
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "write the summary (overall and per family) as JSON");
-  cmd->add_option("--csv", opt->csv, "write one row per trial as CSV");
-  cmd->add_option("--plot", opt->plot, "write an SVG figure: error vs bound, and the histogram of η");
+  cmd->add_option("--csv", opt->csv, "write one row per trial as CSV (scripts/theorem_figure.py plots it)");
   cmd->callback([opt = opt] { run_guarded("theorem", [&] { return run_theorem(*opt); }); });
 }
 

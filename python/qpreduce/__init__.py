@@ -42,6 +42,7 @@ from ._qpreduce import (
     check_theorem,
     companion_demand,
     companion_solution,
+    deform,
     factor_psd,
     families,
     generators,
@@ -55,6 +56,8 @@ from ._qpreduce import (
 # `import qpreduce.families` and `from qpreduce.generators import ...` work too.
 _sys.modules[__name__ + ".families"] = families
 _sys.modules[__name__ + ".generators"] = generators
+_sys.modules[__name__ + ".deform"] = deform
+_sys.modules[__name__ + ".deform.shapes"] = deform.shapes
 
 
 class NumericalError(RuntimeError):

@@ -73,3 +73,38 @@ def as_vector(name, value, size, dtype):
     _check_kind(name, array.dtype, "an array")
     _check_shape(name, array.shape, (size,))
     return np.ascontiguousarray(array, dtype=dtype)
+
+
+def as_rows(name, value, cols, label, dtype):
+    """C-contiguous (rows, cols) copy of a NumPy array: vertices (dtype float64,
+    any real input, finite) or elements (dtype int32, integer input only).
+    ``cols`` is a tuple of the accepted column counts, ``label`` names the
+    rows ("n", "m")."""
+    target = np.dtype(dtype)
+    shapes = " or ".join(f"({label}, {c})" for c in cols)
+    if not isinstance(value, np.ndarray):
+        raise TypeError(f"{name}: expected a numpy.ndarray of shape {shapes}, got {type(value).__name__}")
+    if value.dtype.kind not in ("iu" if target.kind == "i" else "fiu"):
+        what = "integers" if target.kind == "i" else "real numbers"
+        raise TypeError(f"{name}: expected an array of {what} with shape {shapes}, got dtype {value.dtype}")
+    if value.ndim != 2 or value.shape[1] not in cols:
+        raise ValueError(f"{name}: expected shape {shapes}, got {value.shape}")
+    if target.kind == "i":
+        if value.size and (value.min() < 0 or value.max() > _INT32_MAX):
+            raise ValueError(f"{name}: indices must lie in [0, 2^31), got [{value.min()}, {value.max()}]")
+    elif not np.all(np.isfinite(value)):
+        raise ValueError(f"{name}: contains NaN or infinite entries")
+    return np.ascontiguousarray(value, dtype=target)
+
+
+def as_labels(name, value, size, label):
+    """1-D int32 copy of an integer array-like of length size (labels, indices)."""
+    array = np.asarray(value)
+    if array.size == 0:
+        array = array.astype(np.int32)
+    if array.dtype.kind not in "iu":
+        raise TypeError(f"{name}: expected integers with shape ({label},) = ({size},), got dtype {array.dtype}")
+    _check_shape(name, array.shape, ((size, label),))
+    if array.size and (array.min() < -_INT32_MAX or array.max() > _INT32_MAX):
+        raise ValueError(f"{name}: entries out of the 32-bit range")
+    return np.ascontiguousarray(array, dtype=np.int32)

@@ -66,13 +66,12 @@ Vector<Scalar> vector_copy_arg(const char* name, py::handle value, Dim size) {
   return convert("as_vector")(name, value, dim_tuple(size), dtype_name<Scalar>()).template cast<Vector<Scalar>>();
 }
 
-template <typename Scalar>
-Eigen::Map<Vector<Scalar>> vector_view(const char* name, py::handle value, Dim size, bool writable) {
-  // On the per-call path: the messages are built only when a check fails.
-  const auto expected = [&] {
-    return std::string(name) + ": expected a numpy.ndarray of " + dtype_name<Scalar>().template cast<std::string>() +
-           " with shape " + shape_text(size);
-  };
+namespace {
+
+// The array behind `value` when it is a numpy.ndarray of Scalar; TypeError
+// with expected() and what it got otherwise.
+template <typename Scalar, typename Expected>
+py::array typed_array(py::handle value, const Expected& expected) {
   if (!py::isinstance<py::array>(value)) {
     throw py::type_error(expected() + ", got " + py::str(py::type::of(value).attr("__name__")).cast<std::string>());
   }
@@ -80,20 +79,61 @@ Eigen::Map<Vector<Scalar>> vector_view(const char* name, py::handle value, Dim s
   if (!array.dtype().is(py::dtype::of<Scalar>()) && !array.dtype().equal(py::dtype::of<Scalar>())) {
     throw py::type_error(expected() + ", got dtype " + py::str(value.attr("dtype")).cast<std::string>());
   }
+  return array;
+}
+
+// ValueError when `array` is an out= argument (writable) that is read-only,
+// or an input whose entries (`map`) are not all finite.
+template <typename Map>
+void check_entries(const char* name, const py::array& array, const Map& map, bool writable) {
+  if (writable && !array.writeable()) {
+    throw py::value_error(std::string(name) + ": the array is read-only");
+  }
+  if (!writable && !map.allFinite()) {
+    throw py::value_error(std::string(name) + ": contains NaN or infinite entries");
+  }
+}
+
+void throw_not_contiguous(const char* name, py::handle value, const char* what) {
+  throw py::value_error(std::string(name) + ": expected " + what + " array, got strides " +
+                        py::str(value.attr("strides")).cast<std::string>() + " (use numpy.ascontiguousarray)");
+}
+
+}  // namespace
+
+template <typename Scalar>
+Eigen::Map<Vector<Scalar>> vector_view(const char* name, py::handle value, Dim size, bool writable) {
+  // On the per-call path: the messages are built only when a check fails.
+  const auto expected = [&] {
+    return std::string(name) + ": expected a numpy.ndarray of " + dtype_name<Scalar>().template cast<std::string>() +
+           " with shape " + shape_text(size);
+  };
+  const py::array array = typed_array<Scalar>(value, expected);
   if (array.ndim() != 1 || array.shape(0) != size.size) {
     throw py::value_error(expected() + ", got " + py::str(value.attr("shape")).cast<std::string>());
   }
   if (size.size > 1 && array.strides(0) != static_cast<py::ssize_t>(sizeof(Scalar))) {
-    throw py::value_error(std::string(name) + ": expected a contiguous array, got strides " +
-                          py::str(value.attr("strides")).cast<std::string>() + " (use numpy.ascontiguousarray)");
-  }
-  if (writable && !array.writeable()) {
-    throw py::value_error(std::string(name) + ": the array is read-only");
+    throw_not_contiguous(name, value, "a contiguous");
   }
   Eigen::Map<Vector<Scalar>> map(static_cast<Scalar*>(const_cast<void*>(array.data())), size.size);
-  if (!writable && !map.allFinite()) {
-    throw py::value_error(std::string(name) + ": contains NaN or infinite entries");
+  check_entries(name, array, map, writable);
+  return map;
+}
+
+template <typename Scalar>
+RowMap<Scalar> matrix_view(const char* name, py::handle value, Dim rows, Dim cols, bool writable) {
+  const auto expected = [&] {
+    return std::string(name) + ": expected a numpy.ndarray of " + dtype_name<Scalar>().template cast<std::string>() +
+           " with shape " + shape_text(rows, cols);
+  };
+  const py::array array = typed_array<Scalar>(value, expected);
+  if (array.ndim() != 2 || (rows.size >= 0 && array.shape(0) != rows.size) ||
+      (cols.size >= 0 && array.shape(1) != cols.size)) {
+    throw py::value_error(expected() + ", got " + py::str(value.attr("shape")).cast<std::string>());
   }
+  if (!(array.flags() & py::array::c_style)) throw_not_contiguous(name, value, "a C-contiguous");
+  RowMap<Scalar> map(static_cast<Scalar*>(const_cast<void*>(array.data())), array.shape(0), array.shape(1));
+  check_entries(name, array, map, writable);
   return map;
 }
 
@@ -104,6 +144,14 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size) {
   return py::reinterpret_borrow<py::array_t<Scalar>>(out);
 }
 
+void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
+  if (summary.usable()) return;
+  py::object error = py::module_::import("qpreduce").attr("NumericalError")(summary.status, summary.message);
+  error.attr("summary") = summary_object;
+  PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
+  throw py::error_already_set();
+}
+
 #define QPREDUCE_PYTHON_ARGUMENTS(Scalar)                                                          \
   template SparseMatrix<Scalar> sparse_arg<Scalar>(const char*, py::handle, Dim, Dim);             \
   template SparseMatrix<Scalar> square_sparse_arg<Scalar>(const char*, py::handle);                 \
@@ -111,6 +159,7 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size) {
   template Matrix<Scalar> dense_arg<Scalar>(const char*, py::handle, Dim, Dim);                    \
   template Vector<Scalar> vector_copy_arg<Scalar>(const char*, py::handle, Dim);                   \
   template Eigen::Map<Vector<Scalar>> vector_view<Scalar>(const char*, py::handle, Dim, bool);     \
+  template RowMap<Scalar> matrix_view<Scalar>(const char*, py::handle, Dim, Dim, bool);            \
   template py::array_t<Scalar> output_arg<Scalar>(const char*, py::handle, Dim);
 QPREDUCE_PYTHON_ARGUMENTS(double)
 QPREDUCE_PYTHON_ARGUMENTS(float)

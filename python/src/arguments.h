@@ -65,9 +65,20 @@ Eigen::Map<const Vector<Scalar>> vector_arg(const char* name, py::handle value, 
   return Eigen::Map<const Vector<Scalar>>(view.data(), view.size());
 }
 
+// A C-contiguous 2-D array used in place (rows × cols, row-major), with the
+// checks of vector_view; e.g. the n × 3 vertices a deformer frame writes.
+template <typename Scalar>
+using RowMap = Eigen::Map<Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>;
+template <typename Scalar>
+RowMap<Scalar> matrix_view(const char* name, py::handle value, Dim rows, Dim cols, bool writable);
+
 // `out` when given (checked as vector_view), else a new array of `size`.
 template <typename Scalar>
 py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size);
+
+// Raises qpreduce.NumericalError(status, message) with .summary = `summary_object`
+// (the Python view of `summary`) unless summary.usable().
+void raise_if_unusable(const Outcome& summary, py::handle summary_object);
 
 // Options argument: the default T{} for None, else a T (TypeError otherwise).
 template <typename T>

@@ -14,18 +14,6 @@ namespace qpreduce::python {
 
 namespace {
 
-// validate(): raises ValueError with is_valid's reason.
-template <typename Class, typename T>
-void def_validate(Class& cls) {
-  cls.def(
-      "validate",
-      [](const T& options) {
-        std::string why;
-        if (!options.is_valid(&why)) throw py::value_error(why);
-      },
-      "Raises ValueError saying why when the options are invalid (the C++ is_valid).");
-}
-
 void bind_enums(py::module_& m) {
   py::enum_<Status>(m, "Status", "Outcome of a numerical step (common.h). Every summary starts at NotRun.")
       .value("NotRun", Status::NotRun)

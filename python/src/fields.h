@@ -19,6 +19,18 @@ std::string fields_repr(py::handle self, const std::string& type_name, const std
 void set_fields(py::handle self, const std::string& type_name, const std::vector<std::string>& names,
                 const py::kwargs& kwargs);
 
+// validate(): raises ValueError with is_valid's reason.
+template <typename Class, typename T>
+void def_validate(Class& cls) {
+  cls.def(
+      "validate",
+      [](const T& options) {
+        std::string why;
+        if (!options.is_valid(&why)) throw py::value_error(why);
+      },
+      "Raises ValueError saying why when the options are invalid (the C++ is_valid).");
+}
+
 template <typename Class>
 class Fields {
  public:

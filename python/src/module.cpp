@@ -6,4 +6,5 @@ PYBIND11_MODULE(_qpreduce, m) {
   qpreduce::python::bind_solver(m);
   qpreduce::python::bind_analysis(m);
   qpreduce::python::bind_problems(m);
+  qpreduce::python::bind_deform_io(m);
 }

@@ -103,6 +103,10 @@ PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const Phas
   const Matrix<double> MY = op.MY();
   PhaseOneEnergy e;
   e.AyLy.resize(2 * m, k);
+  if (m == 0) {  // no constraints: E(y) has no constraint term
+    e.Lb.resize(0, 0);
+    return e;
+  }
   e.AyLy.topRows(m) = Ay;
   if (options.soft) {
     const double two_delta = 2.0 * options.delta;

@@ -23,21 +23,32 @@ constexpr Index kInterleavedMaxBytes = Index(32) << 20;
 // How far ahead (bytes) the interleaved order prefetches each row.
 constexpr Index kPrefetchBytes = 4096;
 
-}  // namespace
-
-void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out) {
-  if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
+void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R) {
   if (B.rows() % 3 != 0)
     throw std::invalid_argument(
         fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
   check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
   check_finite("reconstruct_points: w", w);
   check_finite("reconstruct_points: R", R);
+}
+
+}  // namespace
+
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out) {
+  if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
+  check_arguments(B, w, R);
+  if (X_out->rows() != B.rows() / 3) X_out->resize(B.rows() / 3, 3);
+  reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3));
+}
+
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
+                        Eigen::Map<Points3d> X_out) {
+  check_arguments(B, w, R);
   const Index n = B.rows() / 3, p = B.cols();
-  if (X_out->rows() != n) X_out->resize(n, 3);
+  check_size("reconstruct_points: X_out rows (B's rows / 3)", n, X_out.rows());
   const float* base = B.data();
   const float* wp = w.data();
-  double* out = X_out->data();
+  double* out = X_out.data();
   [[maybe_unused]] const detail::RowOrder order = B.size() * Index(sizeof(float)) <= kInterleavedMaxBytes
                                      ? detail::RowOrder::Interleaved
                                      : detail::RowOrder::Sequential;

@@ -151,4 +151,21 @@ TEST_CASE("reconstruct_points rejects bad arguments with a message naming them",
   CHECK_THROWS_WITH(reconstruct_points(B, w, inf_R, &X), Contains("R: contains NaN or infinite"));
   CHECK_THROWS_WITH(reconstruct_points(B, w, I, nullptr), Contains("X_out is null"));
   CHECK(X.rows() == 0);  // untouched by the failed calls
+  Points3d Y(3, 3);
+  CHECK_THROWS_WITH(reconstruct_points(B, w, I, Eigen::Map<Points3d>(Y.data(), 3, 3)),
+                    Contains("X_out rows") && Contains("expected 2, got 3"));
+}
+
+TEST_CASE("reconstruct_points into a caller's buffer writes its n rows in place", "[reconstruction]") {
+  std::mt19937 gen(5);
+  const Index n = 40, p = 9;
+  const RowMatrixXf B = random_rows(3 * n, p, gen);
+  const Eigen::VectorXf w = random_vector(p, gen);
+  const Eigen::Matrix3f R = Eigen::AngleAxisf(0.3f, Eigen::Vector3f::UnitZ()).toRotationMatrix();
+  Points3d X;
+  reconstruct_points(B, w, R, &X);
+  Points3d buffer = Points3d::Constant(n + 1, 3, 5.0);  // one guard row after the n
+  reconstruct_points(B, w, R, Eigen::Map<Points3d>(buffer.data(), n, 3));
+  CHECK(buffer.topRows(n) == X);
+  CHECK((buffer.row(n).array() == 5.0).all());
 }

@@ -42,3 +42,20 @@ def problem(request):
 
 def relative_error(x, reference):
     return np.linalg.norm(x - reference) / np.linalg.norm(reference)
+
+
+def resident_bytes():
+    """This process's resident set size (RSS) in bytes."""
+    import resource
+    with open("/proc/self/statm") as statm:
+        pages = int(statm.read().split()[1])
+    return pages * resource.getpagesize()
+
+
+def rss_growth(run, count=10_000, warm_up=1000):
+    """How much the RSS grows over run(count), after run(warm_up) has filled
+    the allocator pools and loaded code lazily."""
+    run(warm_up)
+    before = resident_bytes()
+    run(count)
+    return resident_bytes() - before

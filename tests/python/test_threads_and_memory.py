@@ -7,6 +7,7 @@ import threading
 import numpy as np
 
 import qpreduce
+from conftest import rss_growth
 from qpreduce import families
 
 
@@ -79,13 +80,6 @@ def test_one_solver_shared_by_threads_gives_consistent_answers():
     assert not errors, f"{len(errors)} of 2000 answers match neither constraint set"
 
 
-def resident_bytes():
-    with open("/proc/self/statm") as statm:
-        pages = int(statm.read().split()[1])
-    import resource
-    return pages * resource.getpagesize()
-
-
 def test_no_leak_over_ten_thousand_solves():
     family, solver = small_ready_solver(seed=4)
     demand = families.make_demand(family, 1)
@@ -101,10 +95,7 @@ def test_no_leak_over_ten_thousand_solves():
                 solver.subspace  # a copy of N and UD, freed at once
         return X
 
-    run(1000)  # warm-up: allocator pools, lazily loaded code
-    before = resident_bytes()
-    run(10_000)
-    growth = resident_bytes() - before
+    growth = rss_growth(run)
     # Each iteration allocates w and X (≈ 4 KB); leaking either would add ≥ 40 MB.
     assert growth < 2 * 1024 * 1024, f"RSS grew by {growth / 1024:.0f} KiB over 10⁴ solves"
     assert (sys.getrefcount(b), sys.getrefcount(Y)) == refcounts

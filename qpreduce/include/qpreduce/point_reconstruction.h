@@ -10,7 +10,9 @@
 //   B      3n × p   float, row-major (each point's three rows contiguous)
 //   w      p        float, the reduced coordinates [z; y]
 //   R      3 × 3    float
-//   X_out  n × 3    double, row-major (resized when its row count differs)
+//   X_out  n × 3    double, row-major (resized when its row count differs;
+//                   the Map overload writes into the caller's n × 3 buffer,
+//                   which must have n rows)
 //
 // Cost O(n·p), memory-bound for large n: B is read once, in order, by the
 // OpenMP threads (static split over points); on CPUs with AVX2 + FMA each
@@ -31,5 +33,7 @@ using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::
 using Points3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 
 void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out);
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
+                        Eigen::Map<Points3d> X_out);
 
 }  // namespace qpreduce

@@ -250,6 +250,37 @@ TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]"
   CHECK_THAT(why, Catch::Contains("round_threads"));
 }
 
+TEST_CASE("deformer: a frame into the caller's buffer is the frame into a matrix", "[deformer]") {
+  const DeformableMesh model = cylinder_model(6, 8);
+  const Index n = model.V.rows();
+  Deformer a, b;
+  REQUIRE(a.precompute(model).ok());
+  REQUIRE(b.precompute(model).ok());
+  Handles h;
+  for (Index v : {Index(0), Index(3), Index(7), n - 1}) h.points.push_back({{v}, {}});
+  REQUIRE(a.set_handles(h).ok());
+  REQUIRE(b.set_handles(h).ok());
+  HandleTargets targets = rigid_targets(model.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  targets.points.row(3) += Eigen::RowVector3d(0.5, 0.2, -0.3);
+  // The buffer has a guard row on each side: the frame writes rows 1..n only.
+  Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor> buffer =
+      Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>::Constant(n + 2, 3, -7.0);
+  Vertices out;
+  for (int f = 0; f < 3; ++f) {
+    const FrameSummary sa = a.frame(targets, Eigen::Map<Vertices>(buffer.data() + 3, n, 3));
+    const FrameSummary sb = b.frame(targets, &out);
+    REQUIRE(sa.ok());
+    CHECK(sa.iterations == sb.iterations);
+    CHECK(sa.reconstruct_seconds > 0.0);
+    CHECK(sa.total_seconds >= sa.solve_seconds + sa.reconstruct_seconds);
+    CHECK(buffer.middleRows(1, n) == out);  // the same code: bitwise equal
+  }
+  CHECK((buffer.row(0).array() == -7.0).all());
+  CHECK((buffer.row(n + 1).array() == -7.0).all());
+  CHECK_THROWS_WITH(a.frame(targets, Eigen::Map<Vertices>(buffer.data(), n + 1, 3)),
+                    Catch::Contains("out rows") && Catch::Contains("expected " + std::to_string(n)));
+}
+
 TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
   DeformableMesh model = cylinder_model(4, 6);
   Deformer deformer;

@@ -111,7 +111,8 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   // Plain rounds when the energy terms assume no ties (DeformerOptions::
   // anderson_window) or the model's projection gives no quadratic_term (a
   // custom model that does not define its energy on Phase 2 outputs).
-  const bool energy_known = std::isfinite(model.projection->quadratic_term(work.s_local));
+  const bool energy_known =
+      onsite.phase1.has_energy_terms() && std::isfinite(model.projection->quadratic_term(work.s_local));
   if (tied || !energy_known) opts.anderson_window = 0;
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
   if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
@@ -123,7 +124,9 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   if (tied && st.settings.alternating.anderson_window > 0) {
     summary.message = "plain rounds: this handle set ties a free Rigid patch to its cluster (no acceleration)";
   } else if (!energy_known && st.settings.alternating.anderson_window > 0) {
-    summary.message = "plain rounds: the model's projection defines no quadratic_term (no acceleration)";
+    summary.message = onsite.phase1.has_energy_terms()
+                          ? "plain rounds: the model's projection defines no quadratic_term (no acceleration)"
+                          : "plain rounds: this handle set's constraints were not solved exactly (no acceleration)";
   }
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
@@ -144,6 +147,16 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds = total.seconds();
+  return summary;
+}
+
+FrameSummary Deformer::frame(const HandleTargets& targets, Eigen::Map<Vertices> out) {
+  if (state_->ready) check_size("Deformer::frame: out rows (vertices)", state_->model.n, out.rows());
+  FrameSummary summary = frame(targets, nullptr);
+  const Timer t;
+  reconstruct_points(state_->model.basis, state_->pose.wf, state_->pose.r0.cast<float>(), out);
+  summary.reconstruct_seconds = t.seconds();
+  summary.total_seconds += summary.reconstruct_seconds;
   return summary;
 }
 

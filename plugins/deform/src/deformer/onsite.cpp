@@ -127,7 +127,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
   make_tie_map(model, layout, &onsite);
   // Accelerated rounds need the energy terms; tied sets run plain (frame.cpp).
-  if (st.settings.alternating.anderson_window > 0 && layout.tied.empty() && onsite.phase1.ready()) {
+  if (st.settings.alternating.anderson_window > 0 && layout.tied.empty() && onsite.phase1.ready() && cs.ok()) {
     onsite.phase1.form_energy_terms(model.solver);
   }
   set_fused(model, !layout.tied.empty(), options.threads, st.fused_precision(), &onsite);

@@ -158,6 +158,10 @@ class Deformer {
   // V′ = r₀·(B·w) with B = reconstruction_basis(), w = reduced_coordinates(),
   // r₀ = global_rotation().
   FrameSummary frame(const HandleTargets& targets, Vertices* out);
+  // The same, reconstructing into the caller's n × 3 buffer (a NumPy array,
+  // a mapped GPU buffer) in place: no copy, no allocation. Throws
+  // std::invalid_argument when `out` does not have n rows.
+  FrameSummary frame(const HandleTargets& targets, Eigen::Map<Vertices> out);
 
   // Back to the rest rotations (S = identity, r₀ = identity).
   void reset_pose();

@@ -1,0 +1,605 @@
+// qpreduce.deform: the reduced ARAP deformer (deform/deformer/deformer.h) and
+// what it is given (deformer/handles.h): options, summaries, the model, the
+// handles and the targets. Each Python Deformer holds the C++ Deformer and a
+// mutex every call takes (frames change the pose, so no call is const); the
+// long calls (precompute, load, save, set_handles, frame) release the GIL, so
+// two deformers run in two threads at once.
+#include "arguments.h"
+#include "bindings.h"
+#include "fields.h"
+#include "locking.h"
+
+#include <qpreduce/deform/deformer/deformer.h>
+#include <qpreduce/deform/io/io_error.h>
+
+#include <pybind11/stl.h>
+
+#include <atomic>
+#include <mutex>
+#include <thread>
+
+namespace qpreduce::python {
+
+namespace {
+
+using namespace qpreduce::deform;
+
+// The Deformer and its inputs: the model and options it was built from (load
+// needs them), the handles of the last set_handles, the targets of a frame
+// (kept so that a frame allocates nothing once their sizes are known).
+struct PyDeformer {
+  Deformer deformer;
+  DeformableMesh model;
+  DeformerOptions options;
+  Handles handles;
+  HandleTargets targets;
+  FrameSummary last_frame;
+  std::mutex mutex;
+  // The thread running precompute, while it calls the progress callable:
+  // a call from there would wait for the lock its own thread holds.
+  std::atomic<std::thread::id> reporting{};
+
+  void refuse_reentry() const {
+    if (reporting.load() == std::this_thread::get_id()) {
+      throw py::value_error("Deformer: called from its own precompute's progress callable");
+    }
+  }
+  std::unique_lock<std::mutex> lock() {
+    refuse_reentry();
+    return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex);
+  }
+};
+
+// Thrown through precompute when the progress callable raised; the Python
+// error is back in the interpreter's error indicator.
+struct ProgressRaised {};
+
+ProgressFn progress_arg(py::handle progress) {
+  if (progress.is_none()) return {};
+  if (!PyCallable_Check(progress.ptr())) {
+    throw py::type_error("progress: expected a callable progress(stage: str, fraction: float) or None, got " +
+                         py::str(py::type::of(progress).attr("__name__")).cast<std::string>());
+  }
+  return [callable = py::reinterpret_borrow<py::object>(progress)](const std::string& stage, double fraction) {
+    py::gil_scoped_acquire gil;
+    try {
+      callable(stage, fraction);
+    } catch (py::error_already_set& error) {
+      error.restore();
+      throw ProgressRaised{};
+    }
+  };
+}
+
+void bind_deformer_options(py::module_& m) {
+  py::enum_<ModelKind>(m, "ModelKind", "The built-in deformation models (deformer.h).")
+      .value("Arap", ModelKind::Arap, "Rotations per cluster (paper Eq. 19).")
+      .value("Conformal", ModelKind::Conformal, "Scaled rotations ψ·t, ψ ∈ [1/ψ_max, ψ_max] (Eq. 48–49).");
+  py::enum_<ClusterRotationFit>(m, "ClusterRotationFit", "The rotation step of Phase 2 (arap_energy.h).")
+      .value("Exact", ClusterRotationFit::Exact, "Block-coordinate descent on E′ (with the Q-corrections).")
+      .value("PaperPhase2", ClusterRotationFit::PaperPhase2, "The paper's Eq. 19 (Q dropped).");
+  py::enum_<PatchType>(m, "PatchType", "Affine patches (handles.h): Fixed, Rigid or Affine.")
+      .value("Fixed", PatchType::Fixed, "Stays at rest.")
+      .value("Rigid", PatchType::Rigid, "One rotation and translation.")
+      .value("Affine", PatchType::Affine, "One affine map (Eq. 47).");
+
+  py::class_<EnergyParameters> energy(m, "EnergyParameters", "α, β, γ of the modified ARAP energy E′ (Eq. 8–11).");
+  Fields(energy, "EnergyParameters")
+      .rw("alpha", &EnergyParameters::alpha, "Penalty on the rotation corrections q_k (Eq. 10). Default 0.1.")
+      .rw("beta", &EnergyParameters::beta, "Extra penalty on q_k's action on the normal (surfaces). Default 0.1.")
+      .rw("gamma", &EnergyParameters::gamma, "Moving-frame penalty γ (Eq. 11); 0 (default) switches it off.")
+      .repr()
+      .keyword_init<EnergyParameters>();
+  def_validate<decltype(energy), EnergyParameters>(energy);
+
+  py::class_<DeformerOptions> options(m, "DeformerOptions",
+                                      "Options of Deformer.precompute (deformer.h); keyword construction.");
+  Fields(options, "DeformerOptions")
+      .rw("energy", &DeformerOptions::energy, "EnergyParameters (α, β, γ).")
+      .rw("model", &DeformerOptions::model, "ModelKind.Arap (default) or ModelKind.Conformal.")
+      .rw("conformal_bound", &DeformerOptions::conformal_bound, "ψ_max of the conformal model (> 1). Default 2.")
+      .rw("rotational_proxies", &DeformerOptions::rotational_proxies, "Clusters d when not given. Default 27.")
+      .rw("linear_proxies", &DeformerOptions::linear_proxies, "Linear proxies when not given. Default 33.")
+      .rw("rotation_fit", &DeformerOptions::rotation_fit, "ClusterRotationFit.Exact (default) or PaperPhase2.")
+      .rw("iterations", &DeformerOptions::iterations, "Phase 1/Phase 2 rounds per frame (the cap). Default 8.")
+      .rw("tolerance", &DeformerOptions::tolerance, "Stop once fixed_point_residual ≤ this; 0 (default): never.")
+      .rw("anderson_window", &DeformerOptions::anderson_window, "Anderson acceleration window (0 off, 1–16).")
+      .rw("global_rotation", &DeformerOptions::global_rotation, "Factor out a global rotation. Default True.")
+      .rw("float_rounds", &DeformerOptions::float_rounds, "Phase 2 inputs from float products. Default True.")
+      .rw("round_threads", &DeformerOptions::round_threads, "OpenMP threads of a frame's rounds. Default 1.")
+      .rw("subspace", &DeformerOptions::subspace, "SubspaceOptions of the engine.")
+      .repr()
+      .keyword_init<DeformerOptions>();
+  def_validate<decltype(options), DeformerOptions>(options);
+
+  py::class_<PrecomputeSummary, Outcome> pre(m, "PrecomputeSummary", "Result of Deformer.precompute / load.");
+  Fields(pre, "PrecomputeSummary")
+      .listed("status")
+      .listed("message")
+      .ro("vertices", &PrecomputeSummary::vertices, "n")
+      .ro("elements", &PrecomputeSummary::elements, "Rotation elements r.")
+      .ro("rotational_proxies", &PrecomputeSummary::rotational_proxies, "d")
+      .ro("linear_proxies", &PrecomputeSummary::linear_proxies, "m")
+      .ro("patches", &PrecomputeSummary::patches, "s")
+      .ro("reduced_size", &PrecomputeSummary::reduced_size, "p = 3m + 12s + 9d")
+      .ro("subspace", &PrecomputeSummary::subspace, "The engine's SubspaceSummary.")
+      .ro("clustering_seconds", &PrecomputeSummary::clustering_seconds, "")
+      .ro("assembly_seconds", &PrecomputeSummary::assembly_seconds, "")
+      .ro("subspace_seconds", &PrecomputeSummary::subspace_seconds, "")
+      .ro("reduction_seconds", &PrecomputeSummary::reduction_seconds, "")
+      .ro("total_seconds", &PrecomputeSummary::total_seconds, "")
+      .repr();
+
+  py::class_<FrameSummary, Outcome> frame(m, "FrameSummary", "Result of one Deformer.frame (the quality readout).");
+  Fields(frame, "FrameSummary")
+      .listed("status")
+      .listed("message")
+      .ro("iterations", &FrameSummary::iterations, "Rounds run (the alternation's rounds).")
+      .ro("last_change", &FrameSummary::last_change, "‖ΔS‖ of the last Phase 2.")
+      .ro("fixed_point_residual", &FrameSummary::fixed_point_residual, "‖ΔS‖/‖S‖ of the last round.")
+      .ro("model_energy", &FrameSummary::model_energy, "E′ of the reduced model (accelerated rounds), else NaN.")
+      .ro("rejected_steps", &FrameSummary::rejected_steps, "Extrapolations the Anderson safeguard rejected.")
+      .ro("solve_seconds", &FrameSummary::solve_seconds, "")
+      .ro("reconstruct_seconds", &FrameSummary::reconstruct_seconds, "")
+      .ro("total_seconds", &FrameSummary::total_seconds, "")
+      .repr();
+  frame.def_property_readonly(
+      "rounds", [](const FrameSummary& s) { return s.iterations; }, "Alias of iterations: the rounds run.");
+}
+
+// A point handle from an int (one vertex) or a pair (vertices, weights).
+PointHandle point_handle_arg(py::handle item, size_t index) {
+  PointHandle handle;
+  if (py::isinstance<py::int_>(item) || py::isinstance(item, py::module_::import("numpy").attr("integer"))) {
+    handle.vertices = {item.cast<Index>()};
+    return handle;
+  }
+  const std::string name = "points[" + std::to_string(index) + "]";
+  if (!py::isinstance<py::sequence>(item) || py::len(item) != 2) {
+    throw py::type_error(name + ": expected a vertex index or a pair (vertices, weights), got " +
+                         py::str(py::type::of(item).attr("__name__")).cast<std::string>());
+  }
+  const auto pair = py::reinterpret_borrow<py::sequence>(item);
+  const auto convert = py::module_::import("qpreduce._convert");
+  const auto vertices = convert.attr("as_labels")(name + " vertices", pair[0], -1, "g");
+  const Index g = py::len(vertices);
+  handle.vertices = vertices.cast<std::vector<Index>>();
+  const auto weights = vector_copy_arg<double>((name + " weights").c_str(), pair[1], {g, "g"});
+  handle.weights.assign(weights.data(), weights.data() + weights.size());
+  return handle;
+}
+
+void bind_handles(py::module_& m) {
+  py::class_<PointHandle>(m, "PointHandle", "One vertex, or the weighted point Σ w_i v_i of a group.")
+      .def(
+          py::init([](std::vector<Index> vertices, std::vector<double> weights) {
+            return PointHandle{std::move(vertices), std::move(weights)};
+          }),
+          py::arg("vertices"), py::arg("weights") = std::vector<double>{},
+          "PointHandle(vertices, weights=[])\n\nvertices: g vertex indices; weights: g weights (the point Σ w_i v_i),\n"
+          "or [] for a single vertex.")
+      .def_readwrite("vertices", &PointHandle::vertices, "Vertex indices (g).")
+      .def_readwrite("weights", &PointHandle::weights, "g weights, or [] for a single vertex.")
+      .def("__repr__", [](const PointHandle& h) {
+        return "PointHandle(vertices=" + py::repr(py::cast(h.vertices)).cast<std::string>() +
+               ", weights=" + py::repr(py::cast(h.weights)).cast<std::string>() + ")";
+      });
+  py::class_<Handles>(m, "Handles",
+                      "The handle set of the on-site step: point handles and prescribed patches.\n\n"
+                      "Handles(points=[...], patches=[...]): each point an int (a vertex), a pair\n"
+                      "(vertices, weights) or a PointHandle; patches are patch indices.")
+      .def(
+          py::init([](py::iterable points, std::vector<Index> patches) {
+            Handles handles;
+            size_t i = 0;
+            for (py::handle item : points) {
+              handles.points.push_back(py::isinstance<PointHandle>(item) ? item.cast<PointHandle>()
+                                                                         : point_handle_arg(item, i));
+              ++i;
+            }
+            handles.patches = std::move(patches);
+            return handles;
+          }),
+          py::arg("points") = py::list(), py::arg("patches") = std::vector<Index>{},
+          "Handles(points=[], patches=[])\n\npoints: h items, each a vertex index, a pair (vertices (g,), weights (g,))\n"
+          "or a PointHandle; patches: s indices of the prescribed (non-fixed) patches.")
+      .def_readwrite("points", &Handles::points, "List of PointHandle.")
+      .def_readwrite("patches", &Handles::patches, "Prescribed patch indices.")
+      .def("__repr__", [](const Handles& h) {
+        return "Handles(" + std::to_string(h.points.size()) +
+               " points, patches=" + py::repr(py::cast(h.patches)).cast<std::string>() + ")";
+      });
+  py::class_<HandleTargets>(m, "HandleTargets",
+                            "Targets of one frame: points (h, 3), one per point handle, and one 3×4\n"
+                            "[A | t] per prescribed patch (p ↦ A·p + t).")
+      .def(py::init([](py::handle points, std::vector<Eigen::Matrix<double, 3, 4>> transforms) {
+             HandleTargets t;
+             t.points = dense_arg<double>("points", points, {-1, "h"}, {3, "3"});
+             t.patch_transforms = std::move(transforms);
+             return t;
+           }),
+           py::arg("points") = py::array_t<double>(std::vector<py::ssize_t>{0, 3}),
+           py::arg("patch_transforms") = std::vector<Eigen::Matrix<double, 3, 4>>{},
+           "HandleTargets(points=(0, 3) array, patch_transforms=[])\n\npoints: (h, 3), one row per point handle;\n"
+           "patch_transforms: s arrays (3, 4) [A | t], one per prescribed patch. Copied.")
+      .def_readwrite("points", &HandleTargets::points, "(h, 3)")
+      .def_readwrite("patch_transforms", &HandleTargets::patch_transforms, "List of (3, 4) [A | t].");
+}
+
+// The fields of a DeformableMesh from NumPy: V (n, 3) and elements (m, 3) or
+// (m, 4).
+DeformableMesh model_arg(py::handle V, py::handle elements, py::handle clusters, py::handle patch_of_vertex,
+                         py::handle patch_types) {
+  const auto convert = py::module_::import("qpreduce._convert");
+  DeformableMesh model;
+  model.V = convert.attr("as_rows")("V", V, py::make_tuple(3), "n", "float64").cast<Vertices>();
+  const Index n = model.V.rows();
+  const py::object E = convert.attr("as_rows")("elements", elements, py::make_tuple(3, 4), "m", "int32");
+  if (E.attr("shape").cast<py::tuple>()[1].cast<int>() == 3) {
+    model.F = E.cast<Triangles>();
+  } else {
+    model.T = E.cast<Tetrahedra>();
+  }
+  const Index r = model.is_tet() ? model.T.rows() : n;
+  if (!clusters.is_none()) {
+    model.clusters =
+        convert.attr("as_labels")("clusters", clusters, r, model.is_tet() ? "m" : "n").cast<std::vector<int>>();
+  }
+  if (!patch_of_vertex.is_none()) {
+    model.patch_of_vertex =
+        convert.attr("as_labels")("patch_of_vertex", patch_of_vertex, n, "n").cast<std::vector<int>>();
+  }
+  if (!patch_types.is_none()) {
+    try {
+      model.patch_types = patch_types.cast<std::vector<PatchType>>();
+    } catch (const py::cast_error&) {
+      throw py::type_error("patch_types: expected a list of qpreduce.deform.PatchType, got " +
+                           py::repr(patch_types).cast<std::string>());
+    }
+  }
+  return model;
+}
+
+void bind_model(py::module_& m) {
+  py::class_<DeformableMesh>(m, "Model",
+                             "What precompute needs (handles.h): rest positions V (n, 3), triangles F (m, 3)\n"
+                             "or tetrahedra T (m, 4), optional rotational clusters (one per rotation element:\n"
+                             "vertex for surfaces, tet for solids) and affine patches.")
+      .def(py::init(&model_arg), py::arg("V"), py::arg("elements"), py::arg("clusters") = py::none(),
+           py::arg("patch_of_vertex") = py::none(), py::arg("patch_types") = py::none(),
+           "Model(V, elements, clusters=None, patch_of_vertex=None, patch_types=None)\n\n"
+           "V: (n, 3) real; elements: (m, 3) triangles or (m, 4) tetrahedra, integers; clusters: (n,)\n"
+           "or (m,) labels; patch_of_vertex: (n,), −1 for a free vertex; patch_types: list of PatchType.\n"
+           "Copied. TypeError/ValueError naming the argument on a wrong dtype, shape or NaN.")
+      .def_readonly("V", &DeformableMesh::V, "(n, 3) rest positions")
+      .def_readonly("F", &DeformableMesh::F, "(m, 3) triangles, or (0, 3)")
+      .def_readonly("T", &DeformableMesh::T, "(m, 4) tetrahedra, or (0, 4)")
+      .def_readonly("clusters", &DeformableMesh::clusters, "Cluster per rotation element, or [].")
+      .def_readonly("patch_of_vertex", &DeformableMesh::patch_of_vertex, "(n) patch per vertex (−1 free), or [].")
+      .def_readonly("patch_types", &DeformableMesh::patch_types, "PatchType per patch.")
+      .def_property_readonly("is_tet", &DeformableMesh::is_tet)
+      .def("__repr__", [](const DeformableMesh& model) {
+        return "Model(n=" + std::to_string(model.V.rows()) + ", " +
+               (model.is_tet() ? "tets=" + std::to_string(model.T.rows())
+                               : "triangles=" + std::to_string(model.F.rows())) +
+               ", patches=" + std::to_string(model.patch_types.size()) + ")";
+      });
+  m.def(
+      "handle_residual",
+      [](const DeformableMesh& model, const Handles& handles, const HandleTargets& targets, py::handle deformed) {
+        const auto Vp = matrix_view<double>("deformed", deformed, {model.V.rows(), "n"}, {3, "3"}, false);
+        const Vertices copy = Vp;
+        py::gil_scoped_release release;
+        return handle_residual(model, handles, targets, copy);
+      },
+      py::arg("model"), py::arg("handles"), py::arg("targets"), py::arg("deformed"),
+      "handle_residual(model, handles, targets, deformed) -> float\n\n"
+      "Largest distance between where the handles are in deformed (n, 3) and their targets.");
+}
+
+template <typename Summary>
+Summary checked(Summary summary) {
+  if (!summary.usable()) raise_if_unusable(summary, py::cast(summary));
+  return summary;
+}
+
+Handles handles_arg(py::handle handles, py::handle patches) {
+  if (py::isinstance<Handles>(handles)) {
+    if (!patches.is_none()) throw py::type_error("patches: give them in the Handles object");
+    return handles.cast<Handles>();
+  }
+  Handles h;
+  if (!handles.is_none()) {
+    if (!py::isinstance<py::iterable>(handles)) {
+      throw py::type_error(
+          "handles: expected a Handles, a sequence of vertex indices or (vertices, weights) pairs, or None, got " +
+          py::str(py::type::of(handles).attr("__name__")).cast<std::string>());
+    }
+    size_t i = 0;
+    for (py::handle item : handles) h.points.push_back(point_handle_arg(item, i++));
+  }
+  if (!patches.is_none()) h.patches = patches.cast<std::vector<Index>>();
+  return h;
+}
+
+// Fills the kept HandleTargets from a frame's arguments (no allocation once
+// the sizes are known).
+void targets_arg(PyDeformer& self, py::handle targets, py::handle patch_transforms) {
+  if (py::isinstance<HandleTargets>(targets)) {
+    if (!patch_transforms.is_none()) throw py::type_error("patch_transforms: give them in the HandleTargets object");
+    self.targets = targets.cast<const HandleTargets&>();
+    return;
+  }
+  const Index h = static_cast<Index>(self.handles.points.size());
+  if (targets.is_none()) {
+    if (h > 0)
+      throw py::type_error("targets: expected a numpy.ndarray of float64 with shape (h, 3) = (" + std::to_string(h) +
+                           ", 3), got None");
+    self.targets.points.resize(0, 3);
+  } else {
+    self.targets.points = matrix_view<double>("targets", targets, {h, "h"}, {3, "3"}, false);
+  }
+  const Index s = static_cast<Index>(self.handles.patches.size());
+  self.targets.patch_transforms.resize(s);
+  if (s == 0 && patch_transforms.is_none()) return;
+  if (patch_transforms.is_none()) {
+    throw py::type_error("patch_transforms: expected a numpy.ndarray of float64 with shape (s, 3, 4) = (" +
+                         std::to_string(s) + ", 3, 4), got None");
+  }
+  const std::string expected =
+      "patch_transforms: expected a numpy.ndarray of float64 with shape (s, 3, 4) = (" + std::to_string(s) + ", 3, 4)";
+  if (!py::isinstance<py::array>(patch_transforms)) {
+    throw py::type_error(expected + ", got " +
+                         py::str(py::type::of(patch_transforms).attr("__name__")).cast<std::string>());
+  }
+  const auto array = py::reinterpret_borrow<py::array>(patch_transforms);
+  if (array.ndim() != 3 || array.shape(0) != s || array.shape(1) != 3 || array.shape(2) != 4) {
+    throw py::value_error(expected + ", got " + py::str(patch_transforms.attr("shape")).cast<std::string>());
+  }
+  const auto flat = matrix_view<double>("patch_transforms", array.attr("reshape")(s, 12), {s, "s"}, {12, "12"}, false);
+  for (Index p = 0; p < s; ++p) {
+    self.targets.patch_transforms[p] = Eigen::Map<const Eigen::Matrix<double, 3, 4, Eigen::RowMajor>>(&flat(p, 0));
+  }
+}
+
+void bind_deformer_class(py::module_& m) {
+  py::class_<PyDeformer>(
+      m, "Deformer",
+      "The reduced ARAP deformer (deformer.h): precompute once, set_handles per handle set (the\n"
+      "on-site step), then frame per pose. Frames write V′ (n, 3) float64, into out= without a copy.\n\n"
+      "Errors: a bad argument raises TypeError/ValueError naming it and the expected shape; a failed\n"
+      "numerical step raises qpreduce.NumericalError (.status, .message, .summary).\n"
+      "Threads: every call takes the deformer's own lock and the long ones (precompute, load, save,\n"
+      "set_handles, frame) release the GIL, so different deformers run concurrently; one deformer may\n"
+      "be shared, its calls then run one at a time.")
+      .def(
+          py::init([](py::handle V, py::handle elements, py::handle options, py::handle clusters,
+                      py::handle patch_of_vertex, py::handle patch_types) {
+            auto self = std::make_unique<PyDeformer>();
+            if (py::isinstance<DeformableMesh>(V)) {  // Deformer(model, options)
+              if (!options.is_none() || !clusters.is_none() || !patch_of_vertex.is_none() || !patch_types.is_none()) {
+                throw py::type_error("Deformer(model, options=None): the model carries the mesh, clusters and patches");
+              }
+              self->model = V.cast<DeformableMesh>();
+              options = elements;
+            } else {
+              self->model = model_arg(V, elements, clusters, patch_of_vertex, patch_types);
+            }
+            self->options = options_arg<DeformerOptions>("options", options);
+            return self;
+          }),
+          py::arg("V"), py::arg("elements") = py::none(), py::arg("options") = py::none(), py::kw_only(),
+          py::arg("clusters") = py::none(), py::arg("patch_of_vertex") = py::none(),
+          py::arg("patch_types") = py::none(),
+          "Deformer(V, elements, options=None, *, clusters=None, patch_of_vertex=None, patch_types=None)\n"
+          "Deformer(model, options=None)\n\n"
+          "V: (n, 3) rest positions; elements: (m, 3) triangles or (m, 4) tetrahedra (see Model);\n"
+          "options: DeformerOptions. Nothing is computed until precompute (or load).")
+      .def(
+          "precompute",
+          [](PyDeformer& self, py::handle progress) {
+            const ProgressFn fn = progress_arg(progress);
+            self.refuse_reentry();
+            PrecomputeSummary summary;
+            {
+              py::gil_scoped_release release;
+              std::lock_guard<std::mutex> lock(self.mutex);
+              self.reporting = std::this_thread::get_id();
+              try {
+                summary = self.deformer.precompute(self.model, self.options, fn);
+              } catch (const ProgressRaised&) {
+                self.reporting = std::thread::id{};
+                py::gil_scoped_acquire gil;
+                throw py::error_already_set();
+              } catch (...) {
+                self.reporting = std::thread::id{};
+                throw;
+              }
+              self.reporting = std::thread::id{};
+            }
+            return checked(summary);
+          },
+          py::arg("progress") = py::none(),
+          "precompute(progress=None) -> PrecomputeSummary\n\n"
+          "Clusters, proxies, one factorization and the reduction (O(n) memory for B, 3n×p float).\n"
+          "progress(stage: str, fraction: float) is called between stages (an exception it raises\n"
+          "aborts the precompute and leaves the deformer as it was; a call of this deformer from it\n"
+          "raises ValueError: the precompute holds its lock). Raises ValueError on a bad model\n"
+          "or options, NumericalError when a numerical step fails. Releases the GIL.")
+      .def(
+          "save",
+          [](PyDeformer& self, const std::string& path) {
+            self.refuse_reentry();
+            py::gil_scoped_release release;
+            std::lock_guard<std::mutex> lock(self.mutex);
+            self.deformer.save(path);
+          },
+          py::arg("path"),
+          "save(path)\n\nWrites the precomputed model (binary, CRC-checked, docs/formats.md). Raises\n"
+          "qpreduce.deform.IoError when it cannot be written, ValueError before precompute.")
+      .def(
+          "load",
+          [](PyDeformer& self, const std::string& path) {
+            self.refuse_reentry();
+            PrecomputeSummary summary;
+            {
+              py::gil_scoped_release release;
+              std::lock_guard<std::mutex> lock(self.mutex);
+              summary = self.deformer.load(path, self.model, self.options);
+            }
+            return checked(summary);
+          },
+          py::arg("path"),
+          "load(path) -> PrecomputeSummary\n\nReads a model written by save instead of precomputing; the\n"
+          "deformer's model and options must be those it was made from (IoError otherwise).")
+      .def(
+          "set_handles",
+          [](PyDeformer& self, py::handle handles, py::handle patches, py::handle options) {
+            self.refuse_reentry();
+            Handles h = handles_arg(handles, patches);
+            const auto opts = options_arg<ConstraintOptions>("options", options);
+            ConstraintSummary summary;
+            {
+              py::gil_scoped_release release;
+              std::lock_guard<std::mutex> lock(self.mutex);
+              summary = self.deformer.set_handles(h, opts);
+              self.handles = std::move(h);
+            }
+            return checked(summary);
+          },
+          py::arg("handles") = py::none(), py::kw_only(), py::arg("patches") = py::none(),
+          py::arg("options") = py::none(),
+          "set_handles(handles=None, *, patches=None, options=None) -> ConstraintSummary\n\n"
+          "The on-site step. handles: a Handles, or a sequence whose items are vertex indices or\n"
+          "(vertices, weights) pairs (h point handles); patches: prescribed patch indices (s);\n"
+          "options: ConstraintOptions (soft=True for soft handles). Fixed patches always hold.\n"
+          "Raises ValueError on indices out of range, NumericalError when the reduced constraints\n"
+          "fail. Cost independent of n; releases the GIL.")
+      .def(
+          "frame",
+          [](PyDeformer& self, py::handle targets, py::handle out, py::handle patch_transforms) {
+            const auto lock = self.lock();
+            if (!self.deformer.ready()) throw py::value_error("Deformer.frame: call precompute and set_handles first");
+            targets_arg(self, targets, patch_transforms);
+            const Index n = self.deformer.vertex_count();
+            py::array_t<double> result = out.is_none() ? py::array_t<double>(std::vector<py::ssize_t>{n, 3})
+                                                       : py::reinterpret_borrow<py::array_t<double>>(out);
+            auto view = matrix_view<double>("out", result, {n, "n"}, {3, "3"}, true);
+            {
+              py::gil_scoped_release release;
+              self.last_frame = self.deformer.frame(self.targets, Eigen::Map<Vertices>(view.data(), n, 3));
+            }
+            checked(self.last_frame);
+            return result;
+          },
+          py::arg("targets") = py::none(), py::arg("out") = py::none(), py::kw_only(),
+          py::arg("patch_transforms") = py::none(),
+          "frame(targets=None, out=None, *, patch_transforms=None) -> V′ (n, 3)\n\n"
+          "One pose: rounds of Phase 1/Phase 2 warm-started from the last frame, then the\n"
+          "reconstruction. targets: (h, 3) float64, one row per point handle (or a HandleTargets);\n"
+          "patch_transforms: (s, 3, 4) float64, [A | t] per prescribed patch; out: (n, 3) float64\n"
+          "C-contiguous, written in place and returned (no copy); None makes a new array. The\n"
+          "summary is in .last_frame. Raises TypeError/ValueError naming a bad argument,\n"
+          "NumericalError when the rounds fail. Releases the GIL.")
+      .def_property_readonly(
+          "last_frame", [](PyDeformer& self) { return self.lock(), self.last_frame; },
+          "FrameSummary of the last frame: iterations (rounds), fixed_point_residual, model_energy, ...")
+      .def(
+          "reset_pose", [](PyDeformer& self) { return self.lock(), self.deformer.reset_pose(); },
+          "Back to the rest rotations.")
+      .def(
+          "set_rounds",
+          [](PyDeformer& self, int iterations, double tolerance) {
+            const auto lock = self.lock();
+            self.deformer.set_rounds(iterations, tolerance);
+          },
+          py::arg("iterations"), py::arg("tolerance") = 0.0,
+          "set_rounds(iterations, tolerance=0.0)\n\nThe cap on rounds per frame (≥ 1) and the early stop.")
+      .def(
+          "set_round_threads",
+          [](PyDeformer& self, int threads) { return self.lock(), self.deformer.set_round_threads(threads); },
+          py::arg("threads"), "OpenMP threads of a frame's rounds (0: all).")
+      .def_property_readonly("ready", [](PyDeformer& s) { return s.lock(), s.deformer.ready(); })
+      .def_property_readonly(
+          "vertex_count", [](PyDeformer& s) { return s.lock(), s.deformer.vertex_count(); }, "n")
+      .def_property_readonly(
+          "rotational_proxies", [](PyDeformer& s) { return s.lock(), s.deformer.rotational_proxies(); }, "d")
+      .def_property_readonly("linear_proxies", [](PyDeformer& s) { return s.lock(), s.deformer.linear_proxies(); })
+      .def_property_readonly("patch_count", [](PyDeformer& s) { return s.lock(), s.deformer.patch_count(); })
+      .def_property_readonly("handle_rows", [](PyDeformer& s) { return s.lock(), s.deformer.handle_rows(); })
+      .def_property_readonly(
+          "model", [](PyDeformer& s) { return s.lock(), s.model; }, "A copy of the Model.")
+      .def_property_readonly(
+          "options", [](PyDeformer& s) { return s.lock(), s.options; }, "A copy of the options.")
+      .def_property_readonly(
+          "handles", [](PyDeformer& s) { return s.lock(), s.handles; }, "The current Handles.")
+      .def_property_readonly(
+          "model_name",
+          [](PyDeformer& s) {
+            const auto lock = s.lock();
+            return s.deformer.model() ? s.deformer.model()->name() : std::string();
+          },
+          "'arap', 'conformal', or '' before precompute.")
+      .def_property_readonly(
+          "clusters", [](PyDeformer& s) { return s.lock(), s.deformer.clusters(); }, "Cluster per rotation element.")
+      .def_property_readonly(
+          "rotations", [](PyDeformer& s) { return s.lock(), Eigen::VectorXd(s.deformer.rotations()); },
+          "S (9d): the cluster transforms, column-major 3×3 each (world frame).")
+      .def_property_readonly(
+          "cluster_scales", [](PyDeformer& s) { return s.lock(), s.deformer.cluster_scales(); },
+          "ψ per cluster (1 for rotations; the conformal scale).")
+      .def_property_readonly(
+          "global_rotation", [](PyDeformer& s) { return s.lock(), Eigen::Matrix3d(s.deformer.global_rotation()); },
+          "r₀ (3, 3).")
+      .def(
+          "patch_transform",
+          [](PyDeformer& s, Index p) {
+            const auto lock = s.lock();
+            if (p < 0 || p >= s.deformer.patch_count()) {
+              throw py::value_error("p: expected a patch index in [0, " + std::to_string(s.deformer.patch_count()) +
+                                    "), got " + std::to_string(p));
+            }
+            return s.deformer.patch_transform(p);
+          },
+          py::arg("p"), "patch_transform(p) -> (3, 4) [t_s | d_s] of patch p after the last frame.")
+      .def_property_readonly(
+          "reconstruction_basis",
+          [](PyDeformer& s) {
+            const auto lock = s.lock();
+            py::gil_scoped_release release;  // 3n·p floats
+            return Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>(
+                s.deformer.reconstruction_basis());
+          },
+          "A copy of B = P·[N UD] (3n, p) float32: V′ = r₀·(B·w) (for a GPU reconstruction).")
+      .def_property_readonly(
+          "reduced_coordinates",
+          [](PyDeformer& s) { return s.lock(), Eigen::VectorXf(s.deformer.reduced_coordinates()); },
+          "w (p) float32 of the last frame.")
+      .def(
+          "handle_residual",
+          [](PyDeformer& s, py::handle deformed) {
+            const auto lock = s.lock();
+            const auto Vp = matrix_view<double>("deformed", deformed, {s.model.V.rows(), "n"}, {3, "3"}, false);
+            const Vertices copy = Vp;
+            py::gil_scoped_release release;
+            return handle_residual(s.model, s.handles, s.targets, copy);
+          },
+          py::arg("deformed"),
+          "handle_residual(deformed) -> float: largest distance of a handle from the last frame's target.")
+      .def("__repr__", [](PyDeformer& s) {
+        const auto lock = s.lock();
+        return "Deformer(n=" + std::to_string(s.model.V.rows()) + ", ready=" + (s.deformer.ready() ? "True" : "False") +
+               ")";
+      });
+}
+
+}  // namespace
+
+void bind_deformer(py::module_& deform) {
+  bind_deformer_options(deform);
+  bind_handles(deform);
+  bind_model(deform);
+  bind_deformer_class(deform);
+}
+
+}  // namespace qpreduce::python
