@@ -259,13 +259,13 @@ case("scenes", "least-squares handles with --strict are an error", ["deform", "-
 # Matrix Market inputs of `qpr qp`.
 case("matrix", "2^31 x 2^31 header (was std::bad_alloc)", qp(H="{W}/h.mtx"), RUN,
      ["h.mtx:2", "2147483648 rows", "more than a file of"],
-     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n2147483648 2147483648 1\n1 1 1\n"}, max_seconds=3)
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n2147483648 2147483648 1\n1 1 1\n"}, max_seconds=5)
 case("matrix", "2^28 rows (was 3 GB and 9 s)", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "268435456 rows"],
-     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n268435456 268435456 1\n1 1 1\n"}, max_seconds=3)
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n268435456 268435456 1\n1 1 1\n"}, max_seconds=5)
 case("matrix", "more entries than the file holds", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "cannot fit"],
-     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n4 4 1000000000\n1 1 1\n"}, max_seconds=3)
+     {"h.mtx": "%%MatrixMarket matrix coordinate real symmetric\n4 4 1000000000\n1 1 1\n"}, max_seconds=5)
 case("matrix", "dense array larger than the file", qp(H="{W}/h.mtx"), RUN, ["h.mtx:2", "cannot fit"],
-     {"h.mtx": "%%MatrixMarket matrix array real general\n100000 100000\n1\n"}, max_seconds=3)
+     {"h.mtx": "%%MatrixMarket matrix array real general\n100000 100000\n1\n"}, max_seconds=5)
 case("matrix", "NaN value", qp(H="{W}/h.mtx"), RUN, ["h.mtx:3", "not finite"], {"h.mtx": H.replace("1 1 1", "1 1 nan")})
 case("matrix", "duplicate entry", qp(H="{W}/h.mtx"), RUN, ["h.mtx", "duplicate entry (2, 2)"],
      {"h.mtx": H.replace("4 4 4", "4 4 5") + "2 2 1\n"})
