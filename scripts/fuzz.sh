@@ -35,6 +35,9 @@ seeds_of() {
 }
 
 mkdir -p "$build/findings"
+export QPR_FUZZ_TMP="$build/tmp"  # the targets' scratch files, removed at the end
+rm -rf "$QPR_FUZZ_TMP" && mkdir -p "$QPR_FUZZ_TMP"
+trap 'rm -rf "$QPR_FUZZ_TMP"' EXIT
 export ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 for t in "${targets[@]}"; do

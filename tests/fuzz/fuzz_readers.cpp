@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <stdexcept>
 #include <string>
@@ -33,10 +34,13 @@ namespace {
 using namespace qpreduce;
 using namespace qpreduce::deform;
 
-// A per-process scratch file "<dir>/qpr_fuzz_<pid>/input<ext>".
+// A per-process scratch file "$QPR_FUZZ_TMP/qpr_fuzz_<pid>/input<ext>"
+// (QPR_FUZZ_TMP defaults to /tmp; scripts/fuzz.sh points it into build-fuzz
+// and removes it afterwards).
 std::string scratch(const char* ext) {
   static const std::string dir = [] {
-    const std::string d = "/tmp/qpr_fuzz_" + std::to_string(::getpid());
+    const char* root = std::getenv("QPR_FUZZ_TMP");
+    const std::string d = std::string(root && *root ? root : "/tmp") + "/qpr_fuzz_" + std::to_string(::getpid());
     std::remove(d.c_str());
     (void)::mkdir(d.c_str(), 0700);
     return d;

@@ -34,9 +34,11 @@ struct Scenario {
 // anchored by a point handle, a fixed patch or a prescribed patch. Throws
 // std::invalid_argument "<source>: …" naming the vertex, frame or component.
 void check_scenario(const Scenario& scenario, const std::string& source);
-// Coordinates beyond this overflow once squared and summed (1e308 is the
-// largest double); real meshes are many orders of magnitude smaller.
-inline constexpr double kMaxCoordinate = 1e100;
+// Coordinates beyond this overflow in the precompute, which forms products of
+// up to about the eighth power of the coordinates' scale (measured with a
+// far-away vertex and with a .def translation: 1e35 runs, 1e40 ends in NaN;
+// 1e308 is the largest double). Real meshes are many orders smaller.
+inline constexpr double kMaxCoordinate = 1e30;
 
 // Applies the scenario's overrides (α, β, γ, model, ψ, iterations, proxy
 // counts) to `options`.
