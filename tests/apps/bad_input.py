@@ -318,7 +318,6 @@ WRITERS = [
     ("qp --report", qp("--report", "{OUT}"), ".json"),
     ("theorem --json", ["theorem", "--trials", "10", "--json", "{OUT}"], ".json"),
     ("theorem --csv", ["theorem", "--trials", "10", "--csv", "{OUT}"], ".csv"),
-    ("theorem --plot", ["theorem", "--trials", "10", "--plot", "{OUT}"], ".svg"),
     ("demo --report", ["demo", "--frames", "1", "--out", "{W}/demo", "--report", "{OUT}"], ".json"),
     ("compare --report", ["compare", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL[:4] +
      ["--reference", "local-global", "--out-dir", "{W}/cmp", "--report", "{OUT}"], ".json"),
