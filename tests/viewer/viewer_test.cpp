@@ -6,6 +6,7 @@
 #include <context.h>
 #include <image.h>
 #include <motion.h>
+#include <refine_worker.h>
 #include <renderer.h>
 #include <session.h>
 
@@ -17,8 +18,11 @@
 #include <catch2/catch.hpp>
 
 #include <cfloat>
+#include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
@@ -61,6 +65,13 @@ void scripted_drag(Session* s, MeshRenderer* renderer, int steps, std::vector<Fr
   }
 }
 
+// One GL context for the whole run: a second one, opened after the first is
+// closed, can find xvfb-run's server resetting (its last client left).
+const GlContext& gl_context() {
+  static const GlContext context(kSize, kSize, "viewer_test", false);
+  return context;
+}
+
 Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices& rest) {
   Camera camera;
   camera.up_axis = 2;
@@ -76,8 +87,7 @@ Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices&
 }  // namespace
 
 TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag changes the picture") {
-  GlContext context(kSize, kSize, "viewer_test", false);
-  INFO(context.description());
+  INFO(gl_context().description());
   RenderTarget target;
   target.resize(kSize, kSize, 4);
 
@@ -143,6 +153,107 @@ TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag chang
     CHECK_THROWS_AS(gpu_session.add_handle({-1}, "bad"), std::invalid_argument);
     CHECK_THROWS_AS(gpu_session.add_handle({}, "empty"), std::invalid_argument);
     CHECK_THROWS_AS(read_png("no-such-file.png"), std::runtime_error);
+  }
+}
+
+TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once, cancelled mid-round") {
+  INFO(gl_context().description());
+  Session s(cylinder_input());
+  s.precompute(s.input().options);
+  MeshRenderer renderer(s.rest(), s.input().faces);
+  s.set_reconstruction(Reconstruction::Cpu, &renderer);
+  std::vector<FrameStats> stats;
+  scripted_drag(&s, &renderer, 6, &stats);
+  // The per-frame quality readout: rounds run and the fixed-point residual.
+  CHECK(stats.back().iterations >= 1);
+  CHECK(stats.back().iterations <= s.input().options.iterations);
+  CHECK(std::isfinite(stats.back().fixed_point_residual));
+  CHECK(stats.back().fixed_point_residual >= 0.0);
+  const Vertices reduced = s.last_pose();
+  REQUIRE(reduced.rows() == s.rest().rows());
+
+  SECTION("a refine finishes on the worker; its pose is handed over once and drawn") {
+    RefineWorker& worker = s.refine_worker();
+    CHECK(worker.status().state == RefineStatus::State::Idle);
+    worker.start(s.handle_set(), s.targets(), reduced);
+    worker.wait_idle();
+    const RefineStatus st = worker.status();
+    INFO(st.message);
+    REQUIRE(st.state == RefineStatus::State::Done);
+    CHECK(st.summary.rounds > 0);
+    CHECK_FALSE(st.summary.cancelled);
+    // Full-space local-global does not raise the classic ARAP energy of the
+    // reduced pose, and keeps the (hard) handles.
+    CHECK(st.summary.arap_energy <= s.arap_energy(reduced) * (1 + 1e-9));
+    CHECK(st.summary.handle_residual / s.diagonal() < 1e-6);
+    Vertices refined;
+    REQUIRE(worker.poll(&refined));
+    CHECK_FALSE(worker.poll(&refined));  // once per job
+    REQUIRE(refined.rows() == reduced.rows());
+    CHECK(refined.allFinite());
+    CHECK(s.arap_energy(refined) == Approx(st.summary.arap_energy).epsilon(1e-9));
+    // The readout's distances are those between the reduced and refined poses.
+    const Eigen::VectorXd d = (refined - reduced).rowwise().norm();
+    CHECK(st.summary.max_from_input == Approx(d.maxCoeff() / s.diagonal()).epsilon(1e-9));
+    CHECK(st.summary.rms_from_input > 0.0);
+    CHECK(st.summary.rms_from_input <= st.summary.max_from_input);
+    // Drawn instead of the last frame: positions() is the refined pose (float buffers).
+    s.show_pose(refined, &renderer);
+    Vertices shown;
+    s.positions(renderer, &shown);
+    CHECK((shown - refined).cwiseAbs().maxCoeff() <= 1e-6 * s.diagonal());
+  }
+
+  SECTION("cancel() returns while the worker is inside a round; the pose stays valid; the worker is reusable") {
+    std::mutex m;
+    std::condition_variable cv;
+    bool reached = false, inside = false, release = false;
+    RefineOptions options;
+    options.tolerance = 0.0;  // to the converged shape: far more than 2 rounds
+    RefineWorker worker(s.input().scenario.model, options, [&](int rounds) {
+      if (rounds != 2) return;
+      std::unique_lock<std::mutex> lock(m);
+      reached = inside = true;
+      cv.notify_all();
+      cv.wait(lock, [&] { return release; });
+      inside = false;
+    });
+    worker.start(s.handle_set(), s.targets(), reduced);
+    {
+      std::unique_lock<std::mutex> lock(m);
+      while (!reached && worker.status().state == RefineStatus::State::Running)
+        cv.wait_for(lock, std::chrono::milliseconds(10));
+      REQUIRE(reached);
+    }
+    CHECK(worker.status().state == RefineStatus::State::Running);
+    CHECK(worker.status().rounds == 2);
+    worker.cancel();
+    CHECK(worker.status().state == RefineStatus::State::Cancelled);
+    {
+      std::lock_guard<std::mutex> lock(m);
+      CHECK(inside);  // cancel() did not wait for the round to end
+      release = true;
+    }
+    cv.notify_all();
+    Vertices pose;
+    CHECK_FALSE(worker.poll(&pose));
+    worker.wait_idle();
+    CHECK(worker.status().state == RefineStatus::State::Cancelled);
+    CHECK_FALSE(worker.poll(&pose));  // a cancelled refine is never swapped in
+    const RefineSummary cancelled = worker.last_summary();
+    CHECK(cancelled.cancelled);
+    CHECK(cancelled.rounds == 2);
+    const Vertices last = worker.last_pose();
+    REQUIRE(last.rows() == reduced.rows());
+    CHECK(last.allFinite());
+    CHECK(s.arap_energy(last) <= s.arap_energy(reduced) * (1 + 1e-9));
+
+    worker.start(s.handle_set(), s.targets(), reduced);
+    worker.wait_idle();
+    REQUIRE(worker.status().state == RefineStatus::State::Done);
+    CHECK(worker.status().summary.converged);
+    CHECK(worker.poll(&pose));
+    CHECK(s.arap_energy(pose) <= s.arap_energy(last) * (1 + 1e-9));
   }
 }
 
