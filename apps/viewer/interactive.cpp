@@ -78,7 +78,8 @@ int Interactive::run() {
       mouse();
       keys();
       advance_playback();
-      if (ready_) {
+      watch_handles();
+      if (ready_ && !showing_refined_) {
         try {
           stats_ = session_.step(&renderer_);
           smooth();
@@ -125,6 +126,8 @@ void Interactive::on_precomputed() {
 
 void Interactive::constraints_changed() {
   if (!ready_) return;
+  cancel_refine();
+  last_transforms_.clear();  // counts as a move: the stillness timer restarts
   try {
     op_ms_ = session_.update_constraints(&op_note_);
   } catch (const std::exception& e) {
@@ -190,6 +193,43 @@ void Interactive::advance_playback() {
       message_ = e.what();
     }
   }
+}
+
+RefineWorker& Interactive::refine_worker() { return session_.refine_worker(o_.refine.value_or(RefineOptions{})); }
+
+// Starts a refine once the handles have been still long enough, cancels it
+// when one moves or is grabbed, and swaps in its pose when it finishes.
+void Interactive::watch_handles() {
+  if (!ready_) return;
+  const auto& handles = session_.handles();
+  bool moved = drag_ == Drag::Translate || drag_ == Drag::Rotate || handles.size() != last_transforms_.size();
+  for (size_t h = 0; !moved && h < handles.size(); ++h) moved = handles[h].transform != last_transforms_[h];
+  const double now = glfwGetTime();
+  if (moved) {
+    last_transforms_.resize(handles.size());
+    for (size_t h = 0; h < handles.size(); ++h) last_transforms_[h] = handles[h].transform;
+    still_since_ = now;
+    cancel_refine();
+    return;
+  }
+  const bool posed = session_.last_pose().rows() == session_.rest().rows() &&
+                     (!session_.handle_set().points.empty() || !session_.handle_set().patches.empty());
+  if (auto_refine_ && posed && !refine_started_ && now - still_since_ >= o_.refine_after_still_s) {
+    refine_worker().start(session_.handle_set(), session_.targets(), session_.last_pose());
+    refine_started_ = true;
+  }
+  if (refine_started_ && !showing_refined_ && refine_worker().poll(&refined_)) {
+    session_.show_pose(refined_, &renderer_);
+    showing_refined_ = true;
+    shown_arap_ = -1.0;
+  }
+}
+
+// Back to reduced frames; returns at once (the worker stops before its next round).
+void Interactive::cancel_refine() {
+  if (refine_started_) refine_worker().cancel();
+  refine_started_ = showing_refined_ = false;
+  shown_arap_ = -1.0;
 }
 
 int run_interactive(Session& session, const ViewerOptions& options, const SaveMeshFn& save_mesh) {

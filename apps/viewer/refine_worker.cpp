@@ -150,6 +150,10 @@ void RefineWorker::run(Job job) {
     error = e.what();
   }
   if (out.rows() != job.pose.rows()) out = job.pose;  // nothing ran: keep the input pose
+  // The per-round traces are not shown; dropped so that status() copies
+  // nothing large every frame.
+  summary.round_energy = {};
+  summary.round_seconds = {};
   std::lock_guard<std::mutex> lock(mutex_);
   finished_ok_ = error.empty() && !summary.cancelled;
   summary_ = std::move(summary);

@@ -44,7 +44,9 @@ struct RefineStatus {
   bool preparing = false;                   // Running, before the first round (precompute / factorization)
   int rounds = 0;                           // Running: rounds done so far
   double seconds = 0.0;                     // Running: since start(); Done: the summary's seconds
-  qpreduce::deform::RefineSummary summary;  // Done (and the last finished job otherwise)
+  // Done: its summary (the last finished job's otherwise), without the
+  // per-round traces round_energy / round_seconds.
+  qpreduce::deform::RefineSummary summary;
   std::string message;
 };
 const char *to_string(RefineStatus::State s);
