@@ -72,6 +72,48 @@ const GlContext& gl_context() {
   return context;
 }
 
+// Holds a refine inside one round (the first time the worker's hook sees
+// `round` rounds done) until release(): the test then acts while the worker
+// is provably busy, without timing.
+class RoundLatch {
+ public:
+  explicit RoundLatch(int round) : round_(round) {}
+  RefineWorker::RoundHook hook() {
+    return [this](int rounds) {
+      std::unique_lock<std::mutex> lock(m_);
+      if (rounds != round_ || reached_) return;
+      reached_ = inside_ = true;
+      cv_.notify_all();
+      cv_.wait(lock, [this] { return released_; });
+      inside_ = false;
+    };
+  }
+  // Waits until the worker is held, or is no longer running; true when held.
+  bool wait_held(const RefineWorker& worker) {
+    std::unique_lock<std::mutex> lock(m_);
+    while (!reached_ && worker.status().state == RefineStatus::State::Running)
+      cv_.wait_for(lock, std::chrono::milliseconds(10));
+    return reached_;
+  }
+  bool inside() {
+    std::lock_guard<std::mutex> lock(m_);
+    return inside_;
+  }
+  void release() {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      released_ = true;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  const int round_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool reached_ = false, inside_ = false, released_ = false;
+};
+
 Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices& rest) {
   Camera camera;
   camera.up_axis = 2;
@@ -205,36 +247,18 @@ TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once
   }
 
   SECTION("cancel() returns while the worker is inside a round; the pose stays valid; the worker is reusable") {
-    std::mutex m;
-    std::condition_variable cv;
-    bool reached = false, inside = false, release = false;
+    RoundLatch latch(2);
     RefineOptions options;
     options.tolerance = 0.0;  // to the converged shape: far more than 2 rounds
-    RefineWorker worker(s.input().scenario.model, options, [&](int rounds) {
-      if (rounds != 2) return;
-      std::unique_lock<std::mutex> lock(m);
-      reached = inside = true;
-      cv.notify_all();
-      cv.wait(lock, [&] { return release; });
-      inside = false;
-    });
+    RefineWorker worker(s.input().scenario.model, options, latch.hook());
     worker.start(s.handle_set(), s.targets(), reduced);
-    {
-      std::unique_lock<std::mutex> lock(m);
-      while (!reached && worker.status().state == RefineStatus::State::Running)
-        cv.wait_for(lock, std::chrono::milliseconds(10));
-      REQUIRE(reached);
-    }
+    REQUIRE(latch.wait_held(worker));
     CHECK(worker.status().state == RefineStatus::State::Running);
     CHECK(worker.status().rounds == 2);
     worker.cancel();
     CHECK(worker.status().state == RefineStatus::State::Cancelled);
-    {
-      std::lock_guard<std::mutex> lock(m);
-      CHECK(inside);  // cancel() did not wait for the round to end
-      release = true;
-    }
-    cv.notify_all();
+    CHECK(latch.inside());  // cancel() did not wait for the round to end
+    latch.release();
     Vertices pose;
     CHECK_FALSE(worker.poll(&pose));
     worker.wait_idle();
@@ -254,6 +278,26 @@ TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once
     CHECK(worker.status().summary.converged);
     CHECK(worker.poll(&pose));
     CHECK(s.arap_energy(pose) <= s.arap_energy(last) * (1 + 1e-9));
+  }
+
+  SECTION("start() while a refine runs replaces it without waiting; only the new job's pose is handed over") {
+    RoundLatch latch(1);
+    RefineWorker worker(s.input().scenario.model, RefineOptions{}, latch.hook());
+    worker.start(s.handle_set(), s.targets(), reduced);
+    REQUIRE(latch.wait_held(worker));
+    HandleTargets moved = s.targets();  // every handle 0.05 further along each axis
+    moved.points.array() += 0.05;
+    worker.start(s.handle_set(), moved, reduced);
+    CHECK(worker.status().state == RefineStatus::State::Running);  // the new job, queued
+    CHECK(latch.inside());                                         // start() did not wait for the first job
+    latch.release();
+    worker.wait_idle();
+    REQUIRE(worker.status().state == RefineStatus::State::Done);
+    Vertices pose;
+    REQUIRE(worker.poll(&pose));
+    const DeformableMesh& model = s.input().scenario.model;
+    CHECK(handle_residual(model, s.handle_set(), moved, pose) < 1e-6 * s.diagonal());
+    CHECK(handle_residual(model, s.handle_set(), s.targets(), pose) > 0.05);
   }
 }
 
