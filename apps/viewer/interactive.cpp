@@ -17,8 +17,12 @@ using namespace qpreduce;
 using namespace qpreduce::deform;
 
 Interactive::Interactive(Session& session, const ViewerOptions& o, const SaveMeshFn& save_mesh)
-    : session_(session), o_(o), save_mesh_(save_mesh), context_(o.width, o.height, "qpr view — " + session.input().name, true),
-      renderer_(session.rest(), session.input().faces) {
+    : session_(session),
+      o_(o),
+      save_mesh_(save_mesh),
+      context_(o.width, o.height, "qpr view — " + session.input().name, true),
+      renderer_(session.rest(), session.input().faces),
+      rest_(o.refine_after_still_s) {
   set_camera(&camera_, session.rest(), o);
   style_.mode = o.color;
   deviation_ = o.deviation_scale;
@@ -127,7 +131,7 @@ void Interactive::on_precomputed() {
 void Interactive::constraints_changed() {
   if (!ready_) return;
   cancel_refine();
-  last_transforms_.clear();  // counts as a move: the stillness timer restarts
+  rest_.restart();  // a new handle set counts as a move
   try {
     op_ms_ = session_.update_constraints(&op_note_);
   } catch (const std::exception& e) {
@@ -204,17 +208,14 @@ void Interactive::watch_handles() {
   const auto& handles = session_.handles();
   bool moved = drag_ == Drag::Translate || drag_ == Drag::Rotate || handles.size() != last_transforms_.size();
   for (size_t h = 0; !moved && h < handles.size(); ++h) moved = handles[h].transform != last_transforms_[h];
-  const double now = glfwGetTime();
   if (moved) {
     last_transforms_.resize(handles.size());
     for (size_t h = 0; h < handles.size(); ++h) last_transforms_[h] = handles[h].transform;
-    still_since_ = now;
     cancel_refine();
-    return;
   }
   const bool posed = session_.last_pose().rows() == session_.rest().rows() &&
                      (!session_.handle_set().points.empty() || !session_.handle_set().patches.empty());
-  if (auto_refine_ && posed && !refine_started_ && now - still_since_ >= o_.refine_after_still_s) {
+  if (rest_.update(moved, glfwGetTime()) && auto_refine_ && posed) {
     refine_worker().start(session_.handle_set(), session_.targets(), session_.last_pose());
     refine_started_ = true;
   }

@@ -69,7 +69,7 @@ class Interactive {
   // still for o.refine_after_still_s, cancelled as soon as one moves; its
   // pose is drawn (no reduced frames) until then.
   bool auto_refine_ = true, refine_started_ = false, showing_refined_ = false;
-  double still_since_ = 0.0;
+  RestTimer rest_;
   std::vector<Eigen::Matrix4d> last_transforms_;
   qpreduce::deform::Vertices refined_;
   double shown_arap_ = -1.0;  // "ARAP energy" of the pose shown; < 0: not asked since it changed

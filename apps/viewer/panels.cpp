@@ -102,7 +102,10 @@ void Interactive::frame_panel() {
 void Interactive::refine_panel() {
   ImGui::SetNextWindowPos(ImVec2(10, 580), ImGuiCond_FirstUseEver);
   ImGui::Begin("Refine", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
-  if (ImGui::Checkbox("refine when the handles rest", &auto_refine_) && !auto_refine_) cancel_refine();
+  if (ImGui::Checkbox("refine when the handles rest", &auto_refine_)) {
+    cancel_refine();
+    rest_.restart();  // switched on: a refine after the next rest period
+  }
   if (ready_) {
     const RefineStatus st = refine_worker().status();
     const RefineSummary& r = st.summary;

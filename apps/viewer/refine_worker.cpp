@@ -25,6 +25,18 @@ const char *to_string(RefineStatus::State s) {
   return "?";
 }
 
+bool RestTimer::update(bool moved, double now) {
+  if (moved || !seen_) {
+    since_ = now;
+    seen_ = true;
+    fired_ = false;
+    return false;
+  }
+  if (fired_ || now - since_ < still_seconds_) return false;
+  fired_ = true;
+  return true;
+}
+
 RefineWorker::RefineWorker(DeformableMesh model, const RefineOptions &options, RoundHook hook)
     : model_(std::move(model)), options_(options), hook_(std::move(hook)) {
   std::string why;

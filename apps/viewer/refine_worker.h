@@ -51,6 +51,22 @@ struct RefineStatus {
 };
 const char *to_string(RefineStatus::State s);
 
+// When the handles count as resting: fed once per displayed frame, it says
+// "start" the first frame `still_seconds` after the last move, once per rest.
+class RestTimer {
+ public:
+  explicit RestTimer(double still_seconds) : still_seconds_(still_seconds) {}
+  // moved: a handle moved or is held, or the handle set changed, this frame;
+  // now: seconds on any steady clock. True once per rest.
+  bool update(bool moved, double now);
+  // The next update() counts as a move (e.g. refining was switched back on).
+  void restart() { seen_ = false; }
+
+ private:
+  double still_seconds_, since_ = 0.0;
+  bool seen_ = false, fired_ = false;
+};
+
 class RefineWorker {
  public:
   // Called on the worker thread before each round with the rounds done so far

@@ -239,10 +239,13 @@ TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once
     CHECK(st.summary.max_from_input == Approx(d.maxCoeff() / s.diagonal()).epsilon(1e-9));
     CHECK(st.summary.rms_from_input > 0.0);
     CHECK(st.summary.rms_from_input <= st.summary.max_from_input);
-    // Drawn instead of the last frame: positions() is the refined pose (float buffers).
+    // Drawn instead of the last frame: the vertex buffer holds the refined
+    // pose (floats), and positions() returns it.
     s.show_pose(refined, &renderer);
-    Vertices shown;
+    Vertices drawn, shown;
+    renderer.read_positions(&drawn);
     s.positions(renderer, &shown);
+    CHECK((drawn - refined).cwiseAbs().maxCoeff() <= 1e-6 * s.diagonal());
     CHECK((shown - refined).cwiseAbs().maxCoeff() <= 1e-6 * s.diagonal());
   }
 
@@ -299,6 +302,20 @@ TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once
     CHECK(handle_residual(model, s.handle_set(), moved, pose) < 1e-6 * s.diagonal());
     CHECK(handle_residual(model, s.handle_set(), s.targets(), pose) > 0.05);
   }
+}
+
+TEST_CASE("RestTimer: a refine starts once per rest, the first frame still_seconds after the last move") {
+  RestTimer rest(0.3);
+  CHECK_FALSE(rest.update(false, 0.0));  // the first frame counts as a move
+  CHECK_FALSE(rest.update(false, 0.2));
+  CHECK(rest.update(false, 0.31));
+  CHECK_FALSE(rest.update(false, 0.5));  // once per rest
+  CHECK_FALSE(rest.update(true, 0.6));   // a handle moves or is held
+  CHECK_FALSE(rest.update(false, 0.8));
+  CHECK(rest.update(false, 0.95));
+  rest.restart();  // e.g. refining switched back on
+  CHECK_FALSE(rest.update(false, 1.0));
+  CHECK(rest.update(false, 1.35));
 }
 
 TEST_CASE("recorded handle motion round trips and bad files are refused") {
