@@ -14,7 +14,7 @@ double now_seconds() {
 }
 }  // namespace
 
-const char *to_string(RefineStatus::State s) {
+const char* to_string(RefineStatus::State s) {
   switch (s) {
     case RefineStatus::State::Idle: return "idle";
     case RefineStatus::State::Running: return "running";
@@ -37,7 +37,7 @@ bool RestTimer::update(bool moved, double now) {
   return true;
 }
 
-RefineWorker::RefineWorker(DeformableMesh model, const RefineOptions &options, RoundHook hook)
+RefineWorker::RefineWorker(DeformableMesh model, const RefineOptions& options, RoundHook hook)
     : model_(std::move(model)), options_(options), hook_(std::move(hook)) {
   std::string why;
   if (!options_.is_valid(&why)) throw std::invalid_argument("refine options: " + why);
@@ -55,7 +55,7 @@ RefineWorker::~RefineWorker() {
   thread_.join();
 }
 
-void RefineWorker::start(const Handles &handles, const HandleTargets &targets, const Vertices &pose) {
+void RefineWorker::start(const Handles& handles, const HandleTargets& targets, const Vertices& pose) {
   std::lock_guard<std::mutex> lock(mutex_);
   queued_ = Job{handles, targets, pose, ++generation_};
   cancelled_ = false;
@@ -71,7 +71,7 @@ void RefineWorker::cancel() {
   }
 }
 
-bool RefineWorker::poll(Vertices *pose) {
+bool RefineWorker::poll(Vertices* pose) {
   std::lock_guard<std::mutex> lock(mutex_);
   const std::uint64_t current = generation_;
   if (finished_generation_ != current || !finished_ok_ || taken_generation_ == current) return false;
@@ -158,7 +158,7 @@ void RefineWorker::run(Job job) {
     int calls = 0;  // the Refiner asks once before each round
     summary = refiner_->refine(job.handles, job.targets, job.pose, &out, [&] { return cancel(calls++); });
     if (!summary.usable()) error = summary.message;
-  } catch (const std::exception &e) {
+  } catch (const std::exception& e) {
     error = e.what();
   }
   if (out.rows() != job.pose.rows()) out = job.pose;  // nothing ran: keep the input pose

@@ -10,9 +10,9 @@
 // except the destructor and wait_idle() (headless runs and tests).
 //
 // Usage (UI thread, once per frame):
-//   worker.start(handles, targets, reduced_pose);   // handles still for a
-//   while worker.cancel();                                // a handle moves if
-//   (worker.poll(&pose)) show(pose);             // a finished refine
+//   worker.start(handles, targets, reduced_pose);   // the handles rest
+//   worker.cancel();                                // a handle moves
+//   if (worker.poll(&pose)) show(pose);             // a finished refine
 //   RefineStatus s = worker.status();               // for the panel
 #pragma once
 
@@ -33,23 +33,20 @@ namespace qpr::viewer {
 struct RefineStatus {
   enum class State {
     Idle,       // nothing asked yet
-    Running,    // the current job (preparing: the Refiner or the handle set is
-                // being factored)
+    Running,    // the current job (preparing: building the Refiner or factoring the handle set)
     Done,       // the current job finished; summary is its RefineSummary
-    Cancelled,  // the current job was cancelled (summary: the last finished job,
-                // if any)
-    Failed,     // the current job threw or its summary is not usable; message says
-                // why
+    Cancelled,  // the current job was cancelled (summary: the last finished job, if any)
+    Failed,     // the current job threw or its summary is not usable; message says why
   } state = State::Idle;
-  bool preparing = false;                   // Running, before the first round (precompute / factorization)
-  int rounds = 0;                           // Running: rounds done so far
-  double seconds = 0.0;                     // Running: since start(); Done: the summary's seconds
+  bool preparing = false;  // Running, before the first round (precompute / factorization)
+  int rounds = 0;          // Running: rounds done so far
+  double seconds = 0.0;    // Running: since start(); Done: the summary's seconds
   // Done: its summary (the last finished job's otherwise), without the
   // per-round traces round_energy / round_seconds.
   qpreduce::deform::RefineSummary summary;
   std::string message;
 };
-const char *to_string(RefineStatus::State s);
+const char* to_string(RefineStatus::State s);
 
 // When the handles count as resting: fed once per displayed frame, it says
 // "start" the first frame `still_seconds` after the last move, once per rest.
@@ -76,21 +73,21 @@ class RefineWorker {
 
   // Keeps a copy of `model` (the rest pose the Refiner is built for) and
   // starts the thread; the Refiner itself is built by the first job.
-  RefineWorker(qpreduce::deform::DeformableMesh model, const qpreduce::deform::RefineOptions &options = {},
+  RefineWorker(qpreduce::deform::DeformableMesh model, const qpreduce::deform::RefineOptions& options = {},
                RoundHook hook = {});
   ~RefineWorker();  // cancels, then joins
-  RefineWorker(const RefineWorker &) = delete;
-  RefineWorker &operator=(const RefineWorker &) = delete;
+  RefineWorker(const RefineWorker&) = delete;
+  RefineWorker& operator=(const RefineWorker&) = delete;
 
   // Replaces any job not yet begun and cancels the running one; the thread
   // takes this one next. `pose` is n × 3 (the reduced pose to start from).
-  void start(const qpreduce::deform::Handles &handles, const qpreduce::deform::HandleTargets &targets,
-             const qpreduce::deform::Vertices &pose);
+  void start(const qpreduce::deform::Handles& handles, const qpreduce::deform::HandleTargets& targets,
+             const qpreduce::deform::Vertices& pose);
   // Cancels the current job (running or queued). Returns at once.
   void cancel();
   // UI thread: true (once per job) when the current job has finished
-  // uncancelled and usable; its pose is moved into *pose.
-  bool poll(qpreduce::deform::Vertices *pose);
+  // uncancelled and usable; its pose is copied into *pose.
+  bool poll(qpreduce::deform::Vertices* pose);
   RefineStatus status() const;
   // Blocks until the thread has no job (headless runs and tests only).
   void wait_idle();
