@@ -3,6 +3,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "refine_run.h"
 #include "validators.h"
 
 #include <viewer.h>
@@ -21,6 +22,7 @@ namespace {
 
 struct ViewArgs : ScenarioArgs {
   viewer::ViewerOptions view;
+  RefineArgs refine;
   std::string size = "1280x800", color = "clusters", reconstruction = "gpu", up = "y";
 };
 
@@ -40,6 +42,7 @@ int run_view(ViewArgs& a) {
                                                      {"deviation", viewer::ColorMode::Deviation}}.at(a.color);
   o.reconstruction = a.reconstruction == "cpu" ? viewer::Reconstruction::Cpu : viewer::Reconstruction::Gpu;
   o.up_axis = a.up == "x" ? 0 : a.up == "z" ? 2 : 1;
+  if (a.refine.tolerance) o.refine = refine_options(a.refine);
 
   viewer::ViewerInput input;
   input.name = ls.name;
@@ -76,6 +79,9 @@ void register_view(CLI::App& app) {
   cmd->add_flag("!--no-handles", a->view.show_handles, "Do not draw the handle vertices");
   cmd->add_option("--out", a->view.out_mesh, "Headless: also write the last pose (mesh)");
   cmd->add_option("--stats", a->view.stats_json, "Headless: JSON with timings, the path used and GPU/CPU agreement");
+  // Headless: refine the last frame and report it; interactive: the settings
+  // of the refine that starts when the handles are still.
+  add_refine_options(cmd, &a->refine);
   cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
       ->check(CLI::ExistingFile);
   cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")

@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <stdexcept>
 
 #include <unistd.h>
 
@@ -33,6 +34,8 @@ struct HeadlessRun {
   double op_ms = 0.0;
   std::vector<double> iter_us, recon_ms, frame_ms;
   double residual = 0.0;  // max handle residual / bbox diagonal
+  double fixed_point_residual = 0.0;  // of the last frame (FrameSummary), after its `iterations` rounds
+  int iterations = 0;
   double gpu_cpu = -1.0;  // GPU path: max |GPU read-back − CPU r₀·B·w| / bbox diagonal; −1 on the CPU path
 };
 
@@ -60,6 +63,8 @@ HeadlessRun run_frames(Session& session, MeshRenderer& renderer, const ViewerOpt
     run.recon_ms.push_back(s.reconstruction_ms);
     run.frame_ms.push_back(s.frame_ms);
     run.residual = std::max(run.residual, s.handle_residual);
+    run.fixed_point_residual = s.fixed_point_residual;
+    run.iterations = s.iterations;
   }
   // GPU path: compare the read-back positions with a CPU reconstruction of the same w.
   if (session.reconstruction() == Reconstruction::Gpu) {
@@ -68,6 +73,30 @@ HeadlessRun run_frames(Session& session, MeshRenderer& renderer, const ViewerOpt
     run.gpu_cpu = (gpu - session.cpu_reconstruction()).cwiseAbs().maxCoeff() / session.diagonal();
   }
   return run;
+}
+
+// Refines the last frame's pose on the session's worker (waiting for it: no
+// user here), draws the refined pose, and returns the stats' "refine" object.
+nlohmann::json refine_shown_pose(Session& session, MeshRenderer& renderer, const RefineOptions& options,
+                                 Vertices* refined) {
+  RefineWorker& worker = session.refine_worker(options);
+  worker.start(session.handle_set(), session.targets(), session.last_pose());
+  worker.wait_idle();
+  const RefineStatus st = worker.status();
+  if (st.state != RefineStatus::State::Done || !worker.poll(refined))
+    throw std::runtime_error(fmt::format("refine {}: {}", to_string(st.state), st.message));
+  session.show_pose(*refined, &renderer);
+  const RefineSummary& r = st.summary;
+  return {{"rounds", r.rounds},
+          {"seconds", r.seconds},
+          {"setup_seconds", r.setup_seconds},
+          {"converged", r.converged},
+          {"tolerance", options.tolerance},
+          {"anderson_window", options.anderson_window},
+          {"initial_arap_energy", r.initial_energy},
+          {"arap_energy", r.arap_energy},
+          {"rms_from_reduced", r.rms_from_input},
+          {"max_from_reduced", r.max_from_input}};
 }
 
 // Renders the last pose into the screenshot (and the mesh file when asked).
@@ -94,7 +123,8 @@ void write_last_frame(Session& session, MeshRenderer& renderer, RenderTarget& ta
   }
 }
 
-void print_summary(const Session& session, const GlContext& context, const HeadlessRun& run, const ViewerOptions& o) {
+void print_summary(const Session& session, const GlContext& context, const HeadlessRun& run, const ViewerOptions& o,
+                   const nlohmann::json& refine) {
   const PrecomputeSummary& pre = session.summary();
   fmt::print("{}: {} vertices, {} linear / {} rotational proxies, {} patches; {} frames\n", session.input().name,
              pre.vertices, pre.linear_proxies, pre.rotational_proxies, pre.patches, run.frames);
@@ -106,27 +136,41 @@ void print_summary(const Session& session, const GlContext& context, const Headl
              upper_median(run.frame_ms));
   fmt::print("  handle residual {:.2e} (max, / bbox diagonal)", run.residual);
   if (run.gpu_cpu >= 0) fmt::print(", GPU vs CPU max |Δ| {:.2e} (/ bbox diagonal)", run.gpu_cpu);
-  fmt::print("\n  wrote {}\n", o.screenshot);
+  fmt::print("\n  fixed-point residual {:.2e} after {} rounds (last frame)\n", run.fixed_point_residual,
+             run.iterations);
+  if (!refine.is_null())
+    fmt::print(
+        "  refine {} rounds, {:.3f} s: ARAP energy {:.6g} -> {:.6g}, from the reduced pose RMS {:.2e}, max {:.2e} "
+        "(/ bbox diagonal)\n",
+        refine["rounds"].get<int>(), refine["seconds"].get<double>(), refine["initial_arap_energy"].get<double>(),
+        refine["arap_energy"].get<double>(), refine["rms_from_reduced"].get<double>(),
+        refine["max_from_reduced"].get<double>());
+  fmt::print("  wrote {}\n", o.screenshot);
 }
 
 nlohmann::json stats_json(const Session& session, const GlContext& context, const HeadlessRun& run,
-                          const ViewerOptions& o) {
+                          const ViewerOptions& o, const nlohmann::json& refine, double arap_energy) {
   const PrecomputeSummary& pre = session.summary();
-  return {{"name", session.input().name},
-          {"renderer", context.description()},
-          {"reconstruction", session.reconstruction() == Reconstruction::Gpu ? "gpu" : "cpu"},
-          {"gpu_unavailable_reason", session.gpu_unavailable_reason()},
-          {"vertices", pre.vertices},
-          {"reduced_size", pre.reduced_size},
-          {"frames", run.frames},
-          {"precompute_s", pre.total_seconds},
-          {"op_ms", run.op_ms},
-          {"iteration_us", upper_median(run.iter_us)},
-          {"reconstruction_ms", upper_median(run.recon_ms)},
-          {"frame_ms", upper_median(run.frame_ms)},
-          {"handle_residual_max", run.residual},
-          {"gpu_cpu_max_deviation", run.gpu_cpu},
-          {"screenshot", o.screenshot}};
+  nlohmann::json j = {{"name", session.input().name},
+                      {"renderer", context.description()},
+                      {"reconstruction", session.reconstruction() == Reconstruction::Gpu ? "gpu" : "cpu"},
+                      {"gpu_unavailable_reason", session.gpu_unavailable_reason()},
+                      {"vertices", pre.vertices},
+                      {"reduced_size", pre.reduced_size},
+                      {"frames", run.frames},
+                      {"precompute_s", pre.total_seconds},
+                      {"op_ms", run.op_ms},
+                      {"iteration_us", upper_median(run.iter_us)},
+                      {"reconstruction_ms", upper_median(run.recon_ms)},
+                      {"frame_ms", upper_median(run.frame_ms)},
+                      {"handle_residual_max", run.residual},
+                      {"gpu_cpu_max_deviation", run.gpu_cpu},
+                      {"fixed_point_residual", run.fixed_point_residual},
+                      {"iterations", run.iterations},
+                      {"arap_energy", arap_energy},
+                      {"screenshot", o.screenshot}};
+  if (!refine.is_null()) j["refine"] = refine;
+  return j;
 }
 
 }  // namespace
@@ -138,9 +182,14 @@ int run_headless(Session& session, const ViewerOptions& o, const SaveMeshFn& sav
   target.resize(o.width, o.height, o.samples);
   session.precompute(session.input().options, isatty(fileno(stderr)) ? ProgressFn(stderr_progress) : ProgressFn());
   const HeadlessRun run = run_frames(session, renderer, o);
+  Vertices shown;  // the pose drawn: the refined one with --refine
+  const nlohmann::json refine = o.refine ? refine_shown_pose(session, renderer, *o.refine, &shown) : nlohmann::json();
   write_last_frame(session, renderer, target, o, save_mesh);
-  print_summary(session, context, run, o);
-  if (!o.stats_json.empty()) write_json(o.stats_json, stats_json(session, context, run, o), "stats");
+  print_summary(session, context, run, o, refine);
+  if (!o.stats_json.empty()) {
+    if (!o.refine) session.positions(renderer, &shown);
+    write_json(o.stats_json, stats_json(session, context, run, o, refine, session.arap_energy(shown)), "stats");
+  }
   return 0;
 }
 

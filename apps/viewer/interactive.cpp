@@ -17,8 +17,12 @@ using namespace qpreduce;
 using namespace qpreduce::deform;
 
 Interactive::Interactive(Session& session, const ViewerOptions& o, const SaveMeshFn& save_mesh)
-    : session_(session), o_(o), save_mesh_(save_mesh), context_(o.width, o.height, "qpr view — " + session.input().name, true),
-      renderer_(session.rest(), session.input().faces) {
+    : session_(session),
+      o_(o),
+      save_mesh_(save_mesh),
+      context_(o.width, o.height, "qpr view — " + session.input().name, true),
+      renderer_(session.rest(), session.input().faces),
+      rest_(o.refine_after_still_s) {
   set_camera(&camera_, session.rest(), o);
   style_.mode = o.color;
   deviation_ = o.deviation_scale;
@@ -78,7 +82,8 @@ int Interactive::run() {
       mouse();
       keys();
       advance_playback();
-      if (ready_) {
+      watch_handles();
+      if (ready_ && !showing_refined_) {
         try {
           stats_ = session_.step(&renderer_);
           smooth();
@@ -125,6 +130,8 @@ void Interactive::on_precomputed() {
 
 void Interactive::constraints_changed() {
   if (!ready_) return;
+  cancel_refine();
+  rest_.restart();  // a new handle set counts as a move
   try {
     op_ms_ = session_.update_constraints(&op_note_);
   } catch (const std::exception& e) {
@@ -190,6 +197,40 @@ void Interactive::advance_playback() {
       message_ = e.what();
     }
   }
+}
+
+RefineWorker& Interactive::refine_worker() { return session_.refine_worker(o_.refine.value_or(RefineOptions{})); }
+
+// Starts a refine once the handles have been still long enough, cancels it
+// when one moves or is grabbed, and swaps in its pose when it finishes.
+void Interactive::watch_handles() {
+  if (!ready_) return;
+  const auto& handles = session_.handles();
+  bool moved = drag_ == Drag::Translate || drag_ == Drag::Rotate || handles.size() != last_transforms_.size();
+  for (size_t h = 0; !moved && h < handles.size(); ++h) moved = handles[h].transform != last_transforms_[h];
+  if (moved) {
+    last_transforms_.resize(handles.size());
+    for (size_t h = 0; h < handles.size(); ++h) last_transforms_[h] = handles[h].transform;
+    cancel_refine();
+  }
+  const bool posed = session_.last_pose().rows() == session_.rest().rows() &&
+                     (!session_.handle_set().points.empty() || !session_.handle_set().patches.empty());
+  if (rest_.update(moved, glfwGetTime()) && auto_refine_ && posed) {
+    refine_worker().start(session_.handle_set(), session_.targets(), session_.last_pose());
+    refine_started_ = true;
+  }
+  if (refine_started_ && !showing_refined_ && refine_worker().poll(&refined_)) {
+    session_.show_pose(refined_, &renderer_);
+    showing_refined_ = true;
+    shown_arap_ = -1.0;
+  }
+}
+
+// Back to reduced frames; returns at once (the worker stops before its next round).
+void Interactive::cancel_refine() {
+  if (refine_started_) refine_worker().cancel();
+  refine_started_ = showing_refined_ = false;
+  shown_arap_ = -1.0;
 }
 
 int run_interactive(Session& session, const ViewerOptions& options, const SaveMeshFn& save_mesh) {

@@ -65,6 +65,14 @@ class Interactive {
   bool playing_ = false, recording_ = false, replaying_ = false;
   size_t scenario_frame_ = 0, replay_frame_ = 0;
   HandleMotion recorded_, replay_;
+  // Full-space refine (refine_worker.h): started when the handles have been
+  // still for o.refine_after_still_s, cancelled as soon as one moves; its
+  // pose is drawn (no reduced frames) until then.
+  bool auto_refine_ = true, refine_started_ = false, showing_refined_ = false;
+  RestTimer rest_;
+  std::vector<Eigen::Matrix4d> last_transforms_;
+  qpreduce::deform::Vertices refined_;
+  double shown_arap_ = -1.0;  // "ARAP energy" of the pose shown; < 0: not asked since it changed
 
   // ---- interactive.cpp ----
   void on_precomputed();
@@ -74,6 +82,9 @@ class Interactive {
   void delete_handle(int h);
   void stop_recording_if_changed();
   void advance_playback();
+  RefineWorker& refine_worker();
+  void watch_handles();
+  void cancel_refine();
 
   // ---- picking.cpp ----
   Eigen::Matrix4f pv() const;
@@ -104,6 +115,7 @@ class Interactive {
   void panels();
   void model_panel();
   void frame_panel();
+  void refine_panel();
   void edit_panel();
   void handle_list();
   void motion_controls();

@@ -17,6 +17,7 @@ using namespace qpreduce::deform;
 void Interactive::panels() {
   model_panel();
   frame_panel();
+  refine_panel();
   edit_panel();
 }
 
@@ -79,6 +80,7 @@ void Interactive::frame_panel() {
   int path = wanted_ == Reconstruction::Gpu ? 0 : 1;
   if (ImGui::RadioButton("GPU", &path, 0) | ImGui::RadioButton("CPU", &path, 1)) {
     wanted_ = path == 0 ? Reconstruction::Gpu : Reconstruction::Cpu;
+    cancel_refine();  // back to reduced frames on the new path
     if (ready_) session_.set_reconstruction(wanted_, &renderer_);
   }
   ImGui::Text("running: %s", to_string(session_.reconstruction()));
@@ -89,8 +91,51 @@ void Interactive::frame_panel() {
   ImGui::Text("reconstruction %8.3f ms", shown_.reconstruction_ms);
   ImGui::Text("frame          %8.3f ms", shown_.frame_ms);
   ImGui::Text("handle residual %.2e (/ bbox diag.)", shown_.handle_residual);
+  ImGui::Text("fixed-point residual %.2e after %d rounds", stats_.fixed_point_residual, stats_.iterations);
   ImGui::Text("display %.1f fps", ImGui::GetIO().Framerate);
   if (!op_note_.empty()) ImGui::TextWrapped("%s", op_note_.c_str());
+  ImGui::End();
+}
+
+// The full-space refine: its state, the quality of the pose shown, and the
+// classic ARAP energy on request.
+void Interactive::refine_panel() {
+  ImGui::SetNextWindowPos(ImVec2(10, 580), ImGuiCond_FirstUseEver);
+  ImGui::Begin("Refine", nullptr, ImGuiWindowFlags_AlwaysAutoResize);
+  if (ImGui::Checkbox("refine when the handles rest", &auto_refine_)) {
+    cancel_refine();
+    rest_.restart();  // switched on: a refine after the next rest period
+  }
+  if (ready_) {
+    const RefineStatus st = refine_worker().status();
+    const RefineSummary& r = st.summary;
+    switch (st.state) {
+      case RefineStatus::State::Idle: ImGui::TextUnformatted("refine: idle"); break;
+      case RefineStatus::State::Running:
+        if (st.preparing)
+          ImGui::Text("refine: preparing (factoring), %.2f s", st.seconds);
+        else
+          ImGui::Text("refine: running, %d rounds, %.2f s", st.rounds, st.seconds);
+        break;
+      case RefineStatus::State::Done:
+        ImGui::Text("refine: done, %d rounds, %.2f s%s", r.rounds, r.seconds, r.converged ? "" : " (round limit)");
+        ImGui::Text("ARAP energy %.6g (reduced pose %.6g)", r.arap_energy, r.initial_energy);
+        ImGui::Text("from the reduced pose: RMS %.2e, max %.2e", r.rms_from_input, r.max_from_input);
+        ImGui::TextUnformatted("(/ bbox diagonal; drawn until a handle moves)");
+        break;
+      case RefineStatus::State::Cancelled: ImGui::TextUnformatted("refine: cancelled (handles moved or changed)"); break;
+      case RefineStatus::State::Failed: ImGui::TextWrapped("refine failed: %s", st.message.c_str()); break;
+    }
+    if (ImGui::Button("ARAP energy")) {
+      Vertices V;
+      session_.positions(renderer_, &V);
+      shown_arap_ = session_.arap_energy(V);
+    }
+    if (shown_arap_ >= 0.0) {
+      ImGui::SameLine();
+      ImGui::Text("%.6g (%s pose)", shown_arap_, showing_refined_ ? "refined" : "reduced");
+    }
+  }
   ImGui::End();
 }
 

@@ -1,6 +1,7 @@
 #include "session.h"
 
 #include <qpreduce/deform/deformer/selection_handles.h>
+#include <qpreduce/deform/energy/arap_energy.h>
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/proxies/proxies.h>
 #include <qpreduce/support.h>
@@ -265,6 +266,8 @@ FrameStats Session::step(MeshRenderer* renderer) {
   const Timer total;
   if (path_ == Reconstruction::Gpu) {
     const FrameSummary fs = deformer_->frame(targets_, nullptr);
+    stats.fixed_point_residual = fs.fixed_point_residual;
+    stats.iterations = fs.iterations;
     stats.solve_ms = 1e3 * fs.solve_seconds;
     stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
     const Timer t;
@@ -273,6 +276,8 @@ FrameStats Session::step(MeshRenderer* renderer) {
     stats.reconstruction_ms = 1e3 * t.seconds();
   } else {
     const FrameSummary fs = deformer_->frame(targets_, &cpu_out_);
+    stats.fixed_point_residual = fs.fixed_point_residual;
+    stats.iterations = fs.iterations;
     stats.solve_ms = 1e3 * fs.solve_seconds;
     stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
     const Timer t;
@@ -290,6 +295,22 @@ FrameStats Session::step(MeshRenderer* renderer) {
 void Session::positions(const MeshRenderer& renderer, Vertices* V) const {
   if (path_ == Reconstruction::Gpu) renderer.read_positions(V);
   else *V = cpu_out_;
+}
+
+void Session::show_pose(const Vertices& V, MeshRenderer* renderer) {
+  check_size("Session::show_pose: rows", rest().rows(), V.rows());
+  renderer->upload_positions(V);
+  if (path_ == Reconstruction::Cpu) cpu_out_ = V;  // what positions() returns on this path
+}
+
+double Session::arap_energy(const Vertices& V) const {
+  check_size("Session::arap_energy: rows", rest().rows(), V.rows());
+  return qpreduce::deform::arap_energy(rest(), deformer_->elements(), V);
+}
+
+RefineWorker& Session::refine_worker(const RefineOptions& options) {
+  if (!refine_) refine_ = std::make_unique<RefineWorker>(input_.scenario.model, options);
+  return *refine_;
 }
 
 Vertices Session::cpu_reconstruction() const {

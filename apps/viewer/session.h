@@ -15,6 +15,7 @@
 // reconstruction, then upload).
 #pragma once
 
+#include "refine_worker.h"
 #include "renderer.h"
 
 #include <qpreduce/deform/deformer/deformer.h>
@@ -60,6 +61,10 @@ struct FrameStats {
   double reconstruction_ms = 0.0; // w → positions and normals in GPU buffers (either path)
   double frame_ms = 0.0;          // solve + reconstruction
   double handle_residual = 0.0;   // max over constrained points / bbox diagonal
+  // How far the pose is from the alternation's fixed point after the frame's
+  // rounds (FrameSummary::fixed_point_residual, ‖ΔS‖/‖S‖), and those rounds.
+  double fixed_point_residual = 0.0;
+  int iterations = 0;
 };
 
 class Session {
@@ -118,6 +123,22 @@ class Session {
   // CPU reconstruction r₀·(B·w) of the last frame from the Deformer's
   // accessors (double accumulation), to check the GPU path against.
   qpreduce::deform::Vertices cpu_reconstruction() const;
+  // The handle set and targets of the last frame, and its pose (n × 3, read
+  // back on the GPU path): what a refine starts from.
+  const qpreduce::deform::Handles& handle_set() const { return flat_; }
+  const qpreduce::deform::HandleTargets& targets() const { return targets_; }
+  const qpreduce::deform::Vertices& last_pose() const { return cpu_out_; }
+  // Draws `V` (n × 3, e.g. a refined pose) instead of the last frame until
+  // the next step; positions() then returns it.
+  void show_pose(const qpreduce::deform::Vertices& V, MeshRenderer* renderer);
+  // Classic ARAP energy (arap_energy.h) of a pose V (n × 3) against the rest
+  // pose, over the deformer's rotation elements.
+  double arap_energy(const qpreduce::deform::Vertices& V) const;
+
+  // ---- full-space refine (refine_worker.h) ----
+  // The session's worker, made on first use with `options` (later calls
+  // return the same worker and ignore them).
+  RefineWorker& refine_worker(const qpreduce::deform::RefineOptions& options = {});
 
  private:
   ViewerInput input_;
@@ -141,6 +162,7 @@ class Session {
   qpreduce::deform::Vertices cpu_out_;
   qpreduce::deform::Scenario residual_scenario_;  // flat_ as a scenario, for handle_residual
   qpreduce::deform::LinearProxies input_linear_pending_;  // the proxies of the pending deformer
+  std::unique_ptr<RefineWorker> refine_;                  // last: destroyed (joined) first
 
   void fill_targets();
 };

@@ -6,6 +6,7 @@
 #include "session.h"
 
 #include <functional>
+#include <optional>
 #include <string>
 
 namespace qpr::viewer {
@@ -27,6 +28,13 @@ struct ViewerOptions {
   std::string replay;              // a recorded handle motion (JSON) to play
   int max_frames = 0;              // interactive: close after this many frames (0: never; for smoke tests)
   std::string window_screenshot;   // interactive with max_frames: the whole window (panels too) at the last frame
+  // Full-space refine (refine_worker.h). Headless, when set: refine the last
+  // frame's pose, draw and write the refined pose, report it under "refine".
+  // Interactive: the settings of the automatic refine (defaults when unset).
+  std::optional<qpreduce::deform::RefineOptions> refine;
+  // Interactive: how long the handles must stay still before a refine starts
+  // (long enough not to start one between the events of a slow drag).
+  double refine_after_still_s = 0.3;
 };
 
 // Writes a pose of the input mesh (surfaces OBJ/OFF/PLY, tets .mesh/.node or

@@ -6,6 +6,7 @@
 #include <context.h>
 #include <image.h>
 #include <motion.h>
+#include <refine_worker.h>
 #include <renderer.h>
 #include <session.h>
 
@@ -17,8 +18,11 @@
 #include <catch2/catch.hpp>
 
 #include <cfloat>
+#include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
@@ -61,6 +65,55 @@ void scripted_drag(Session* s, MeshRenderer* renderer, int steps, std::vector<Fr
   }
 }
 
+// One GL context for the whole run: a second one, opened after the first is
+// closed, can find xvfb-run's server resetting (its last client left).
+const GlContext& gl_context() {
+  static const GlContext context(kSize, kSize, "viewer_test", false);
+  return context;
+}
+
+// Holds a refine inside one round (the first time the worker's hook sees
+// `round` rounds done) until release(): the test then acts while the worker
+// is provably busy, without timing.
+class RoundLatch {
+ public:
+  explicit RoundLatch(int round) : round_(round) {}
+  RefineWorker::RoundHook hook() {
+    return [this](int rounds) {
+      std::unique_lock<std::mutex> lock(m_);
+      if (rounds != round_ || reached_) return;
+      reached_ = inside_ = true;
+      cv_.notify_all();
+      cv_.wait(lock, [this] { return released_; });
+      inside_ = false;
+    };
+  }
+  // Waits until the worker is held, or is no longer running; true when held.
+  bool wait_held(const RefineWorker& worker) {
+    std::unique_lock<std::mutex> lock(m_);
+    while (!reached_ && worker.status().state == RefineStatus::State::Running)
+      cv_.wait_for(lock, std::chrono::milliseconds(10));
+    return reached_;
+  }
+  bool inside() {
+    std::lock_guard<std::mutex> lock(m_);
+    return inside_;
+  }
+  void release() {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      released_ = true;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  const int round_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  bool reached_ = false, inside_ = false, released_ = false;
+};
+
 Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices& rest) {
   Camera camera;
   camera.up_axis = 2;
@@ -76,8 +129,7 @@ Image render(const MeshRenderer& renderer, RenderTarget* target, const Vertices&
 }  // namespace
 
 TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag changes the picture") {
-  GlContext context(kSize, kSize, "viewer_test", false);
-  INFO(context.description());
+  INFO(gl_context().description());
   RenderTarget target;
   target.resize(kSize, kSize, 4);
 
@@ -144,6 +196,126 @@ TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag chang
     CHECK_THROWS_AS(gpu_session.add_handle({}, "empty"), std::invalid_argument);
     CHECK_THROWS_AS(read_png("no-such-file.png"), std::runtime_error);
   }
+}
+
+TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once, cancelled mid-round") {
+  INFO(gl_context().description());
+  Session s(cylinder_input());
+  s.precompute(s.input().options);
+  MeshRenderer renderer(s.rest(), s.input().faces);
+  s.set_reconstruction(Reconstruction::Cpu, &renderer);
+  std::vector<FrameStats> stats;
+  scripted_drag(&s, &renderer, 6, &stats);
+  // The per-frame quality readout: rounds run and the fixed-point residual.
+  CHECK(stats.back().iterations >= 1);
+  CHECK(stats.back().iterations <= s.input().options.iterations);
+  CHECK(std::isfinite(stats.back().fixed_point_residual));
+  CHECK(stats.back().fixed_point_residual >= 0.0);
+  const Vertices reduced = s.last_pose();
+  REQUIRE(reduced.rows() == s.rest().rows());
+
+  SECTION("a refine finishes on the worker; its pose is handed over once and drawn") {
+    RefineWorker& worker = s.refine_worker();
+    CHECK(worker.status().state == RefineStatus::State::Idle);
+    worker.start(s.handle_set(), s.targets(), reduced);
+    worker.wait_idle();
+    const RefineStatus st = worker.status();
+    INFO(st.message);
+    REQUIRE(st.state == RefineStatus::State::Done);
+    CHECK(st.summary.rounds > 0);
+    CHECK_FALSE(st.summary.cancelled);
+    // Full-space local-global does not raise the classic ARAP energy of the
+    // reduced pose, and keeps the (hard) handles.
+    CHECK(st.summary.arap_energy <= s.arap_energy(reduced) * (1 + 1e-9));
+    CHECK(st.summary.handle_residual / s.diagonal() < 1e-6);
+    Vertices refined;
+    REQUIRE(worker.poll(&refined));
+    CHECK_FALSE(worker.poll(&refined));  // once per job
+    REQUIRE(refined.rows() == reduced.rows());
+    CHECK(refined.allFinite());
+    CHECK(s.arap_energy(refined) == Approx(st.summary.arap_energy).epsilon(1e-9));
+    // The readout's distances are those between the reduced and refined poses.
+    const Eigen::VectorXd d = (refined - reduced).rowwise().norm();
+    CHECK(st.summary.max_from_input == Approx(d.maxCoeff() / s.diagonal()).epsilon(1e-9));
+    CHECK(st.summary.rms_from_input > 0.0);
+    CHECK(st.summary.rms_from_input <= st.summary.max_from_input);
+    // Drawn instead of the last frame: the vertex buffer holds the refined
+    // pose (floats), and positions() returns it.
+    s.show_pose(refined, &renderer);
+    Vertices drawn, shown;
+    renderer.read_positions(&drawn);
+    s.positions(renderer, &shown);
+    CHECK((drawn - refined).cwiseAbs().maxCoeff() <= 1e-6 * s.diagonal());
+    CHECK((shown - refined).cwiseAbs().maxCoeff() <= 1e-6 * s.diagonal());
+  }
+
+  SECTION("cancel() returns while the worker is inside a round; the pose stays valid; the worker is reusable") {
+    RoundLatch latch(2);
+    RefineOptions options;
+    options.tolerance = 0.0;  // to the converged shape: far more than 2 rounds
+    RefineWorker worker(s.input().scenario.model, options, latch.hook());
+    worker.start(s.handle_set(), s.targets(), reduced);
+    REQUIRE(latch.wait_held(worker));
+    CHECK(worker.status().state == RefineStatus::State::Running);
+    CHECK(worker.status().rounds == 2);
+    worker.cancel();
+    CHECK(worker.status().state == RefineStatus::State::Cancelled);
+    CHECK(latch.inside());  // cancel() did not wait for the round to end
+    latch.release();
+    Vertices pose;
+    CHECK_FALSE(worker.poll(&pose));
+    worker.wait_idle();
+    CHECK(worker.status().state == RefineStatus::State::Cancelled);
+    CHECK_FALSE(worker.poll(&pose));  // a cancelled refine is never swapped in
+    const RefineSummary cancelled = worker.last_summary();
+    CHECK(cancelled.cancelled);
+    CHECK(cancelled.rounds == 2);
+    const Vertices last = worker.last_pose();
+    REQUIRE(last.rows() == reduced.rows());
+    CHECK(last.allFinite());
+    CHECK(s.arap_energy(last) <= s.arap_energy(reduced) * (1 + 1e-9));
+
+    worker.start(s.handle_set(), s.targets(), reduced);
+    worker.wait_idle();
+    REQUIRE(worker.status().state == RefineStatus::State::Done);
+    CHECK(worker.status().summary.converged);
+    CHECK(worker.poll(&pose));
+    CHECK(s.arap_energy(pose) <= s.arap_energy(last) * (1 + 1e-9));
+  }
+
+  SECTION("start() while a refine runs replaces it without waiting; only the new job's pose is handed over") {
+    RoundLatch latch(1);
+    RefineWorker worker(s.input().scenario.model, RefineOptions{}, latch.hook());
+    worker.start(s.handle_set(), s.targets(), reduced);
+    REQUIRE(latch.wait_held(worker));
+    HandleTargets moved = s.targets();  // every handle 0.05 further along each axis
+    moved.points.array() += 0.05;
+    worker.start(s.handle_set(), moved, reduced);
+    CHECK(worker.status().state == RefineStatus::State::Running);  // the new job, queued
+    CHECK(latch.inside());                                         // start() did not wait for the first job
+    latch.release();
+    worker.wait_idle();
+    REQUIRE(worker.status().state == RefineStatus::State::Done);
+    Vertices pose;
+    REQUIRE(worker.poll(&pose));
+    const DeformableMesh& model = s.input().scenario.model;
+    CHECK(handle_residual(model, s.handle_set(), moved, pose) < 1e-6 * s.diagonal());
+    CHECK(handle_residual(model, s.handle_set(), s.targets(), pose) > 0.05);
+  }
+}
+
+TEST_CASE("RestTimer: a refine starts once per rest, the first frame still_seconds after the last move") {
+  RestTimer rest(0.3);
+  CHECK_FALSE(rest.update(false, 0.0));  // the first frame counts as a move
+  CHECK_FALSE(rest.update(false, 0.2));
+  CHECK(rest.update(false, 0.31));
+  CHECK_FALSE(rest.update(false, 0.5));  // once per rest
+  CHECK_FALSE(rest.update(true, 0.6));   // a handle moves or is held
+  CHECK_FALSE(rest.update(false, 0.8));
+  CHECK(rest.update(false, 0.95));
+  rest.restart();  // e.g. refining switched back on
+  CHECK_FALSE(rest.update(false, 1.0));
+  CHECK(rest.update(false, 1.35));
 }
 
 TEST_CASE("recorded handle motion round trips and bad files are refused") {
