@@ -160,6 +160,7 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   check_finite("FixedCoordinateSolver::set_reduced_constraints: A_y", Ay);
   const Timer timer;
   op_.reset();
+  energy_.reset();  // the terms of the previous constraint set
 
   std::optional<detail::ScopedBlasThreads> blas;  // single-threaded BLAS unless asked (see ConstraintOptions)
   if (options.threads > 0) blas.emplace(options.threads);
@@ -179,7 +180,6 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
     }
   }
   scratch_.resize(op_->scratch_size());
-  energy_.reset();
   Az_ = Az;
   Ay_ = Ay;
   options_ = options;

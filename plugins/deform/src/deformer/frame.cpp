@@ -108,12 +108,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
   const bool tied = !onsite.tied_patches.empty();
-  // Plain rounds when the energy terms assume no ties (DeformerOptions::
-  // anderson_window) or the model's projection gives no quadratic_term (a
-  // custom model that does not define its energy on Phase 2 outputs).
-  const bool energy_known =
-      onsite.phase1.has_energy_terms() && std::isfinite(model.projection->quadratic_term(work.s_local));
-  if (tied || !energy_known) opts.anderson_window = 0;
+  if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
   if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
@@ -121,12 +116,8 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
   summary.model_energy = as.energy;
   summary.rejected_steps = as.rejected;
-  if (tied && st.settings.alternating.anderson_window > 0) {
-    summary.message = "plain rounds: this handle set ties a free Rigid patch to its cluster (no acceleration)";
-  } else if (!energy_known && st.settings.alternating.anderson_window > 0) {
-    summary.message = onsite.phase1.has_energy_terms()
-                          ? "plain rounds: the model's projection defines no quadratic_term (no acceleration)"
-                          : "plain rounds: this handle set's constraints were not solved exactly (no acceleration)";
+  if (!onsite.plain_reason.empty() && st.settings.alternating.anderson_window > 0) {
+    summary.message = "plain rounds: " + onsite.plain_reason + " (no acceleration)";
   }
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
@@ -196,11 +187,7 @@ void Deformer::set_anderson_window(int window) {
         "with the paper's Eq. 19 step)");
   }
   // A handle set made with plain rounds has no energy terms yet.
-  detail_deformer::OnSite& onsite = st.onsite;
-  if (window > 0 && st.ready && onsite.phase1.ready() && onsite.tied_patches.empty() &&
-      !onsite.phase1.has_energy_terms()) {
-    onsite.phase1.form_energy_terms(st.model.solver);
-  }
+  if (st.ready && st.onsite.phase1.ready()) detail_deformer::prepare_acceleration(st.model, window, &st.onsite);
   st.settings.alternating.anderson_window = window;
 }
 

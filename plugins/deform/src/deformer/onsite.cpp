@@ -7,6 +7,8 @@
 #include "handle_checks.h"
 #include "state.h"
 
+#include <cmath>
+
 #include <algorithm>
 #include <utility>
 
@@ -113,6 +115,27 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
 
 }  // namespace
 
+namespace detail_deformer {
+
+void prepare_acceleration(const Model& model, int window, OnSite* onsite) {
+  // The energy terms assume no ties; a custom projection may not define its
+  // energy on Phase 2 outputs (quadratic_term NaN: InputProjection).
+  if (!onsite->tied_patches.empty()) {
+    onsite->plain_reason = "this handle set ties a free Rigid patch to its cluster";
+  } else if (!onsite->constraints_ok || !onsite->phase1.ready()) {
+    onsite->plain_reason = "this handle set's constraints were not solved exactly";
+  } else if (!std::isfinite(model.projection->quadratic_term(Vector<double>::Zero(9 * model.d)))) {
+    onsite->plain_reason = "the model's projection defines no quadratic_term";
+  } else {
+    onsite->plain_reason.clear();
+  }
+  if (window > 0 && onsite->plain_reason.empty() && !onsite->phase1.has_energy_terms()) {
+    onsite->phase1.form_energy_terms(model.solver);
+  }
+}
+
+}  // namespace detail_deformer
+
 ConstraintSummary Deformer::set_handles(const Handles& handles, const ConstraintOptions& options) {
   State& st = *state_;
   if (!st.ready) throw std::invalid_argument("Deformer::set_handles: call precompute first");
@@ -126,12 +149,10 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   const ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
   make_tie_map(model, layout, &onsite);
-  // Accelerated rounds need the energy terms; tied sets run plain (frame.cpp).
-  if (st.settings.alternating.anderson_window > 0 && layout.tied.empty() && onsite.phase1.ready() && cs.ok()) {
-    onsite.phase1.form_energy_terms(model.solver);
-  }
   set_fused(model, !layout.tied.empty(), options.threads, st.fused_precision(), &onsite);
   onsite.tied_patches = std::move(layout.tied);
+  onsite.constraints_ok = cs.ok();
+  detail_deformer::prepare_acceleration(model, st.settings.alternating.anderson_window, &onsite);
   onsite.tie_row0 = layout.tie_row0;
   onsite.handles = handles;
   onsite.rows = layout.cols;

@@ -23,6 +23,7 @@
 #include <qpreduce/alternating.h>
 #include <qpreduce/subspace_solver.h>
 
+#include <string>
 #include <vector>
 
 namespace qpreduce::deform::detail_deformer {
@@ -139,7 +140,17 @@ struct OnSite {
   std::vector<Index> tied_patches;
   Index tie_row0 = 0;
   Matrix<double> tie_map, MU_tied;
+  // Why this handle set's rounds run plain whatever anderson_window says
+  // (empty: they may be accelerated): a tied free Rigid patch, constraints
+  // not solved exactly, or a projection without quadratic_term.
+  std::string plain_reason;
+  bool constraints_ok = false;  // the set_reduced_constraints status was Success
 };
+
+// Sets onsite->plain_reason for the current handle set and, when the rounds
+// are to be accelerated (window > 0) and may be, forms Phase 1's energy terms
+// once (O(m·d·k)). Called by set_handles and set_anderson_window.
+void prepare_acceleration(const Model& model, int window, OnSite* onsite);
 
 // The results of the last frame (warm start of the next one).
 struct Pose {
