@@ -3,7 +3,9 @@
 #   1. the Release build and its full Catch2 suite (ctest);
 #   2. the same suite built with AddressSanitizer + UBSan (./build-asan);
 #   3. two tiny consumer projects built against the installed package config
-#      (the engine and deformer without Ceres; the reference component);
+#      (the engine and deformer without Ceres; the reference component), and
+#      the Python tests of the solver, deformer and refine run against the
+#      Python package as installed;
 #   4. the readers' libFuzzer targets (clang-14, ./build-fuzz): the corpus of
 #      tests/fuzz replayed, then each target fuzzed for QPR_FUZZ_SECONDS
 #      (default 6) seconds (scripts/fuzz.sh, docs/robustness.md).
@@ -40,6 +42,22 @@ cmake -S "$root/tests/packaging/reference_consumer" -B "$root/build/reference_co
   -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
 cmake --build "$root/build/reference_consumer" -j "$jobs"
 "$root/build/reference_consumer/reference_consumer"
+
+echo "== installed Python package"
+# The package `cmake --install` put under the prefix (the interpreter's
+# site-packages layout), imported from outside the checkout with nothing of
+# the build tree on the path: the solver, deformer and refine tests and the
+# examples run against it.
+python="$(sed -n 's/^_Python3_EXECUTABLE:INTERNAL=//p' "$root/build/CMakeCache.txt")"
+module="$(find "$prefix" -name '_qpreduce*.so' -print -quit)"
+if [ -z "$module" ]; then
+  echo "the Python package was not installed under $prefix" >&2
+  exit 1
+fi
+site="$(dirname "$(dirname "$module")")"
+(cd "$prefix" && PYTHONPATH="$site" QPREDUCE_EXPECT_PACKAGE_DIR="$site" OMP_NUM_THREADS="$jobs" \
+  "$python" -m pytest -q -p no:cacheprovider "$root/tests/python/test_solver.py" \
+  "$root/tests/python/test_deform.py" "$root/tests/python/test_refine.py" "$root/tests/python/test_examples.py")
 
 echo "== fuzzing the readers (libFuzzer, ASan + UBSan)"
 bash "$root/scripts/fuzz.sh"

@@ -271,6 +271,7 @@ void bind_deform_io(py::module_& m) {
   bind_mesh_io(deform);
   bind_scenarios(deform);
   bind_references(deform);
+  bind_refiner(deform);
 }
 
 }  // namespace qpreduce::python

@@ -1,9 +1,20 @@
 """Shared inputs for the qpreduce Python tests: seeded random PSD problems."""
 
+import os
+
 import numpy as np
 import pytest
 import scipy.sparse
 import scipy.sparse.linalg
+
+import qpreduce
+
+# scripts/test.sh runs part of this suite against the installed package; it
+# sets QPREDUCE_EXPECT_PACKAGE_DIR so that a build tree found first by
+# accident fails instead of being tested in its place.
+_expected = os.environ.get("QPREDUCE_EXPECT_PACKAGE_DIR")
+if _expected and not os.path.realpath(qpreduce.__file__).startswith(os.path.realpath(_expected) + os.sep):
+    raise RuntimeError(f"qpreduce imported from {qpreduce.__file__}, expected under {_expected}")
 
 
 class RandomProblem:

@@ -1,0 +1,126 @@
+"""qpreduce.deform.Refiner: the full-space finish of a reduced pose — the same
+converged energy from the reduced pose and from rest, one factorization per
+handle set, out= without a copy, cancel from another thread, and errors."""
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import qpreduce
+from qpreduce import deform
+
+from test_deform import make_deformer
+
+
+@pytest.fixture(scope="module")
+def posed():
+    deformer, scenario = make_deformer(frames=2)
+    reduced = deformer.frame(scenario.frames[-1])
+    return deformer, scenario, reduced
+
+
+def test_refine_from_the_reduced_pose_and_from_rest_reach_the_same_arap_energy(posed):
+    _, scenario, reduced = posed
+    refiner = deform.Refiner(scenario.model, deform.RefineOptions(tolerance=1e-10))
+    targets = scenario.frames[-1]
+    V_red, from_reduced = refiner.refine(scenario.handles, targets, reduced)
+    V_rest, from_rest = refiner.refine(scenario.handles, targets)
+    assert from_reduced.ok() and from_reduced.converged and from_rest.converged
+    assert from_reduced.refactored and not from_rest.refactored  # same handle set: factor reused
+    assert from_reduced.arap_energy == pytest.approx(from_rest.arap_energy, rel=1e-6)
+    assert from_reduced.arap_energy == pytest.approx(deform.arap_energy(scenario.model, V_red), rel=1e-12)
+    # It only goes down from the reduced pose, and agrees with the plain reference.
+    assert from_reduced.arap_energy <= deform.arap_energy(scenario.model, reduced) * (1 + 1e-12)
+    _, reference = deform.solve_local_global(scenario.model, scenario.handles, targets,
+                                             deform.ReferenceOptions(max_iterations=20000))
+    assert from_reduced.arap_energy == pytest.approx(reference.energy, rel=1e-6)
+    assert from_reduced.handle_residual < 1e-9
+    # The readout: distances from the input pose over the diagonal, per round.
+    diagonal = np.linalg.norm(scenario.model.V.max(axis=0) - scenario.model.V.min(axis=0))
+    d = np.linalg.norm(V_red - reduced, axis=1) / diagonal
+    assert from_reduced.max_from_input == pytest.approx(d.max(), rel=1e-9)
+    assert from_reduced.rms_from_input == pytest.approx(np.sqrt(np.mean(d**2)), rel=1e-9)
+    assert len(from_reduced.round_energy) == from_reduced.rounds
+    assert np.all(np.diff(from_reduced.round_energy) <= 1e-12 * from_reduced.initial_energy)
+    # Warm-started from the reduced pose it needs fewer rounds than from rest.
+    assert from_reduced.rounds < from_rest.rounds
+
+
+def test_refine_writes_the_callers_array(posed):
+    _, scenario, reduced = posed
+    refiner = deform.Refiner(scenario.model)
+    out = np.zeros_like(reduced)
+    V, summary = refiner.refine(scenario.handles, scenario.frames[-1], reduced, out=out)
+    assert V is out and summary.ok()
+    expected, _ = refiner.refine(scenario.handles, scenario.frames[-1], reduced)
+    assert np.array_equal(out, expected)
+
+
+def test_cancel_from_another_thread_leaves_a_valid_pose(posed):
+    _, scenario, _ = posed
+    # From rest with plain rounds and no tolerance: thousands of rounds unless cancelled.
+    refiner = deform.Refiner(scenario.model, deform.RefineOptions(tolerance=0.0, anderson_window=0,
+                                                                   max_iterations=1000000))
+    result = {}
+
+    def run():
+        result["V"], result["summary"] = refiner.refine(scenario.handles, scenario.frames[-1])
+
+    worker = threading.Thread(target=run)
+    worker.start()
+    deadline = time.monotonic() + 60
+    while worker.is_alive() and time.monotonic() < deadline:
+        time.sleep(0.05)
+        refiner.cancel()
+    worker.join(timeout=60)
+    assert not worker.is_alive(), "cancel() did not stop the refine"
+    summary, V = result["summary"], result["V"]
+    assert summary.cancelled and not summary.converged and summary.ok()
+    assert np.isfinite(V).all()
+    assert summary.arap_energy == pytest.approx(deform.arap_energy(scenario.model, V), rel=1e-12)
+    # The rest pose misses the targets (energy 0); the rounds hold them and
+    # then only go down.
+    assert summary.handle_residual < 1e-9
+    assert len(summary.round_energy) == summary.rounds
+    assert np.all(np.diff(summary.round_energy) <= 1e-12 * summary.round_energy[0])
+    # A later refine is not affected by the earlier cancel.
+    refiner.set_options(deform.RefineOptions(tolerance=1e-8))
+    _, again = refiner.refine(scenario.handles, scenario.frames[-1], V)
+    assert again.converged and not again.cancelled
+
+
+def test_bad_options_and_arguments_name_the_problem(posed):
+    _, scenario, reduced = posed
+    with pytest.raises(ValueError, match="tolerance"):
+        deform.Refiner(scenario.model, deform.RefineOptions(tolerance=-1.0))
+    with pytest.raises(ValueError, match="anderson_window"):
+        deform.RefineOptions(anderson_window=17).validate()
+    refiner = deform.Refiner(scenario.model)
+    with pytest.raises(ValueError, match="tolerance"):
+        refiner.set_options(deform.RefineOptions(tolerance=float("nan")))
+    with pytest.raises(ValueError, match=r"pose.*\(n, 3\)"):
+        refiner.refine(scenario.handles, scenario.frames[-1], reduced[:-1])
+    bad = reduced.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="pose"):
+        refiner.refine(scenario.handles, scenario.frames[-1], bad)
+    with pytest.raises(TypeError, match="out"):
+        refiner.refine(scenario.handles, scenario.frames[-1], reduced, out=np.zeros(reduced.shape, np.float32))
+    with pytest.raises(TypeError):
+        refiner.refine([0, 1], scenario.frames[-1])
+    with pytest.raises(TypeError, match="options"):
+        deform.Refiner(scenario.model, dict(tolerance=1.0))
+    # The refiner still works after all of these.
+    _, summary = refiner.refine(scenario.handles, scenario.frames[-1], reduced)
+    assert summary.ok() and summary.converged
+
+
+def test_a_failed_factorization_raises_numerical_error(posed):
+    _, scenario, _ = posed
+    refiner = deform.Refiner(scenario.model)
+    # No handles at all: the global step is singular (the translations are free).
+    with pytest.raises(qpreduce.NumericalError) as raised:
+        refiner.refine(deform.Handles(), deform.HandleTargets())
+    assert raised.value.status == qpreduce.Status.NumericalFailure and raised.value.message
