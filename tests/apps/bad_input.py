@@ -196,7 +196,7 @@ case("meshes", "a vertex at 1e20 still runs", ["deform", "{W}/far.off", "--sel",
      0, [], {"far.off": FAR.replace("1e300", "1e20"), "far.sel": SEL + "1\n"})
 case("meshes", "an unanchored component is named (was 'condition inf')",
      ["deform", "{W}/two.off", "--sel", "{W}/two.sel", "--def", "{W}/tube.def"] + SMALL, RUN,
-     ["two.off", "connected component 1 (48 vertices, from vertex 48)", "nothing holds it"],
+     ["two.off", "connected component 1 (48 vertices, first vertex 48)", "no handle or fixed region anchoring it"],
      {"two.off": TWO, "two.sel": SEL + "1\n" * NV})
 case("meshes", "missing mesh file", deform(mesh="{W}/none.off"), RUN, ["none.off", "cannot open"])
 case("meshes", "a directory as the mesh", deform(mesh="{W}/dem"), RUN, ["dem", "unsupported"])
