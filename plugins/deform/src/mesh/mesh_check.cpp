@@ -10,9 +10,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <numeric>
 #include <stdexcept>
-#include <tuple>
 
 namespace qpreduce::deform {
 
@@ -145,14 +145,14 @@ void check_coordinates(Inputs& in, std::vector<MeshFinding>* out) {
   in.measurable.assign(static_cast<size_t>(in.n), 1);
   for (Index v = 0; v < in.n; ++v) {
     const Row3 x = in.V.row(v);
-    const std::string at = fmt::format("({:g}, {:g}, {:g})", x(0), x(1), x(2));
+    const auto at = [&x] { return fmt::format("({:g}, {:g}, {:g})", x(0), x(1), x(2)); };
     if (!x.allFinite()) {
       in.measurable[v] = 0;
-      if (nonfinite.add({v})) nonfinite.sentence(fmt::format("vertex {} at {} has a non-finite coordinate", v, at));
+      if (nonfinite.add({v})) nonfinite.sentence(fmt::format("vertex {} at {} has a non-finite coordinate", v, at()));
     } else if (!(x.cwiseAbs().maxCoeff() <= in.o.max_coordinate)) {
       in.measurable[v] = 0;
       if (overflow.add({v}))
-        overflow.sentence(fmt::format("vertex {} at {}: coordinates beyond {:g} overflow in the energy", v, at,
+        overflow.sentence(fmt::format("vertex {} at {}: coordinates beyond {:g} overflow in the energy", v, at(),
                                       in.o.max_coordinate));
     }
   }
@@ -314,12 +314,13 @@ void check_unreferenced(const Inputs& in, const MeshCheckSummary& s, std::vector
   loose.finish(out);
 }
 
-// Vertices within duplicate_distance·diagonal of a lower-numbered vertex:
-// sort by grid cell (side 2r, so an r-ball meets at most 2 cells per axis)
-// and look in the 8 cells the ball around each vertex can reach.
+// Vertices within r = duplicate_distance·diagonal of a lower-numbered vertex:
+// sort by grid cell and look in the cells the r-ball around each vertex
+// reaches. The side 16r (≥ 2r: at most 2 cells per axis) keeps that to one
+// cell for most vertices (a ball crosses a face with probability 1/8 per axis).
 void check_duplicates(const Inputs& in, const MeshCheckSummary& s, std::vector<MeshFinding>* out) {
   FindingBuilder dup(MeshDefect::DuplicateVertex, CheckSeverity::Warning, "vertex", in.o.max_listed);
-  const double r = in.o.duplicate_distance * s.diagonal, side = 2.0 * r;
+  const double r = in.o.duplicate_distance * s.diagonal, side = 16.0 * r;
   using Key = std::array<double, 3>;
   std::vector<std::pair<Key, Index>> cells;
   cells.reserve(static_cast<size_t>(in.n));
@@ -357,37 +358,54 @@ void check_duplicates(const Inputs& in, const MeshCheckSummary& s, std::vector<M
   dup.finish(out);
 }
 
-// Edges in more than two triangles, or faces in more than two tets: sort the
-// sorted-corner keys of every element side and count equal runs.
-void check_manifold_sides(const Inputs& in, std::vector<MeshFinding>* out) {
-  const bool tri = in.p == 3;
-  FindingBuilder many(tri ? MeshDefect::NonManifoldEdge : MeshDefect::NonManifoldFace, CheckSeverity::Warning,
-                      tri ? "edge" : "face", in.o.max_listed);
-  using Side = std::array<int, 3>;  // sorted corners; third −1 for an edge
-  std::vector<Side> sides;
-  sides.reserve(static_cast<size_t>(in.m * (tri ? 3 : 4)));
+// Every element side as a sortable key: a triangle edge (a < b) as
+// (a·2³² + b, triangle); a tet face (a < b < c) as (a·2³² + b, c).
+using SideKey = std::pair<std::uint64_t, std::uint32_t>;
+
+std::vector<SideKey> sorted_sides(const Inputs& in) {
+  std::vector<SideKey> sides;
+  sides.reserve(static_cast<size_t>(in.m * in.p));
   for (Index e = 0; e < in.m; ++e) {
     if (!in.topological[e]) continue;
     for (int k = 0; k < in.p; ++k) {
-      Side side{-1, -1, -1};
-      for (int j = 0, w = 0; j < in.p - 1; ++j) side[w++] = in.E(e, (k + 1 + j) % in.p);
-      std::sort(side.begin(), side.begin() + (in.p - 1));
-      sides.push_back(side);
+      std::array<std::uint32_t, 3> c{};
+      for (int j = 0; j < in.p - 1; ++j) c[j] = static_cast<std::uint32_t>(in.E(e, (k + 1 + j) % in.p));
+      std::sort(c.begin(), c.begin() + (in.p - 1));
+      const std::uint64_t ab = (std::uint64_t{c[0]} << 32) | c[1];
+      sides.emplace_back(ab, in.p == 3 ? static_cast<std::uint32_t>(e) : c[2]);
     }
   }
   std::sort(sides.begin(), sides.end());
+  return sides;
+}
+
+// Calls run(i, j) for each run [i, j) of the same side.
+template <typename Run>
+void for_each_side(const Inputs& in, const std::vector<SideKey>& sides, Run run) {
+  const auto same = [tri = in.p == 3](const SideKey& x, const SideKey& y) {
+    return x.first == y.first && (tri || x.second == y.second);
+  };
   for (size_t i = 0; i < sides.size();) {
     size_t j = i;
-    while (j < sides.size() && sides[j] == sides[i]) ++j;
-    if (j - i > 2) {
-      std::vector<Index> corners(sides[i].begin(), sides[i].begin() + (in.p - 1));
-      if (many.add(corners))
-        many.sentence(fmt::format("{} ({}) is shared by {} {}s: the {} is not a manifold there",
-                                  tri ? "edge" : "face", fmt::join(corners, ", "), j - i, in.element(),
-                                  tri ? "surface" : "solid"));
-    }
+    while (j < sides.size() && same(sides[j], sides[i])) ++j;
+    run(i, j);
     i = j;
   }
+}
+
+// Edges in more than two triangles, or faces in more than two tets.
+void check_manifold_sides(const Inputs& in, const std::vector<SideKey>& sides, std::vector<MeshFinding>* out) {
+  const bool tri = in.p == 3;
+  FindingBuilder many(tri ? MeshDefect::NonManifoldEdge : MeshDefect::NonManifoldFace, CheckSeverity::Warning,
+                      tri ? "edge" : "face", in.o.max_listed);
+  for_each_side(in, sides, [&](size_t i, size_t j) {
+    if (j - i <= 2) return;
+    std::vector<Index> corners{static_cast<Index>(sides[i].first >> 32), static_cast<Index>(sides[i].first & 0xffffffffu)};
+    if (!tri) corners.push_back(sides[i].second);
+    if (many.add(corners))
+      many.sentence(fmt::format("{} ({}) is shared by {} {}s: the {} is not a manifold there", tri ? "edge" : "face",
+                                fmt::join(corners, ", "), j - i, in.element(), tri ? "surface" : "solid"));
+  });
   many.finish(out);
 }
 
@@ -397,38 +415,42 @@ Index find_root(std::vector<Index>& parent, Index x) {
   return x;
 }
 
+void unite(std::vector<Index>& parent, Index x, Index y) {
+  const Index rx = find_root(parent, x), ry = find_root(parent, y);
+  if (rx != ry) parent[std::max(rx, ry)] = std::min(rx, ry);
+}
+
 // Surface vertices whose triangles form more than one fan ("bow-ties"): the
 // corners at a vertex are joined when their triangles share an edge at it;
-// more than one group of corners is non-manifold.
-void check_fans(const Inputs& in, std::vector<MeshFinding>* out) {
+// more than one group of corners is non-manifold. `sides`: sorted_sides.
+void check_fans(const Inputs& in, const std::vector<SideKey>& sides, std::vector<MeshFinding>* out) {
   FindingBuilder bowtie(MeshDefect::NonManifoldVertex, CheckSeverity::Warning, "vertex", in.o.max_listed);
   std::vector<Index> parent(static_cast<size_t>(3 * in.m));
   std::iota(parent.begin(), parent.end(), 0);
-  std::vector<std::tuple<int, int, Index>> spokes;  // (vertex, other end of an edge at it, corner)
-  spokes.reserve(static_cast<size_t>(6 * in.m));
-  for (Index f = 0; f < in.m; ++f) {
-    if (!in.topological[f]) continue;
-    for (int k = 0; k < 3; ++k) {
-      const Index corner = 3 * f + k;
-      spokes.emplace_back(in.E(f, k), in.E(f, (k + 1) % 3), corner);
-      spokes.emplace_back(in.E(f, k), in.E(f, (k + 2) % 3), corner);
+  const auto corner = [&](std::uint32_t f, std::uint64_t v) {
+    const Index k = in.E(f, 0) == static_cast<int>(v) ? 0 : in.E(f, 1) == static_cast<int>(v) ? 1 : 2;
+    return 3 * static_cast<Index>(f) + k;
+  };
+  for_each_side(in, sides, [&](size_t i, size_t j) {
+    const std::uint64_t a = sides[i].first >> 32, b = sides[i].first & 0xffffffffu;
+    for (size_t t = i + 1; t < j; ++t) {
+      unite(parent, corner(sides[t].second, a), corner(sides[i].second, a));
+      unite(parent, corner(sides[t].second, b), corner(sides[i].second, b));
     }
-  }
-  std::sort(spokes.begin(), spokes.end());
-  for (size_t i = 1; i < spokes.size(); ++i)
-    if (std::get<0>(spokes[i]) == std::get<0>(spokes[i - 1]) && std::get<1>(spokes[i]) == std::get<1>(spokes[i - 1]))
-      parent[find_root(parent, std::get<2>(spokes[i]))] = find_root(parent, std::get<2>(spokes[i - 1]));
-  std::vector<std::pair<int, Index>> fans;  // (vertex, root of a corner at it)
+  });
+  std::vector<std::uint64_t> fans;  // vertex·2³² + root of a corner at it
   fans.reserve(static_cast<size_t>(3 * in.m));
   for (Index f = 0; f < in.m; ++f)
     if (in.topological[f])
-      for (int k = 0; k < 3; ++k) fans.emplace_back(in.E(f, k), find_root(parent, 3 * f + k));
+      for (int k = 0; k < 3; ++k)
+        fans.push_back((static_cast<std::uint64_t>(in.E(f, k)) << 32) |
+                       static_cast<std::uint64_t>(find_root(parent, 3 * f + k)));
   std::sort(fans.begin(), fans.end());
   fans.erase(std::unique(fans.begin(), fans.end()), fans.end());
   for (size_t i = 0; i < fans.size();) {
     size_t j = i;
-    while (j < fans.size() && fans[j].first == fans[i].first) ++j;
-    const Index v = fans[i].first;
+    while (j < fans.size() && fans[j] >> 32 == fans[i] >> 32) ++j;
+    const Index v = static_cast<Index>(fans[i] >> 32);
     if (j - i > 1 && bowtie.add({v}))
       bowtie.sentence(fmt::format("vertex {} joins {} separate fans of triangles (a bow-tie): the surface is not a "
                                   "manifold there",
@@ -508,8 +530,9 @@ MeshCheckSummary diagnose_mesh(const VerticesRef& V, const ElementsRef& E, const
     check_elements(in, &s, &out);
     check_unreferenced(in, s, &out);
     check_duplicates(in, s, &out);
-    check_manifold_sides(in, &out);
-    if (in.p == 3) check_fans(in, &out);
+    const std::vector<SideKey> sides = sorted_sides(in);
+    check_manifold_sides(in, sides, &out);
+    if (in.p == 3) check_fans(in, sides, &out);
     check_components(in, &s, &out);
   }
   std::stable_sort(out.begin(), out.end(), [](const MeshFinding& a, const MeshFinding& b) {
