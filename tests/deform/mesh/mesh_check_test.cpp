@@ -380,6 +380,22 @@ TEST_CASE("shared meshes: no errors; the README's unreferenced vertices are foun
     CHECK((loose ? loose->count : 0) == unreferenced);
     CHECK(s.diagonal > 0.0);
   }
+  // The one shared mesh with an error: the ogre's zero-area triangles, the
+  // first being the one the geometry refuses.
+  const TriangleMesh ogre = read_triangle_mesh(data + "/meshes/ogre.obj");
+  const MeshCheckSummary os = diagnose_mesh(ogre.V, ogre.F);
+  const MeshFinding* flat = find(os, MeshDefect::DegenerateElement);
+  REQUIRE(flat);
+  REQUIRE(!flat->first.empty());
+  const Index first_flat = flat->first[0][0];
+  CHECK_THROWS_WITH(face_areas(ogre.V, ogre.F), Catch::Contains("face " + std::to_string(first_flat) + " is degenerate"));
+  Triangles rest(ogre.F.rows() - flat->count, 3);  // without them, the geometry accepts the mesh
+  std::vector<char> dropped(static_cast<size_t>(ogre.F.rows()), 0);
+  for (const auto& f : flat->first) dropped[static_cast<size_t>(f[0])] = 1;
+  REQUIRE(flat->count <= static_cast<Index>(flat->first.size()));  // all of them listed
+  for (Index f = 0, r = 0; f < ogre.F.rows(); ++f)
+    if (!dropped[static_cast<size_t>(f)]) rest.row(r++) = ogre.F.row(f);
+  CHECK_NOTHROW(face_areas(ogre.V, rest));
   // The cactus with its selection's anchors (fixed and handle vertices): one component, held.
   const TriangleMesh cactus = read_triangle_mesh(data + "/meshes/botsch-sorkine/cactus.off");
   const Selection sel = read_sel(data + "/meshes/botsch-sorkine/cactus.sel");

@@ -102,8 +102,8 @@ struct MeshCheckOptions {
   double degenerate_tolerance = kDefaultDegenerateTolerance;
   // Near-degenerate: quality q (1 for the regular element) below this.
   // 1e-3 is a smallest angle of about 0.06° for a triangle: cotangent weights
-  // near 1e3 against O(1) elsewhere, three digits of the factorization lost;
-  // none of the shared meshes has an element this thin.
+  // near 1e3 against O(1) elsewhere, three digits of the factorization lost.
+  // Still far above the degenerate rule (1e-12): a warning, not an error.
   double near_degenerate_quality = 1e-3;
   // Duplicates: vertices closer than this times the diagonal. 1e-10: far
   // below any modelled feature, far above the rounding of the file's digits.
