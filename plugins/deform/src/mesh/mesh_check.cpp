@@ -206,6 +206,54 @@ std::string corners_of(const Inputs& in, Index e) {
   return fmt::format("{}", fmt::join(in.E.row(e).data(), in.E.row(e).data() + in.p, ", "));
 }
 
+// The measures of one element with distinct, measurable corners.
+struct ElementShape {
+  double shortest2 = HUGE_VAL, longest2 = 0.0;  // squared edge lengths
+  double measure = 0.0;  // 2·area (triangles) or 6·|volume| (tets)
+  double scale = 0.0;    // ℓ²_max (triangles) or ℓ³_max (tets): the degenerate rule is measure ≤ tol·scale
+  double quality = 0.0;  // 1 for the regular element
+  double det = 0.0;      // tets: det[b − a, c − a, d − a]
+};
+
+ElementShape element_shape(const Inputs& in, Index e) {
+  ElementShape q;
+  for (int k = 0; k < in.p; ++k)
+    for (int l = k + 1; l < in.p; ++l) {
+      const double l2 = (in.V.row(in.E(e, k)) - in.V.row(in.E(e, l))).squaredNorm();
+      q.longest2 = std::max(q.longest2, l2);
+      q.shortest2 = std::min(q.shortest2, l2);
+    }
+  const Row3 a = in.V.row(in.E(e, 0)), b = in.V.row(in.E(e, 1)), c = in.V.row(in.E(e, 2));
+  if (in.p == 3) {
+    q.measure = (b - a).cross(c - a).norm();
+    q.scale = q.longest2;
+    q.quality = q.measure / q.scale / (std::sqrt(3.0) / 2.0);
+  } else {
+    q.det = (b - a).cross(c - a).dot(Row3(in.V.row(in.E(e, 3))) - a);
+    q.measure = std::abs(q.det);
+    q.scale = q.longest2 * std::sqrt(q.longest2);
+    q.quality = q.measure / q.scale * std::sqrt(2.0);
+  }
+  return q;
+}
+
+// Tets with det < 0, among the `oriented` (non-degenerate) ones.
+void report_inverted(const Inputs& in, const std::vector<Index>& inverted, Index oriented,
+                     std::vector<MeshFinding>* out) {
+  FindingBuilder inv(MeshDefect::InvertedTet, CheckSeverity::Warning, "tet", in.o.max_listed);
+  for (Index e : inverted) inv.add({e});
+  if (inverted.empty()) return;
+  const Index e = inverted.front(), count = static_cast<Index>(inverted.size());
+  inv.sentence(count == oriented
+                   ? fmt::format("every tet is negatively oriented, e.g. tet {}: det[b − a, c − a, d − a] < 0, the "
+                                 "opposite of the TetGen and MEDIT convention",
+                                 e)
+                   : fmt::format("tet {} is inverted: det[b − a, c − a, d − a] < 0 while {} of the {} tets are "
+                                 "positive (the mesh folds over itself there)",
+                                 e, grouped(oriented - count), grouped(oriented)));
+  inv.finish(out);
+}
+
 // Degenerate, near-degenerate and inverted elements; edge lengths and worst quality.
 void check_elements(const Inputs& in, MeshCheckSummary* s, std::vector<MeshFinding>* out) {
   const char* name = in.element();
@@ -223,43 +271,25 @@ void check_elements(const Inputs& in, MeshCheckSummary* s, std::vector<MeshFindi
         degenerate.sentence(fmt::format("{} {} repeats a corner: it has no {}", name, e, in.p == 3 ? "area" : "volume"));
       continue;
     }
-    double lmax2 = 0.0;
-    for (int k = 0; k < in.p; ++k)
-      for (int l = k + 1; l < in.p; ++l) {
-        const double l2 = (in.V.row(in.E(e, k)) - in.V.row(in.E(e, l))).squaredNorm();
-        lmax2 = std::max(lmax2, l2);
-        shortest2 = std::min(shortest2, l2);
-      }
-    longest2 = std::max(longest2, lmax2);
-    const Row3 a = in.V.row(in.E(e, 0)), b = in.V.row(in.E(e, 1)), c = in.V.row(in.E(e, 2));
-    double measure = 0.0, scale = 0.0, quality = 0.0, det = 0.0;  // measure: 2·area or 6·|volume|
-    if (in.p == 3) {
-      measure = (b - a).cross(c - a).norm();
-      scale = lmax2;
-      quality = measure / scale / (std::sqrt(3.0) / 2.0);
-    } else {
-      det = (b - a).cross(c - a).dot(Row3(in.V.row(in.E(e, 3))) - a);
-      measure = std::abs(det);
-      scale = lmax2 * std::sqrt(lmax2);
-      quality = measure / scale * std::sqrt(2.0);
-    }
-    if (!(measure > in.o.degenerate_tolerance * scale)) {
+    const ElementShape q = element_shape(in, e);
+    shortest2 = std::min(shortest2, q.shortest2);
+    longest2 = std::max(longest2, q.longest2);
+    if (!(q.measure > in.o.degenerate_tolerance * q.scale)) {
       if (degenerate.add({e}))
         degenerate.sentence(fmt::format("{} {} (vertices {}) is degenerate: {} {:.3g} against its longest edge {:.3g}",
-                                        name, e, corners_of(in, e),
-                                        in.p == 3 ? "area" : "volume", in.p == 3 ? measure / 2 : measure / 6,
-                                        std::sqrt(lmax2)));
+                                        name, e, corners_of(in, e), in.p == 3 ? "area" : "volume",
+                                        q.measure / (in.p == 3 ? 2 : 6), std::sqrt(q.longest2)));
       continue;
     }
-    worst = std::min(worst, quality);
-    if (quality < in.o.near_degenerate_quality && thin.add({e}))
+    worst = std::min(worst, q.quality);
+    if (q.quality < in.o.near_degenerate_quality && thin.add({e}))
       thin.sentence(fmt::format("{} {} (vertices {}) is nearly degenerate: quality {:.2g} (1 for a regular {}; "
                                 "below {:g} its cotangent weights reach about {:.0g})",
-                                name, e, corners_of(in, e), quality, name,
-                                in.o.near_degenerate_quality, 1.0 / quality));
+                                name, e, corners_of(in, e), q.quality, name, in.o.near_degenerate_quality,
+                                1.0 / q.quality));
     if (in.p == 4) {
       ++oriented;
-      if (det < 0) inverted.push_back(e);
+      if (q.det < 0) inverted.push_back(e);
     }
   }
   if (std::isfinite(shortest2)) {
@@ -269,20 +299,7 @@ void check_elements(const Inputs& in, MeshCheckSummary* s, std::vector<MeshFindi
   s->worst_quality = std::isfinite(worst) ? worst : 0.0;
   degenerate.finish(out);
   thin.finish(out);
-
-  FindingBuilder inv(MeshDefect::InvertedTet, CheckSeverity::Warning, "tet", in.o.max_listed);
-  for (Index e : inverted) inv.add({e});
-  if (!inverted.empty()) {
-    const Index e = inverted.front();
-    inv.sentence(static_cast<Index>(inverted.size()) == oriented
-                     ? fmt::format("every tet is negatively oriented, e.g. tet {}: det[b − a, c − a, d − a] < 0, the "
-                                   "opposite of the TetGen and MEDIT convention",
-                                   e)
-                     : fmt::format("tet {} is inverted: det[b − a, c − a, d − a] < 0 while {} of the {} tets are "
-                                   "positive (the mesh folds over itself there)",
-                                   e, grouped(oriented - static_cast<Index>(inverted.size())), grouped(oriented)));
-  }
-  inv.finish(out);
+  report_inverted(in, inverted, oriented, out);
 }
 
 // Distance from x to the box [lo, hi] (0 inside).
