@@ -135,6 +135,7 @@ int run_compare(const CompareArgs& a) {
   settings.name = ls.name;
   settings.options = ls.options;
   settings.out_path = path("reduced");
+  settings.preflight = ls.preflight;
   RunOutputs reduced;
   const nlohmann::json rep = run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr,
                                           settings, &reduced);

@@ -19,7 +19,7 @@ struct DeformArgs : ScenarioArgs {
 };
 
 int run_deform(const DeformArgs& a) {
-  LoadedScenario ls = load_scenario(a);
+  LoadedScenario ls = load_scenario(a, a.strict);
   RunSettings settings;
   settings.name = ls.name;
   settings.options = ls.options;
@@ -28,6 +28,7 @@ int run_deform(const DeformArgs& a) {
   settings.cache_path = a.cache;
   if (a.refine.tolerance) settings.refine = refine_options(a.refine);
   settings.strict = a.strict;
+  settings.preflight = ls.preflight;
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;
 }
@@ -43,7 +44,8 @@ void register_deform(CLI::App& app) {
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
   add_refine_options(cmd, &a->refine);
   cmd->add_flag("--strict", a->strict,
-                "Handles that can hold only in the least-squares sense are an error instead of a warning");
+                "Warnings are errors: handles that hold only in the least-squares sense, and the mesh pre-flight's "
+                "warnings (near-degenerate elements, duplicate or unreferenced vertices, …; see qpr check)");
   cmd->callback([a = a]() { run_guarded("deform", [&] { return run_deform(*a); }); });
 }
 

@@ -20,6 +20,8 @@ void register_deform(CLI::App& app);
 void register_qp(CLI::App& app);
 // `qpr compare`: reduced ARAP against full-space references (cmd_compare.cpp, docs/quality.md).
 void register_compare(CLI::App& app);
+// `qpr check`: mesh pre-flight diagnostics (cmd_check.cpp, docs/robustness.md).
+void register_check(CLI::App& app);
 
 // `qpr view`: interactive deformation viewer, headless screenshots (cmd_view.cpp, docs/viewer.md);
 // built when QPREDUCE_BUILD_VIEWER is on (QPREDUCE_HAVE_VIEWER).

@@ -2,6 +2,7 @@
 #include "refine_run.h"
 
 #include "app_support.h"
+#include "preflight.h"
 #include "validators.h"
 
 #include <qpreduce/deform/mesh/geometry.h>
@@ -195,7 +196,7 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
 
 }  // namespace
 
-LoadedScenario load_scenario(const ScenarioArgs& a) {
+LoadedScenario load_scenario(const ScenarioArgs& a, bool strict) {
   const int sources = !a.sel.empty() + !a.anim.empty() + !a.scene.empty();
   if (sources != 1) throw std::invalid_argument("give exactly one of --sel/--def, --anim, --scene");
   if (!a.sel.empty() && a.def.empty()) throw std::invalid_argument("--sel needs --def");
@@ -228,6 +229,7 @@ LoadedScenario load_scenario(const ScenarioArgs& a) {
   }
   ls.name = !a.scene.empty() ? a.scene : a.mesh;
   ls.options = deformer_options(a, ls.scenario.model_kind, tet);
+  ls.preflight = preflight(ls.scenario, ls.name, strict);
   check_scenario(ls.scenario, ls.name);
   return ls;
 }
@@ -428,6 +430,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   }
   report["bounding_box_diagonal"] = diag;
   if (settings.refine) report["refine"] = refined;
+  if (!settings.preflight.is_null()) report["preflight"] = settings.preflight;
 
   print_table(settings.name, scenario, pre, settings, cache_loaded, report, options.iterations, s);
   if (settings.refine) print_refine_line(refined);

@@ -46,9 +46,11 @@ struct LoadedScenario {
   bool tet = false;
   qpreduce::deform::DeformerOptions options;
   std::string name;
+  nlohmann::json preflight;  // the mesh pre-flight's findings (preflight.h)
 };
-// Reads the files and builds the scenario. Throws on bad input.
-LoadedScenario load_scenario(const ScenarioArgs& args);
+// Reads the files, builds the scenario and runs the mesh pre-flight
+// (preflight.h; `strict`: its warnings are errors). Throws on bad input.
+LoadedScenario load_scenario(const ScenarioArgs& args, bool strict = false);
 
 // Writes a pose of the loaded mesh: surfaces as OBJ/OFF/PLY; tets as .mesh,
 // .node/.ele, or their boundary surface for a surface extension.
@@ -80,6 +82,7 @@ struct RunSettings {
   // Set: refine the last frame's pose in full space (refine_run.h); the
   // mesh written and arap_energy are then the refined pose's.
   std::optional<qpreduce::deform::RefineOptions> refine;
+  nlohmann::json preflight;  // set: the report's "preflight" (LoadedScenario::preflight)
 };
 
 // Checks, before anything runs or is written, that the mesh, the report and

@@ -18,6 +18,7 @@ int main(int argc, char** argv) {
   qpr::register_compare(app);
   qpr::register_theorem(app);
   qpr::register_qp(app);
+  qpr::register_check(app);
 #ifdef QPREDUCE_HAVE_VIEWER
   qpr::register_view(app);
 #endif

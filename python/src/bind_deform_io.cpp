@@ -9,6 +9,7 @@
 #include <qpreduce/deform/io/scenario.h>
 #include <qpreduce/deform/io/scene.h>
 #include <qpreduce/deform/io/tet_io.h>
+#include <qpreduce/deform/mesh/mesh_check.h>
 #include <qpreduce/deform/mesh/shapes.h>
 #include <qpreduce/deform/reference/reference.h>
 
@@ -187,6 +188,73 @@ void bind_scenarios(py::module_& m) {
       "read_scene(path) -> Scenario\n\nOur JSON scene (docs/formats.md): mesh, handles, patches, proxies, energy.");
 }
 
+// diagnose_mesh's summary as a dict (its fields; findings as dicts).
+py::dict check_dict(const MeshCheckSummary& s) {
+  py::list findings;
+  for (const MeshFinding& f : s.findings)
+    findings.append(py::dict(py::arg("defect") = to_string(f.defect), py::arg("severity") = to_string(f.severity),
+                             py::arg("count") = f.count, py::arg("item") = f.item, py::arg("first") = f.first,
+                             py::arg("message") = f.message));
+  return py::dict(py::arg("status") = to_string(s.status), py::arg("vertices") = s.vertices,
+                  py::arg("elements") = s.elements, py::arg("corners") = s.corners,
+                  py::arg("box_min") = Eigen::Vector3d(s.box_min), py::arg("box_max") = Eigen::Vector3d(s.box_max),
+                  py::arg("diagonal") = s.diagonal, py::arg("shortest_edge") = s.shortest_edge,
+                  py::arg("longest_edge") = s.longest_edge, py::arg("worst_quality") = s.worst_quality,
+                  py::arg("components") = s.components, py::arg("anchors_checked") = s.anchors_checked,
+                  py::arg("findings") = findings, py::arg("seconds") = s.seconds);
+}
+
+void bind_mesh_check(py::module_& m) {
+  m.def(
+      "diagnose_mesh",
+      [](py::handle V, py::handle E, py::handle anchored, double near_degenerate_quality, double duplicate_distance,
+         double far_distance, Index max_listed) {
+        // V may hold NaN or infinities: they are findings here, not argument errors.
+        const auto v = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(V);
+        if (!v || v.ndim() != 2 || v.shape(1) != 3)
+          throw py::value_error("V: expected a real array of shape (n, 3)");
+        const Vertices rest = Eigen::Map<const Vertices>(v.data(), v.shape(0), 3);
+        const auto elements = py::module_::import("qpreduce._convert")
+                                  .attr("as_rows")("E", E, py::make_tuple(3, 4), "m", "int32")
+                                  .cast<Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>();
+        std::vector<char> held;
+        if (!anchored.is_none()) {
+          const auto a = py::array_t<bool, py::array::c_style | py::array::forcecast>::ensure(anchored);
+          if (!a || a.ndim() != 1 || a.shape(0) != rest.rows())
+            throw py::value_error("anchored: expected " + std::to_string(rest.rows()) + " flags (one per vertex)");
+          held.assign(a.data(), a.data() + a.shape(0));
+        }
+        MeshCheckOptions o;
+        o.near_degenerate_quality = near_degenerate_quality;
+        o.duplicate_distance = duplicate_distance;
+        o.far_distance = far_distance;
+        o.max_listed = max_listed;
+        const MeshCheckSummary s = without_gil([&] { return diagnose_mesh(rest, elements, held, o); });
+        return check_dict(s);
+      },
+      py::arg("V"), py::arg("E"), py::arg("anchored") = py::none(), py::kw_only(),
+      py::arg("near_degenerate_quality") = MeshCheckOptions{}.near_degenerate_quality,
+      py::arg("duplicate_distance") = MeshCheckOptions{}.duplicate_distance,
+      py::arg("far_distance") = MeshCheckOptions{}.far_distance,
+      py::arg("max_listed") = MeshCheckOptions{}.max_listed,
+      "diagnose_mesh(V, E, anchored=None, *, near_degenerate_quality=1e-3, duplicate_distance=1e-10,\n"
+      "              far_distance=1.0, max_listed=10) -> dict\n\n"
+      "The mesh pre-flight of `qpr check` (mesh/mesh_check.h): V (n, 3), E (m, 3) triangles or (m, 4)\n"
+      "tets, anchored (n,) flags of the vertices handles hold (None: anchoring not checked). Returns\n"
+      "status ('clean', 'warnings', 'errors'), sizes, scale and findings: dicts with defect, severity,\n"
+      "count, item, first (the first offenders) and message. Defects are findings, never exceptions.");
+  m.def(
+      "anchored_vertices",
+      [](const Scenario& sc) {
+        const std::vector<char> a = anchored_vertices(sc);
+        py::array_t<bool> out(static_cast<py::ssize_t>(a.size()));
+        std::copy(a.begin(), a.end(), out.mutable_data());
+        return out;
+      },
+      py::arg("scenario"),
+      "anchored_vertices(scenario) -> (n,) bool\n\nThe vertices the scenario's handles and fixed patches hold.");
+}
+
 void bind_references(py::module_& m) {
   py::enum_<ReferenceEnergy>(m, "ReferenceEnergy", "What a full-space reference minimises (reference.h).")
       .value("ClassicArap", ReferenceEnergy::ClassicArap, "One rotation per element (Eq. 6).")
@@ -270,6 +338,7 @@ void bind_deform_io(py::module_& m) {
   bind_deformer(deform);
   bind_mesh_io(deform);
   bind_scenarios(deform);
+  bind_mesh_check(deform);
   bind_references(deform);
   bind_refiner(deform);
 }

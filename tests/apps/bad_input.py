@@ -7,7 +7,7 @@ file is left intact and that no temporary file stays behind. Run:
 
     bad_input.py QPR_BINARY [--group NAME] [--list]
 
-Groups: options, meshes, handles, scenes, matrix, writers. Exit status 0 when
+Groups: options, meshes, handles, scenes, check, matrix, writers. Exit status 0 when
 every case of the selected groups passed; a failing case prints its command,
 exit code and stderr.
 """
@@ -191,13 +191,45 @@ case("meshes", "a vertex at 1e40 (was 'contains NaN' at write time)",
      ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def", "--out", "{W}/o.off"] + SMALL,
      RUN, ["far.off", "vertex 48 at (1e+40", "beyond 1e+30"], {"far.off": FAR.replace("1e300", "1e40"),
                                                                "far.sel": SEL + "1\n"})
-case("meshes", "a vertex at 1e20 still runs", ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def",
-                                                "{W}/tube.def", "--out", "{W}/o.off"] + SMALL,
-     0, [], {"far.off": FAR.replace("1e300", "1e20"), "far.sel": SEL + "1\n"})
+case("meshes", "an unreferenced vertex at 1e20 is named (was a silent run, every bbox-relative scale off)",
+     ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def", "--out", "{W}/o.off"] + SMALL,
+     RUN, ["far.off", "vertex 48 is referenced by no element and lies 3.5e+19 bounding-box diagonals away"],
+     {"far.off": FAR.replace("1e300", "1e20"), "far.sel": SEL + "1\n"})
+
+def tube_with(vertices, faces, name="m.off"):
+    """Files for the tube with extra vertices (numbered from NV) and faces ("a b c", 0-based): the mesh
+    as `name`, and tube.sel with the extra vertices free."""
+    lines = OFF.splitlines()[2:]
+    V, F = lines[:NV] + list(vertices), lines[NV:] + ["3 " + f for f in faces]
+    return {name: "OFF\n%d %d 0\n" % (len(V), len(F)) + "\n".join(V + F) + "\n",
+            "tube.sel": SEL + "1\n" * len(vertices)}
+
+
 case("meshes", "an unanchored component is named (was 'condition inf')",
      ["deform", "{W}/two.off", "--sel", "{W}/two.sel", "--def", "{W}/tube.def"] + SMALL, RUN,
-     ["two.off", "connected component 1 (48 vertices, from vertex 48)", "nothing holds it"],
+     ["two.off", "connected component 1 (48 vertices, first vertex 48)", "no handle or fixed region anchoring it"],
      {"two.off": TWO, "two.sel": SEL + "1\n" * NV})
+# The mesh pre-flight of `qpr deform` (diagnose_mesh, as `qpr check`): the named problem, not a symptom.
+case("meshes", "pre-flight: a zero-area triangle is named with the file (was named by spokes_and_rims_elements)",
+     deform(mesh="{W}/m.off"), RUN, ["m.off: triangle 80 (vertices 0, 48, 1) is degenerate: area"],
+     tube_with(["0.8535535 0.3535535 0"], ["0 48 1"]))
+case("meshes", "pre-flight: a near-degenerate triangle is a warning, the run goes on (was silent)",
+     deform(mesh="{W}/m.off"), 0, ["warning", "m.off: triangle 80 (vertices 0, 48, 1) is nearly degenerate"],
+     tube_with(["0.8535535 0.3535635 0"], ["0 48 1"]))
+case("meshes", "pre-flight: a near-degenerate triangle with --strict is an error",
+     deform("--strict", mesh="{W}/m.off"), RUN, ["(--strict) triangle 80 (vertices 0, 48, 1) is nearly degenerate"],
+     tube_with(["0.8535535 0.3535635 0"], ["0 48 1"]))
+case("meshes", "pre-flight: an unreferenced vertex inside the box is a warning",
+     ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def"] + SMALL, 0,
+     ["warning", "vertex 48 is referenced by no element: it stays where it is"],
+     {"far.off": FAR.replace("1e300 1e300 1e300", "0 0 2"), "far.sel": SEL + "1\n"})
+case("meshes", "pre-flight: an unreferenced vertex 2 diagonals away is an error",
+     ["deform", "{W}/far.off", "--sel", "{W}/far.sel", "--def", "{W}/tube.def"] + SMALL, RUN,
+     ["vertex 48 is referenced by no element and lies 2 bounding-box diagonals away"],
+     {"far.off": FAR.replace("1e300 1e300 1e300", "0 0 13.798"), "far.sel": SEL + "1\n"})
+case("meshes", "pre-flight: two problems, the first named and the other counted",
+     deform(mesh="{W}/m.off"), RUN, ["triangle 80 (vertices 0, 48, 1) is degenerate", "(and 1 more problem"],
+     tube_with(["0.8535535 0.3535535 0", "0 0 1.5"], ["0 48 1"]))
 case("meshes", "missing mesh file", deform(mesh="{W}/none.off"), RUN, ["none.off", "cannot open"])
 case("meshes", "a directory as the mesh", deform(mesh="{W}/dem"), RUN, ["dem", "unsupported"])
 
@@ -265,6 +297,68 @@ case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}
 case("scenes", "least-squares handles with --strict are an error", ["deform", "--scene", "{W}/s.json", "--strict"],
      RUN, ["--strict", "constraints-least-squares"], {"s.json": scene(HELD)})
 
+# `qpr check`: every finding on stdout, exit 0 clean, 1 warnings only, 2 errors (or warnings with --strict).
+CLEAN, WARNINGS, ERRORS = 0, 1, 2
+MEDIT_TETS = ("MeshVersionFormatted 1\nDimension 3\nVertices\n5\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n0 0 -1 0\n"
+              "Tetrahedra\n2\n1 2 3 4 0\n%s 0\nEnd\n")
+
+
+def check(*extra, mesh="{W}/tube.off"):
+    return ["check", mesh] + list(extra)
+
+
+case("check", "a clean tube", check(), CLEAN, [], stdout_words=["48 vertices, 80 triangles, 1 connected component",
+                                                                 "anchors: not checked", "status: clean"])
+case("check", "a clean tube with its selection", check("--sel", "{W}/tube.sel"), CLEAN, [],
+     stdout_words=["anchors: from", "tube.sel", "diagonal 4.899", "status: clean"])
+case("check", "a zero-area triangle", check(mesh="{W}/m.off"), ERRORS, [],
+     tube_with(["0.8535535 0.3535535 0"], ["0 48 1"]),
+     stdout_words=["error: triangle 80 (vertices 0, 48, 1) is degenerate", "status: errors"])
+case("check", "a sliver triangle", check(mesh="{W}/m.off"), WARNINGS, [],
+     tube_with(["0.8535535 0.3535635 0"], ["0 48 1"]),
+     stdout_words=["warning: triangle 80 (vertices 0, 48, 1) is nearly degenerate: quality 5.8e-06", "status: warnings"])
+case("check", "a sliver triangle with --strict", check("--strict", mesh="{W}/m.off"), ERRORS, [],
+     tube_with(["0.8535535 0.3535635 0"], ["0 48 1"]),
+     stdout_words=["error: triangle 80", "status: errors (--strict: warnings are errors)"])
+case("check", "a duplicate vertex (a seam)", check(mesh="{W}/m.off"), WARNINGS, [],
+     tube_with(["1 0 0", "1 0 0.8", "0.707107 0.707107 0.8"], ["48 50 49"]),
+     stdout_words=["vertex 48 lies at the position of vertex 0", "(3 vertices in all)"])
+case("check", "an unreferenced vertex far away", check(mesh="{W}/m.off"), ERRORS, [], tube_with(["0 0 13.798"], []),
+     stdout_words=["error: vertex 48 is referenced by no element and lies 2 bounding-box diagonals away"])
+case("check", "an unreferenced vertex inside the box", check(mesh="{W}/m.off"), WARNINGS, [],
+     tube_with(["0 0 2"], []), stdout_words=["warning: vertex 48 is referenced by no element"])
+case("check", "an edge in three triangles", check(mesh="{W}/m.off"), WARNINGS, [], tube_with(["0 0 0.4"], ["8 9 48"]),
+     stdout_words=["warning: edge (8, 9) is shared by 3 triangles"])
+case("check", "a bow-tie vertex", check(mesh="{W}/m.off"), WARNINGS, [],
+     tube_with(["2 0 -1", "2 1 -1"], ["0 48 49"]), stdout_words=["warning: vertex 0 joins 2 separate fans"])
+case("check", "an unanchored component with --sel", check("--sel", "{W}/two.sel", mesh="{W}/two.off"), ERRORS, [],
+     {"two.off": TWO, "two.sel": SEL + "1\n" * NV},
+     stdout_words=["2 connected components", "connected component 1 (48 vertices, first vertex 48) has no handle or "
+                   "fixed region anchoring it"])
+case("check", "two components without anchors are clean", check(mesh="{W}/two.off"), CLEAN, [], {"two.off": TWO},
+     stdout_words=["2 connected components", "status: clean"])
+case("check", "an inverted tet", check(mesh="{W}/t.mesh"), WARNINGS, [], {"t.mesh": MEDIT_TETS % "1 2 3 5"},
+     stdout_words=["2 tets", "warning: tet 1 is inverted", "1 of the 2 tets are positive"])
+case("check", "every tet inverted", check(mesh="{W}/t.mesh"), WARNINGS, [],
+     {"t.mesh": MEDIT_TETS.replace("1 2 3 4 0", "1 3 2 4 0") % "1 2 3 5"},
+     stdout_words=["every tet is negatively oriented"])
+case("check", "positive tets are clean", check(mesh="{W}/t.mesh"), CLEAN, [], {"t.mesh": MEDIT_TETS % "1 3 2 5"},
+     stdout_words=["status: clean"])
+case("check", "a scene: its mesh and anchors", ["check", "--scene", "{W}/s.json"], CLEAN, [],
+     {"s.json": scene(', %s, "handles": [{"vertices": [44], "targets": [[[1, 0, 5]]]}]' % PATCH)},
+     stdout_words=["anchors: from", "s.json", "status: clean"])
+case("check", "a scene that names another mesh than MESH", ["check", "{W}/tube.obj", "--scene", "{W}/s.json"], RUN,
+     ["s.json names the mesh", "tube.off, not", "tube.obj"], {"s.json": scene(', ' + PATCH)})
+case("check", "--sel and --scene together", check("--sel", "{W}/tube.sel", "--scene", "{W}/s.json"), RUN,
+     ["--sel or --scene, not both"], {"s.json": scene(', ' + PATCH)})
+case("check", "no MESH", ["check"], RUN, ["give MESH, or --scene"])
+case("check", "a selection of the wrong size", check("--sel", "{W}/tube.sel"), RUN, ["tube.sel", "expected 48 entries"],
+     {"tube.sel": SEL + "1\n"})
+case("check", "a mesh without faces", check(mesh="{W}/m.off"), RUN, ["m.off"], {"m.off": "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n"})
+case("check", "a NaN coordinate", check(mesh="{W}/m.off"), RUN, ["m.off", "nan"],
+     {"m.off": OFF.replace("\n1 0 0\n", "\nnan 0 0\n", 1)})
+case("check", "an empty file", check(mesh="{W}/m.off"), RUN, ["m.off", "empty file"], {"m.off": ""})
+
 # Matrix Market inputs of `qpr qp`.
 case("matrix", "2^31 x 2^31 header (was std::bad_alloc)", qp(H="{W}/h.mtx"), RUN,
      ["h.mtx:2", "2147483648 rows", "more than a file of"],
@@ -319,6 +413,7 @@ WRITERS = [
     ("theorem --json", ["theorem", "--trials", "10", "--json", "{OUT}"], ".json"),
     ("theorem --csv", ["theorem", "--trials", "10", "--csv", "{OUT}"], ".csv"),
     ("demo --report", ["demo", "--frames", "1", "--out", "{W}/demo", "--report", "{OUT}"], ".json"),
+    ("check --report", ["check", "{W}/tube.off", "--report", "{OUT}"], ".json"),
     ("compare --report", ["compare", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL[:4] +
      ["--reference", "local-global", "--out-dir", "{W}/cmp", "--report", "{OUT}"], ".json"),
 ]

@@ -208,7 +208,8 @@ std::pair<double, std::string> frame_reach(const Scenario& sc, size_t f) {
   return {reach, where};
 }
 
-// True for a vertex the handles hold: in a point handle, a fixed patch or a prescribed patch.
+}  // namespace
+
 std::vector<char> anchored_vertices(const Scenario& sc) {
   std::vector<char> anchored(static_cast<size_t>(sc.model.V.rows()), 0);
   for (const PointHandle& h : sc.handles.points)
@@ -222,8 +223,6 @@ std::vector<char> anchored_vertices(const Scenario& sc) {
   }
   return anchored;
 }
-
-}  // namespace
 
 void check_scenario(const Scenario& sc, const std::string& source) {
   const Vertices& V = sc.model.V;
@@ -241,22 +240,8 @@ void check_scenario(const Scenario& sc, const std::string& source) {
   }
   const MeshComponents components = sc.model.is_tet() ? connected_components(V.rows(), sc.model.T)
                                                        : connected_components(V.rows(), sc.model.F);
-  const std::vector<char> anchored = anchored_vertices(sc);
-  std::vector<char> held(static_cast<size_t>(components.element_components), 0);
-  std::vector<Index> size(held.size(), 0), first(held.size(), -1);
-  for (Index v = 0; v < V.rows(); ++v) {
-    const int c = components.vertex_component[static_cast<size_t>(v)];
-    if (c >= components.element_components) continue;  // unreferenced: kept, not deformed
-    held[c] |= anchored[static_cast<size_t>(v)];
-    if (first[c] < 0) first[c] = v;
-    ++size[c];
-  }
-  for (size_t c = 0; c < held.size(); ++c)
-    if (!held[c])
-      throw std::invalid_argument(fmt::format(
-          "{}: connected component {} ({} vertices, from vertex {}) has no handle, fixed vertex or prescribed patch: "
-          "nothing holds it in place, so its pose is not determined",
-          source, c, size[c], first[c]));
+  const MeshFinding loose = unanchored_components(components, anchored_vertices(sc), 1);
+  if (loose.count > 0) throw std::invalid_argument(fmt::format("{}: {}", source, loose.message));
 }
 
 Scenario scenario_from_sel_def(const Vertices& V, const Selection& sel, const Eigen::Matrix4d& def, int frames) {

@@ -7,6 +7,7 @@
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/handles_io.h"
 #include "qpreduce/deform/io/scene.h"
+#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxCoordinate
 
 #include <optional>
 #include <string>
@@ -33,12 +34,13 @@ struct Scenario {
 // kMaxCoordinate in magnitude, and every connected component of the elements
 // anchored by a point handle, a fixed patch or a prescribed patch. Throws
 // std::invalid_argument "<source>: …" naming the vertex, frame or component.
+// (kMaxCoordinate is in mesh_check.h, whose diagnose_mesh checks all of the
+// mesh's side of this and more.)
 void check_scenario(const Scenario& scenario, const std::string& source);
-// Coordinates beyond this overflow in the precompute, which forms products of
-// up to about the eighth power of the coordinates' scale (measured with a
-// far-away vertex and with a .def translation: 1e35 runs, 1e40 ends in NaN;
-// 1e308 is the largest double). Real meshes are many orders smaller.
-inline constexpr double kMaxCoordinate = 1e30;
+
+// One flag per vertex (n entries), non-zero for a vertex the handles hold: in
+// a point handle, a fixed patch or a prescribed patch (diagnose_mesh's anchors).
+std::vector<char> anchored_vertices(const Scenario& scenario);
 
 // Applies the scenario's overrides (α, β, γ, model, ψ, iterations, proxy
 // counts) to `options`.

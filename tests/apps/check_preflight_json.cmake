@@ -1,0 +1,40 @@
+# cmake -DJSON=<file> [-DUNDER=<key>] -P check_preflight_json.cmake
+# Checks a mesh pre-flight report (`qpr check --report`, or the "preflight"
+# object of a `qpr deform` report with -DUNDER=preflight) of a clean,
+# anchored, one-component shared mesh: every field there, status clean, no
+# finding, a positive scale.
+if(NOT EXISTS "${JSON}")
+  message(FATAL_ERROR "no report at ${JSON}")
+endif()
+file(READ "${JSON}" doc)
+if(UNDER)
+  string(JSON doc ERROR_VARIABLE err GET "${doc}" ${UNDER})
+  if(err)
+    message(FATAL_ERROR "${UNDER} missing: ${err}")
+  endif()
+endif()
+foreach(key status strict vertices elements element_type components anchors_checked errors warnings seconds)
+  string(JSON ${key} ERROR_VARIABLE err GET "${doc}" ${key})
+  if(err)
+    message(FATAL_ERROR "${key} missing: ${err}")
+  endif()
+endforeach()
+foreach(key diagonal shortest_edge longest_edge worst_quality)
+  string(JSON ${key} ERROR_VARIABLE err GET "${doc}" scale ${key})
+  if(err OR NOT ${key} GREATER 0)
+    message(FATAL_ERROR "scale.${key} is '${${key}}', expected a positive number ${err}")
+  endif()
+endforeach()
+string(JSON findings LENGTH "${doc}" findings)
+if(NOT status STREQUAL "clean" OR NOT errors EQUAL 0 OR NOT warnings EQUAL 0 OR NOT findings EQUAL 0)
+  message(FATAL_ERROR "expected a clean mesh: status ${status}, ${errors} errors, ${warnings} warnings, ${findings} findings")
+endif()
+if(NOT anchors_checked OR NOT components EQUAL 1 OR NOT vertices GREATER 0 OR NOT elements GREATER 0)
+  message(FATAL_ERROR "anchors_checked ${anchors_checked}, ${components} components, ${vertices} vertices, ${elements} elements")
+endif()
+if(NOT longest_edge GREATER shortest_edge OR NOT diagonal GREATER longest_edge OR worst_quality GREATER 1)
+  message(FATAL_ERROR "scale out of order: edges ${shortest_edge} to ${longest_edge}, diagonal ${diagonal}, "
+                      "worst quality ${worst_quality}")
+endif()
+message(STATUS "pre-flight report OK: ${vertices} vertices, ${elements} ${element_type}s, diagonal ${diagonal}, "
+               "worst quality ${worst_quality}, ${seconds} s")
