@@ -466,9 +466,9 @@ int run(const Args& a) {
         if (!cs.usable()) violation(&tally, f, std::string(to_string(kind)) + " set refused: " + cs.brief_report());
         if (cs.status == Status::ConstraintsLeastSquares) ++tally.least_squares_sets;
         if (a.verbose)
-          std::printf("set %ld at frame %ld: %s, %zu point handles, %s (rank %ld of %ld rows)\n", index, f,
+          std::printf("set %ld at frame %ld: %s, %zu point handles, %s (rank %ld of %ld rows, condition %.3g)\n", index, f,
                       to_string(kind), next.handles.points.size(), cs.brief_report().c_str(),
-                      static_cast<long>(cs.rank), static_cast<long>(cs.m));
+                      static_cast<long>(cs.rank), static_cast<long>(cs.m), cs.condition);
         motion = std::move(next);
       }
     }
