@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 
 #include <memory>
+#include <string>
 
 namespace qpr {
 
@@ -24,6 +25,10 @@ int run_deform(const DeformArgs& a) {
   settings.name = ls.name;
   settings.options = ls.options;
   settings.out_path = a.out;
+  if (a.out.find("{frame}") != std::string::npos) {  // every frame, as --out's help says
+    settings.write_frames.clear();
+    for (int f = 0; f < static_cast<int>(ls.scenario.frames.size()); ++f) settings.write_frames.push_back(f);
+  }
   settings.report_path = a.report;
   settings.cache_path = a.cache;
   if (a.refine.tolerance) settings.refine = refine_options(a.refine);

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -130,13 +131,20 @@ void AtomicFile::flush() {
   buffer_.clear();
 }
 
-void AtomicFile::commit() {
+void AtomicFile::seal() {
+  if (sealed_) return;
   if (fd_ < 0) throw FileError(path_, 0, "commit after the file was committed or discarded");
   flush();
   if (!temporary_.empty() && ::fsync(fd_) != 0) fail("cannot write to disk", errno);
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) fail("cannot close", errno);
+  sealed_ = true;
+}
+
+void AtomicFile::commit() {
+  if (committed_) throw FileError(path_, 0, "commit after the file was committed or discarded");
+  seal();
   if (!temporary_.empty() && std::rename(temporary_.c_str(), target_.c_str()) != 0)
     fail("cannot replace the file with the new one", errno);
   temporary_.clear();
@@ -147,6 +155,15 @@ void write_file_atomically(const std::string& path, std::string_view bytes) {
   AtomicFile file(path);
   file.write(bytes);
   file.commit();
+}
+
+void write_files_atomically(const std::vector<std::pair<std::string, std::string_view>>& files) {
+  std::vector<std::unique_ptr<AtomicFile>> open;
+  open.reserve(files.size());
+  for (const auto& f : files) open.push_back(std::make_unique<AtomicFile>(f.first));  // every destination first
+  for (size_t i = 0; i < files.size(); ++i) open[i]->write(files[i].second);
+  for (auto& f : open) f->seal();
+  for (auto& f : open) f->commit();  // renames only
 }
 
 void check_destination(const std::string& path, const std::string& what) {

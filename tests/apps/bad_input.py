@@ -444,6 +444,84 @@ CASES.append(dict(group="writers", name="deform: missing --report directory leav
                   words=["missing/r.json", "does not exist"], files={"keep.off": EARLIER}, max_seconds=None,
                   stdout_words=[], intact="keep.off"))
 
+# Multi-file outputs (docs/robustness.md, "Outputs written as several files"):
+# every file atomic, every destination checked before the run; a failure
+# midway leaves the files written before it complete and new, the rest as
+# they were, and no temporary.
+
+
+def box_tets(nx=2, ny=2, nz=4):
+    """A box of nx × ny × nz cubes, six positive tets each, as MEDIT text, and a
+    .sel fixing the bottom layer and moving the top one."""
+    V = [(i, j, k) for k in range(nz + 1) for j in range(ny + 1) for i in range(nx + 1)]
+    vid = lambda i, j, k: i + (nx + 1) * (j + (ny + 1) * k)
+    T = []
+    for i in range(nx):
+        for j in range(ny):
+            for k in range(nz):
+                c = [vid(i + (b & 1), j + (b >> 1 & 1), k + (b >> 2 & 1)) for b in range(8)]
+                for a, b in ((1, 3), (1, 5), (2, 3), (2, 6), (4, 5), (4, 6)):  # Freudenthal: 0 → a → a|b → 7
+                    t = [c[0], c[a], c[a | b], c[7]]
+                    p = [V[x] for x in t]
+                    d = [[p[r][q] - p[0][q] for q in range(3)] for r in (1, 2, 3)]
+                    det = (d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1]) - d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0])
+                           + d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0]))
+                    T.append(t if det > 0 else [t[0], t[2], t[1], t[3]])
+    mesh = "MeshVersionFormatted 1\nDimension 3\nVertices\n%d\n" % len(V)
+    mesh += "".join("%d %d %d 0\n" % v for v in V)
+    mesh += "Tetrahedra\n%d\n" % len(T) + "".join("%d %d %d %d 0\n" % tuple(x + 1 for x in t) for t in T) + "End\n"
+    sel = "".join("%d\n" % (0 if v[2] == 0 else 2 if v[2] == nz else 1) for v in V)
+    return mesh, sel
+
+
+BOX_MESH, BOX_SEL = box_tets()
+TETS = {"box.mesh": BOX_MESH, "box.sel": BOX_SEL}
+for ext in (".mesh", ".node"):
+    name = "deform --out %s (tets)" % ext
+    args = ["deform", "{W}/box.mesh", "--sel", "{W}/box.sel", "--def", "{W}/tube.def"] + SMALL + ["--out"]
+    CASES.append(dict(group="writers", name=name + " to /dev/full", args=args + ["{W}/full" + ext], code=RUN,
+                      words=["full" + ext, "No space left on device"], files=dict(TETS), max_seconds=None,
+                      stdout_words=[], links={"full" + ext: "/dev/full"}))
+    CASES.append(dict(group="writers", name=name + " into a missing directory",
+                      args=args + ["{W}/missing/out" + ext], code=RUN, words=["missing/out" + ext, "does not exist"],
+                      files=dict(TETS), max_seconds=None, stdout_words=[]))
+    CASES.append(dict(group="writers", name=name + " under a file-size limit", args=args + ["{W}/out" + ext],
+                      code=RUN, words=["File too large"], files=dict(TETS, **{"out" + ext: EARLIER + "x" * 4096}),
+                      max_seconds=None, stdout_words=[], fsize=16, intact="out" + ext))
+# TetGen writes .node, .ele and .face together: the .ele failing keeps the earlier .node.
+CASES.append(dict(group="writers", name="deform --out .node (tets): the .ele on /dev/full keeps the earlier .node",
+                  args=["deform", "{W}/box.mesh", "--sel", "{W}/box.sel", "--def", "{W}/tube.def"] + SMALL +
+                  ["--out", "{W}/out.node"], code=RUN, words=["out.ele", "No space left on device"],
+                  files=dict(TETS, **{"out.node": EARLIER}), max_seconds=None, stdout_words=[],
+                  links={"out.ele": "/dev/full"}, intact="out.node"))
+# Every frame to its own file: frame 1 fails on a full device after frame 0
+# was written; the earlier file of frame 2 (never reached) is intact.
+FRAMES3 = SMALL[:4] + ["--frames", "3"]
+CASES.append(dict(group="writers", name="deform --out {frame}: a failure at frame 1 keeps the later earlier files",
+                  args=deform("--out", "{W}/f_{frame}.off", small=FRAMES3), code=RUN,
+                  words=["f_001.off", "No space left on device"], files={"f_002.off": EARLIER}, max_seconds=None,
+                  stdout_words=[], links={"f_001.off": "/dev/full"}, intact="f_002.off"))
+CASES.append(dict(group="writers", name="deform --out {frame} into a missing directory",
+                  args=deform("--out", "{W}/missing/f_{frame}.off", small=FRAMES3), code=RUN,
+                  words=["missing/f_", "does not exist"], files={}, max_seconds=None, stdout_words=[]))
+# qp --out X_<name>.mtx, one file per demand.
+CASES.append(dict(group="writers", name="qp --out to /dev/full", args=qp("--out", "{W}/sol"), code=RUN,
+                  words=["X_d0.mtx", "No space left on device"], files={"sol/keep.txt": EARLIER}, max_seconds=None,
+                  stdout_words=[], links={"sol/X_d0.mtx": "/dev/full"}, intact="sol/keep.txt"))
+# (qp creates a missing --out folder; one under a regular file cannot be made.)
+CASES.append(dict(group="writers", name="qp --out under a regular file", args=qp("--out", "{W}/tube.off/sol"),
+                  code=RUN, words=["tube.off/sol"], files={}, max_seconds=None, stdout_words=[]))
+# The meshes of demo and compare (their folders are created; a limit stops the first mesh).
+CASES.append(dict(group="writers", name="demo --out meshes under a file-size limit",
+                  args=["demo", "--frames", "1", "--out", "{W}/demo"], code=RUN, words=["cylinder_rest.off", "File too large"],
+                  files={"demo/cylinder_rest.off": EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[], fsize=16,
+                  intact="demo/cylinder_rest.off"))
+CASES.append(dict(group="writers", name="compare --out-dir meshes under a file-size limit",
+                  args=["compare", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL[:4] +
+                  ["--reference", "local-global", "--out-dir", "{W}/cmp"], code=RUN, words=["reduced.off", "File too large"],
+                  files={"cmp/reduced.off": EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[], fsize=16,
+                  intact="cmp/reduced.off"))
+
 # ---------------------------------------------------------------- runner
 
 

@@ -147,3 +147,56 @@ TEST_CASE("AtomicFile through a symbolic link replaces the linked file", "[atomi
   CHECK(contents(dir / "real.txt") == "new\n");
   fs::remove_all(dir);
 }
+
+TEST_CASE("write_files_atomically writes a set of files all together or not at all", "[atomic_file]") {
+  const fs::path dir = scratch("set");
+  const std::string a = (dir / "m.node").string(), b = (dir / "m.ele").string();
+  qpreduce::write_files_atomically({{a, "old node\n"}, {b, "old ele\n"}});
+  CHECK(contents(a) == "old node\n");
+  CHECK(contents(b) == "old ele\n");
+  const std::string small(1000, 'n'), large(100000, 'e');
+  {
+    // The first file fits under the limit, the second does not: neither changes.
+    const FileSizeLimit limit(4096);
+    CHECK_THAT(message_of([&] { qpreduce::write_files_atomically({{a, small}, {b, large}}); }),
+               Catch::Contains("m.ele") && Catch::Contains("File too large"));
+  }
+  CHECK(contents(a) == "old node\n");
+  CHECK(contents(b) == "old ele\n");
+  // A destination that cannot be written stops the set before anything is written.
+  const std::string missing = (dir / "no" / "m.face").string();
+  CHECK_THAT(message_of([&] { qpreduce::write_files_atomically({{a, small}, {b, small}, {missing, small}}); }),
+             Catch::Contains("does not exist"));
+  CHECK(contents(a) == "old node\n");
+  CHECK(contents(b) == "old ele\n");
+  CHECK(others(dir, "") == 2);  // m.node and m.ele, no temporary
+  qpreduce::write_files_atomically({{a, small}, {b, large}});
+  CHECK(contents(a) == small);
+  CHECK(contents(b) == large);
+  CHECK(others(dir, "") == 2);
+  fs::remove_all(dir);
+}
+
+TEST_CASE("AtomicFile::seal leaves the rename to commit, and no temporary without it", "[atomic_file]") {
+  const fs::path dir = scratch("seal");
+  const fs::path target = dir / "a.txt";
+  qpreduce::write_file_atomically(target.string(), "old\n");
+  {
+    AtomicFile f(target.string());
+    f.write("new\n");
+    f.seal();
+    CHECK(contents(target) == "old\n");
+    CHECK(contents(f.temporary()) == "new\n");
+    CHECK_THROWS_AS(f.write("more"), FileError);
+  }  // not committed: the sealed temporary goes
+  CHECK(contents(target) == "old\n");
+  CHECK(others(dir, "a.txt") == 0);
+  AtomicFile g(target.string());
+  g.write("new\n");
+  g.seal();
+  g.commit();
+  CHECK(contents(target) == "new\n");
+  CHECK_THROWS_AS(g.commit(), FileError);
+  CHECK(others(dir, "a.txt") == 0);
+  fs::remove_all(dir);
+}

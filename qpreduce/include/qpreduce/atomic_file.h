@@ -24,6 +24,7 @@
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "qpreduce/support.h"
@@ -47,6 +48,11 @@ class AtomicFile {
   // Flushes, syncs, closes and renames the temporary over the target.
   // Throws FileError (and removes the temporary) when any step fails.
   void commit();
+  // The part of commit() that can fail for want of space: flushes, syncs
+  // and closes; commit() then only renames. Lets several files be written
+  // all together (write_files_atomically). Throws FileError (and removes
+  // the temporary) when a step fails.
+  void seal();
 
   const std::string& path() const { return path_; }
   // The temporary's path ("" when writing a non-regular target in place).
@@ -63,11 +69,21 @@ class AtomicFile {
   std::string temporary_;  // "" when writing in place
   std::vector<char> buffer_;
   int fd_ = -1;
+  bool sealed_ = false;  // flushed, synced and closed; only the rename is left
   bool committed_ = false;
 };
 
 // Writes `bytes` to `path` through an AtomicFile.
 void write_file_atomically(const std::string& path, std::string_view bytes);
+
+// Writes a set of files that belong together (TetGen's .node/.ele/.face):
+// every destination is checked and every temporary written, synced and
+// closed before the first rename, so a failure to create or write any of
+// them (a missing directory, a full disk, a file-size limit) leaves every
+// earlier file untouched and no temporary. Only a failure of the renames
+// themselves (rare: they need no space) can leave the files before it new
+// and the rest old. `files`: (path, bytes) pairs. Throws FileError.
+void write_files_atomically(const std::vector<std::pair<std::string, std::string_view>>& files);
 
 // Checks, before a long run, that `path` can be written the way AtomicFile
 // writes it: not a directory, its directory exists and is writable (or, for

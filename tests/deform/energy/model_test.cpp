@@ -15,6 +15,7 @@
 #include <Eigen/Dense>
 
 #include <cstdio>
+#include <limits>
 #include <random>
 
 using namespace qpreduce;
@@ -512,4 +513,77 @@ TEST_CASE("rigid patches stay rigid and fixed patches do not move, under every m
   bad.patch_transforms[1](0, 0) = 1.0;
   loaded.frame(bad, &out);
   CHECK((loaded.patch_transform(2) - T).cwiseAbs().maxCoeff() < 1e-9);
+}
+
+TEST_CASE("a frame whose rounds produce NaN reports it and keeps the last good pose", "[model][custom][nan]") {
+  // ARAP, except that Phase 2 writes NaN while `poison` is set (a model
+  // that breaks down): the frame must say so, not throw from the
+  // reconstruction, and the next frame must start from the last good pose.
+  struct Poisoned final : DeformationModel {
+    std::shared_ptr<const DeformationModel> base = make_arap_model({});
+    std::shared_ptr<bool> poison = std::make_shared<bool>(false);
+    std::string name() const override { return "poisoned"; }
+    std::vector<std::pair<std::string, double>> parameters() const override { return base->parameters(); }
+    ModifiedArapSystem assemble(const Vertices& V, const RotationElements& el, const std::vector<int>& c,
+                                Index d) const override {
+      return base->assemble(V, el, c, d);
+    }
+    std::unique_ptr<ClusterProjection> projection(const ClusterGeometry& g) const override {
+      struct Wrap final : ClusterProjection {
+        std::unique_ptr<ClusterProjection> inner;
+        std::shared_ptr<bool> poison;
+        double project(const Eigen::Ref<const Vector<double>>& in, Eigen::Ref<Vector<double>> y) override {
+          const double change = inner->project(in, y);
+          if (*poison) y.setConstant(std::numeric_limits<double>::quiet_NaN());
+          return change;
+        }
+        void retract(Eigen::Ref<Eigen::VectorXd> y) const override { inner->retract(y); }
+        bool valid(const Eigen::Ref<const Eigen::VectorXd>& y, double tol, std::string* why) const override {
+          return inner->valid(y, tol, why);
+        }
+        double energy(const Eigen::Ref<const Eigen::VectorXd>& a, const Eigen::Ref<const Eigen::VectorXd>& y) const override {
+          return inner->energy(a, y);
+        }
+      };
+      auto w = std::make_unique<Wrap>();
+      w->inner = base->projection(g);
+      w->poison = poison;
+      return w;
+    }
+  };
+  auto poisoned = std::make_shared<Poisoned>();
+  DeformableMesh model = bar_model();
+  const Handles h = end_patches(&model, 10, 13, PatchType::Affine);
+  DeformerOptions opts;
+  opts.rotational_proxies = 6;
+  opts.anderson_window = 0;  // plain rounds: every round goes through project()
+  opts.custom_model = poisoned;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, opts).ok());
+  REQUIRE(deformer.set_handles(h).ok());
+  Vertices good;
+  REQUIRE(deformer.frame(scaled_targets(1.1), &good).ok());
+  REQUIRE(good.allFinite());
+  const Eigen::VectorXd S = deformer.rotations();
+  const Eigen::VectorXf w = deformer.reduced_coordinates();
+
+  *poisoned->poison = true;
+  Vertices out = good;
+  FrameSummary bad;
+  REQUIRE_NOTHROW(bad = deformer.frame(scaled_targets(1.2), &out));
+  CHECK(bad.status == Status::NumericalFailure);
+  CHECK_THAT(bad.message, Catch::Contains("NaN") && Catch::Contains("last good"));
+  CHECK(out == good);  // not written
+  CHECK(deformer.rotations() == S);
+  CHECK(deformer.reduced_coordinates() == w);
+  Vertices mapped(model.V.rows(), 3);
+  REQUIRE_NOTHROW(bad = deformer.frame(scaled_targets(1.2), Eigen::Map<Vertices>(mapped.data(), mapped.rows(), 3)));
+  CHECK(bad.status == Status::NumericalFailure);
+  CHECK(mapped.isApprox(good, 1e-6));  // the last good pose again
+
+  *poisoned->poison = false;
+  Vertices next;
+  const FrameSummary ok = deformer.frame(scaled_targets(1.2), &next);
+  CHECK(ok.ok());
+  CHECK(next.allFinite());
 }

@@ -1,12 +1,19 @@
 // Tet mesh readers: the MEDIT and TetGen variants they accept and the error
-// messages for malformed files (round trips are in mesh_io_test.cpp).
+// messages for malformed files (round trips are in mesh_io_test.cpp); the
+// TetGen writer's files written all together.
 #include "io_test_util.h"
 
 #include "qpreduce/deform/io/tet_io.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 
 using namespace qpreduce::deform;
 using Catch::Contains;
 using io_test::TempDir;
+namespace fs = std::filesystem;
 
 TEST_CASE("MEDIT variants and errors", "[io][medit]") {
   const TempDir dir;
@@ -77,4 +84,29 @@ TEST_CASE("TetGen variants and errors", "[io][tetgen]") {
   dir.write("j.ele", "1 4 0\n0 0 1 2 3\n");
   dir.write("j.face", "2 0\n0 0 1 2\n");
   CHECK_THROWS_WITH(read_tetgen(dir.path("j.node")), Contains("j.face:2: unexpected end of file after 1 of 2 faces"));
+}
+
+TEST_CASE("TetGen writer: the .node, .ele and .face files together or none", "[io][tetgen][writers]") {
+  const TempDir dir;
+  const TetMesh earlier = shapes::box_tets(1, 1, 1, 1, 1, 1);
+  write_tetgen(dir.path("m.node"), earlier);
+  auto read = [&](const std::string& name) {
+    std::ifstream in(dir.path(name), std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string node = read("m.node"), face = read("m.face");
+  REQUIRE(!node.empty());
+  REQUIRE(!face.empty());
+  // The .ele is a link to a full device (written in place, fails): the .node
+  // and .face written before or after it must not be replaced.
+  if (!fs::exists("/dev/full")) return;
+  fs::remove(dir.path("m.ele"));
+  fs::create_symlink("/dev/full", dir.path("m.ele"));
+  CHECK_THROWS_WITH(write_tetgen(dir.path("m.node"), shapes::box_tets(2, 2, 2, 3, 3, 3)),
+                    Contains("m.ele") && Contains("No space left on device"));
+  CHECK(read("m.node") == node);
+  CHECK(read("m.face") == face);
+  int entries = 0;
+  for (const auto& e : fs::directory_iterator(dir.path(""))) entries += e.path().filename().string()[0] != '.' ? 1 : 100;
+  CHECK(entries == 3);  // m.node, m.ele, m.face; no temporary (".m.node.tmp…")
 }

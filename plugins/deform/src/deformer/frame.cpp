@@ -101,6 +101,8 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   FrameSummary summary;
 
   // Solve in the frame rotated by r₀ᵀ.
+  work.x_before = pose.x;  // same size every frame: no allocation
+  work.r0_before = pose.r0;
   pose.r0 = global_rotation_of(model, pose.S, st.settings.global_rotation);
   const Eigen::Matrix3d r0t = pose.r0.transpose();
   fill_targets(model, targets, r0t, &work.b);
@@ -121,8 +123,17 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   }
   summary.status = as.status;
   if (!pose.x.allFinite() || !work.s_local.allFinite()) {
+    // Keep the last good pose (S is still untouched): no NaN reaches the
+    // reconstruction, the caller's vertices or the next frame's warm start.
     summary.status = Status::NumericalFailure;
-    summary.message = "the alternating rounds produced NaN or infinite reduced coordinates";
+    summary.message =
+        "the alternating rounds produced NaN or infinite reduced coordinates; the pose is left as after the last "
+        "good frame";
+    pose.x = work.x_before;
+    pose.r0 = work.r0_before;
+    summary.solve_seconds = t.seconds();
+    summary.total_seconds = total.seconds();
+    return summary;
   }
   rotate_clusters(model.d, pose.r0, work.s_local, &pose.S);
   summary.solve_seconds = t.seconds();

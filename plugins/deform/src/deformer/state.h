@@ -164,6 +164,10 @@ struct Pose {
 struct Workspace {
   Eigen::VectorXd b;        // handle targets in the frame of r₀ (OnSite::rows)
   Eigen::VectorXd s_local;  // 9d: S in the frame of r₀
+  // The last good pose's x and r₀, put back when a frame's rounds fail
+  // (NaN): the pose stays the last good one and the next frame starts there.
+  Eigen::VectorXd x_before;
+  Eigen::Matrix3d r0_before = Eigen::Matrix3d::Identity();
 };
 
 // The runtime options (DeformerOptions: iterations, float_rounds,

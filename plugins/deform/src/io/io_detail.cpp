@@ -42,6 +42,14 @@ void write_file(const std::string& path, std::string_view bytes) {
   }
 }
 
+void write_files(const std::vector<std::pair<std::string, std::string_view>>& files) {
+  try {
+    write_files_atomically(files);
+  } catch (const FileError& e) {
+    fail(e.file(), e.line(), e.problem());
+  }
+}
+
 std::string lower_extension(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),

@@ -11,6 +11,7 @@
 
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace qpreduce::deform::detail {
@@ -21,6 +22,9 @@ std::string read_file(const std::string& path);
 // (qpreduce::AtomicFile); IoError when the file cannot be written, the
 // earlier file then untouched.
 void write_file(const std::string& path, std::string_view bytes);
+// A set of files that belong together, all or none up to the renames
+// (qpreduce::write_files_atomically); IoError as write_file.
+void write_files(const std::vector<std::pair<std::string, std::string_view>>& files);
 // ".obj" for "dir/Mesh.OBJ"; "" without an extension.
 std::string lower_extension(const std::string& path);
 // `path` without its extension ("dir/a.node" → "dir/a").

@@ -273,13 +273,16 @@ void write_tetgen(const std::string& path, const TetMesh& mesh) {
   put_numbered(node, mesh.V, "");
   fmt::format_to(std::back_inserter(ele), "{} 4 0\n", mesh.T.rows());
   put_numbered(ele, mesh.T, "");
-  detail::write_buffer(prefix + ".node", node);
-  detail::write_buffer(prefix + ".ele", ele);
+  auto bytes = [](const detail::Buffer& b) { return std::string_view(b.data(), b.size()); };
+  std::vector<std::pair<std::string, std::string_view>> files{{prefix + ".node", bytes(node)},
+                                                              {prefix + ".ele", bytes(ele)}};
   if (mesh.F.rows() > 0) {
     fmt::format_to(std::back_inserter(face), "{} 1\n", mesh.F.rows());
     put_numbered(face, mesh.F, " 1");
-    detail::write_buffer(prefix + ".face", face);
+    files.emplace_back(prefix + ".face", bytes(face));
   }
+  // The three files describe one mesh: all of them or, on a failure, none.
+  detail::write_files(files);
 }
 
 void write_tet_mesh(const std::string& path, const TetMesh& mesh) {

@@ -157,6 +157,10 @@ class Deformer {
   // reconstruction is left to the caller (e.g. a GPU, paper Fig. 5 step 5):
   // V′ = r₀·(B·w) with B = reconstruction_basis(), w = reduced_coordinates(),
   // r₀ = global_rotation().
+  // When the rounds produce NaN or infinities the summary says
+  // Status::NumericalFailure and the pose stays the last good one: *out is
+  // not written, rotations(), reduced_coordinates() and global_rotation()
+  // are as after the last good frame, and the next frame starts from there.
   FrameSummary frame(const HandleTargets& targets, Vertices* out);
   // The same, reconstructing into the caller's n × 3 buffer (a NumPy array,
   // a mapped GPU buffer) in place: no copy, no allocation. Throws

@@ -47,7 +47,9 @@ TetMesh read_tet_mesh(const std::string& path, MeshReadInfo* info = nullptr);
 void write_medit(const std::string& path, const TetMesh& mesh);
 // Writes `<prefix>.node`, `<prefix>.ele` and, when F is not empty,
 // `<prefix>.face` (0-based, no attributes, no markers except the `.face`
-// marker 1); `path` is the `.node` path or the prefix.
+// marker 1); `path` is the `.node` path or the prefix. The files are written
+// together: a failure (a missing directory, a full disk, a file-size limit)
+// leaves all the earlier ones untouched (qpreduce::write_files_atomically).
 void write_tetgen(const std::string& path, const TetMesh& mesh);
 // Dispatch on the extension: .mesh → MEDIT, .node → TetGen.
 void write_tet_mesh(const std::string& path, const TetMesh& mesh);
