@@ -158,6 +158,27 @@ TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range
   CHECK(worst < 1e-12);
 }
 
+TEST_CASE("fit_rotation's Newton path for nearly conformal input gives the exact polar factor", "[arap][phase2]") {
+  // G = c·R·S with S = I + ε·(symmetric, unit norm), ε from 1e-12 to 0.08:
+  // ‖XᵀX − I‖ of X = G/∛det G stays below the 0.1 that selects the Newton
+  // steps (up to the largest ε), whose result must still be R to round-off.
+  double worst = 0.0, worst_orthogonality = 0.0;
+  for (unsigned seed = 0; seed < 300; ++seed) {
+    const Eigen::VectorXd a = random_vector(14, 5000 + seed);
+    const Eigen::Matrix3d R = rotation(3.0 * a(0), a.segment<3>(1));
+    Eigen::Matrix3d E;
+    E << a(4), a(5), a(6), a(5), a(7), a(8), a(6), a(8), a(9);
+    const double eps = std::pow(10.0, -12.0 + 10.9 * (seed % 100) / 99.0);  // 1e-12 … 0.08
+    const Eigen::Matrix3d S = Eigen::Matrix3d::Identity() + eps * E / E.norm();
+    const Eigen::Matrix3d F = fit_rotation((0.2 + std::abs(a(10))) * R * S);
+    worst = std::max(worst, (F - R).norm());
+    worst_orthogonality = std::max(worst_orthogonality, (F.transpose() * F - Eigen::Matrix3d::Identity()).norm());
+    CHECK(F.determinant() > 0.0);
+  }
+  CHECK(worst < 1e-14);
+  CHECK(worst_orthogonality < 1e-14);
+}
+
 TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
   for (unsigned seed = 0; seed < 50; ++seed) {
     const Eigen::VectorXd a = random_vector(4, seed);

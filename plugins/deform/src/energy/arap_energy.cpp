@@ -523,9 +523,31 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   // error (to ~1e-15). Worse-conditioned G take the scaled Newton iteration
   // X ← ½(γX + X⁻ᵀ/γ) (Higham); reflected or nearly singular G
   // (det G ≤ 1e-6·‖G‖³) the SVD path. Why not eigenvectors: docs/deform.md.
+  //
+  // Nearly conformal G (the retraction of an extrapolated rotation, a
+  // Phase 2 input of a rigidly moved cluster with isotropic covariance):
+  // X = G/∛det G = Q·H with H symmetric positive definite, det H = 1, and
+  // E = H − I small. A Newton step gives Q·½(H + H⁻¹), whose E is
+  // ½E²H⁻¹: ‖E′‖ ≤ ‖E‖²/(2(1 − ‖E‖)). ‖XᵀX − I‖_F = ‖E(2I + E)‖_F ≥ ‖E‖_F
+  // bounds ‖E‖ from the start, so the steps run until that bound is below
+  // 1e-17: two to four inverses instead of the eigenvalues (whose closed
+  // form costs an acos, a sincos and three square roots).
   const double norm = G.norm();
   const double det = G.determinant();
   if (!(det > 1e-6 * norm * norm * norm)) return fit_rotation_svd(G);
+  {
+    Eigen::Matrix3d X = G / std::cbrt(det);
+    Eigen::Matrix3d defect = X.transpose() * X;
+    defect.diagonal().array() -= 1.0;
+    double e = defect.norm();
+    if (e < 0.1) {
+      while (e > 1e-17) {
+        X = 0.5 * (X + X.inverse().transpose());
+        e = e * e / (2.0 * (1.0 - e));
+      }
+      return X;
+    }
+  }
   const Eigen::Matrix3d M = G.transpose() * G;
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
   eig.computeDirect(M, Eigen::EigenvaluesOnly);
