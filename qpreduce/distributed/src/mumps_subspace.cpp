@@ -538,6 +538,33 @@ void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, 
 
 }  // namespace
 
+void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, Index block_size,
+                     VariationalSubspace<double>* whole) {
+  int rank = 0, ranks = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &ranks);
+  std::vector<RowRange> parts;
+  for (int r = 0; r < ranks; ++r) parts.push_back(owned_rows(part.n, r, ranks));
+  const auto gather = [&](const MatD& mine_cols, MatD* out) {
+    const Index cols = mine_cols.cols();
+    if (rank == root) out->resize(part.n, cols);
+    MatD mine, packed;
+    for (Index j = 0; j < cols; j += block_size) {
+      const Index b = std::min(block_size, cols - j);
+      mine = mine_cols.middleCols(j, b).transpose();  // b × rows: each row's b values contiguous
+      if (rank == root) packed.resize(b, part.n);
+      const Counts c(parts, b);
+      MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, packed.data(), c.count.data(),
+                  c.offset.data(), MPI_DOUBLE, root, comm);
+      if (rank == root) out->middleCols(j, b) = packed.transpose();
+    }
+  };
+  whole->N.resize(0, 0);
+  whole->UD.resize(0, 0);
+  gather(part.N_rows, &whole->N);
+  gather(part.UD_rows, &whole->UD);
+}
+
 DistributedSummary build_subspace_mumps(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D,
                                         const SubspaceOptions& options, const MumpsOptions& mumps,
                                         DistributedSubspace* out) {

@@ -99,4 +99,11 @@ DistributedSummary build_subspace_mumps(MPI_Comm comm, const SparseMatrix<double
                                         const SubspaceOptions& options, const MumpsOptions& mumps,
                                         DistributedSubspace* out);
 
+// Collective: the whole N (n × d) and UD (n × k) on `root`, gathered by
+// blocks of `block_size` columns (root holds the result plus one n × block
+// buffer); other ranks' `whole` is left empty. For writers of the
+// single-machine model cache, whose format holds the double basis.
+void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, Index block_size,
+                     VariationalSubspace<double>* whole);
+
 }  // namespace qpreduce::distributed
