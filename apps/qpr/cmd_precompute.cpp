@@ -8,13 +8,17 @@
 #include "guard.h"
 
 #include <qpreduce/distributed/mumps_subspace.h>
+#include <qpreduce/problems/families.h>
+#include <qpreduce/subspace_solver.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 #include <mpi.h>
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <stdexcept>
 #include <vector>
 
@@ -124,6 +128,79 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   return 0;
 }
 
+struct GmrfArgs {
+  long side = 300, candidates = 200;
+  std::string backend = "mumps";
+  int block = 64;
+};
+
+// The engine alone on the seeded GMRF grid (qpreduce/problems, families.h):
+// with mumps nothing is gathered (each rank keeps its rows of N and UD);
+// with cholmod the single-process SubspaceSolver. Prints time and the
+// peak memory of every rank.
+int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
+  if (a.backend != "mumps" && a.backend != "cholmod") {
+    throw std::invalid_argument(fmt::format("--backend: expected mumps or cholmod, got \"{}\"", a.backend));
+  }
+  if (a.backend == "cholmod" && mpi.size > 1) {
+    throw std::invalid_argument(fmt::format("--backend cholmod runs on one process; got {} MPI ranks", mpi.size));
+  }
+  if (a.block < 1) throw std::invalid_argument(fmt::format("--block: expected at least 1, got {}", a.block));
+  qpreduce::families::GmrfOptions g;
+  g.nx = g.ny = a.side;
+  g.candidates = a.candidates;
+  g.observed = std::min<qpreduce::Index>(g.observed, a.candidates);
+  std::string why;
+  if (!g.is_valid(&why)) throw std::invalid_argument("GMRF grid: " + why);
+  const qpreduce::Timer total;
+  const auto family = qpreduce::families::make_gmrf(g);
+  qpreduce::SubspaceOptions options = qpreduce::families::recommended_options(family);
+  options.block_size = a.block;
+  qpreduce::SubspaceSummary summary;
+  std::string detail;
+  if (a.backend == "mumps") {
+    const auto rows = qpreduce::distributed::owned_rows(family.n(), MPI_COMM_WORLD);
+    qpreduce::distributed::DistributedSubspace part;
+    const auto dist = qpreduce::distributed::build_subspace_mumps(
+        MPI_COMM_WORLD, family.H.middleRows(rows.begin, rows.size()), family.C, family.D, options, {}, &part);
+    summary = dist;
+    detail = fmt::format("ordering {}, factorization {:.2f} s, solves {:.2f} s, reduction {:.2f} s, MUMPS memory "
+                         "max/total {:.0f}/{:.0f} MB",
+                         dist.ordering, dist.factorize_seconds, dist.solve_seconds, dist.reduce_seconds,
+                         dist.factor_megabytes_max, dist.factor_megabytes_total);
+  } else {
+    qpreduce::SubspaceSolver<double> solver;
+    summary = solver.precompute(family.H, family.C, family.D, options);
+    detail = fmt::format("factorization {:.2f} s, solves {:.2f} s", summary.factorize_seconds, summary.solve_seconds);
+  }
+  const double seconds = total.seconds();
+  const double mine = peak_rss_megabytes();
+  std::vector<double> peaks(static_cast<size_t>(mpi.size));
+  MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  if (mpi.rank != 0) return summary.ok() ? 0 : 3;
+  std::printf("gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",
+              a.side, a.side, static_cast<long long>(family.n()), static_cast<long long>(family.d()),
+              static_cast<long long>(family.k()), a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
+              summary.brief_report().c_str(), detail.c_str());
+  for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
+  return summary.ok() ? 0 : 3;
+}
+
+// Runs `body` with MPI up; a rank that failed alone would leave the others
+// waiting in a collective, so a failure with K > 1 ends the whole job.
+void run_with_mpi(const char* name, const std::function<int(const MpiSession&)>& body) {
+  const MpiSession mpi;
+  int code = 0;
+  try {
+    run_guarded(name, [&] { return body(mpi); });
+  } catch (const CLI::RuntimeError& e) {
+    code = e.get_exit_code();
+  }
+  if (code != 0 && mpi.size > 1) MPI_Abort(MPI_COMM_WORLD, code);
+  MPI_Finalize();
+  if (code != 0) throw CLI::RuntimeError(code);
+}
+
 }  // namespace
 
 void register_precompute(CLI::App& app) {
@@ -135,20 +212,16 @@ void register_precompute(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve and columns per gather")
       ->capture_default_str();
-  cmd->callback([a = a]() {
-    const MpiSession mpi;
-    int code = 0;
-    try {
-      run_guarded("precompute", [&] { return run_precompute(*a, mpi); });
-    } catch (const CLI::RuntimeError& e) {
-      code = e.get_exit_code();
-    }
-    // A rank that failed alone would leave the others waiting in a
-    // collective: end the whole job instead.
-    if (code != 0 && mpi.size > 1) MPI_Abort(MPI_COMM_WORLD, code);
-    MPI_Finalize();
-    if (code != 0) throw CLI::RuntimeError(code);
-  });
+  cmd->callback([a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
+
+  auto [gmrf, g] = add_command<GmrfArgs>(
+      app, "precompute-gmrf", "Subspace build of the seeded GMRF grid family, for scaling runs (mpirun -np K …)");
+  gmrf->add_option("--side", g->side, "grid vertices per side; n = side²")->capture_default_str();
+  gmrf->add_option("--candidates", g->candidates, "candidate sites d")->capture_default_str();
+  gmrf->add_option("--backend", g->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
+      ->capture_default_str();
+  gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")->capture_default_str();
+  gmrf->callback([g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
 }
 
 }  // namespace qpr

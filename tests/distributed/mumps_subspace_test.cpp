@@ -67,7 +67,7 @@ void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, cons
   INFO(summary.brief_report() << " ordering: " << summary.ordering);
   REQUIRE(summary.ok());
   CHECK(same_status_everywhere(summary.status));
-  CHECK(summary.backend_used == ref.backend_used);
+  CHECK(summary.kkt_route == (ref.backend_used == Backend::SparseLU));
   CHECK(summary.kkt_residual < 1e-8);
   const auto rows = out.rows;
   const MatD N_ref = reference.subspace().N.middleRows(rows.begin, rows.size());

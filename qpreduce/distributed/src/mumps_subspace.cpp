@@ -91,7 +91,6 @@ class MumpsBuild {
     summary.d = d;
     summary.k = k;
     summary.ranks = ranks;
-    summary.backend_used = Backend::Auto;
     const double diag_max = allreduce(comm, local_diagonal().cwiseAbs().maxCoeff(), MPI_MAX);
     tau = options.psd_shift * std::max(diag_max, 1e-300);
   }
@@ -301,7 +300,6 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
                 fmt::format("{} has {} negative pivots, so the KKT matrix [[H, C], [Cᵀ, 0]] is singular: H is not "
                             "positive definite on ker(Cᵀ)", what, solver.negative_pivots()));
   }
-  summary.backend_used = options.backend == Backend::SimplicialLDLT ? Backend::SimplicialLDLT : Backend::Cholmod;
 
   const Timer t;
   const auto dense_cols = [](const SpD& S) {
@@ -363,7 +361,6 @@ bool MumpsBuild::kkt_route() {
   }
   MumpsSolver solver(comm, Symmetry::Indefinite, mumps);
   if (!factor_and_probe(solver, K_rows, rows.begin, K_order, "the KKT matrix [[H, C], [Cᵀ, 0]]")) return false;
-  summary.backend_used = Backend::SparseLU;
   const Timer t;
   // Right-hand sides [I; ...] for N: e_j in row n + j; for UD: D on top.
   const auto n_rhs = [this](Index j, MatD& block) {
@@ -469,6 +466,7 @@ DistributedSummary MumpsBuild::run() {
   const double H_nnz = allreduce(comm, static_cast<double>(H_rows.nonZeros()), MPI_SUM);
   const bool use_kkt = options.backend == Backend::SparseLU ||
                        (options.backend == Backend::Auto && fill > options.max_augmentation_fill * H_nnz);
+  summary.kkt_route = use_kkt;
   if (!(use_kkt ? kkt_route() : augmented_route(aug))) return summary;
 
   MatD DtUD = k > 0 ? MatD(D_rows.transpose() * F) : MatD(0, 0);

@@ -64,8 +64,11 @@ struct MumpsOptions {
   bool is_valid(std::string* why) const;
 };
 
+// backend_used stays Backend::Auto (the Backend enum names the single-process
+// backends); kkt_route says which matrix MUMPS factored.
 struct DistributedSummary : SubspaceSummary {
   int ranks = 0;
+  bool kkt_route = false;        // K = [[H, C], [Cᵀ, 0]] (else H_ρ, or H without augmentation)
   std::string ordering;          // e.g. "PT-Scotch (parallel)", "METIS (sequential)"
   int mumps_infog1 = 0;          // INFOG(1), INFOG(2) of the last MUMPS call (< 0: its error)
   int mumps_infog2 = 0;
