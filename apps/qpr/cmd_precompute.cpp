@@ -70,7 +70,7 @@ qpreduce::deform::Deformer::SubspaceBuilder mumps_builder(const MpiSession& mpi,
         MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D, opts, {}, &part);
     qpreduce::SubspaceSummary summary = *record;
     if (!summary.ok()) return summary;
-    qpreduce::distributed::gather_subspace(MPI_COMM_WORLD, part, 0, block, B);
+    qpreduce::distributed::gather_subspace(MPI_COMM_WORLD, part, 0, B);
     *Hr = std::move(part.Hr);
     *BtD = std::move(part.BtD);
     if (mpi.rank != 0) {
@@ -210,7 +210,7 @@ void register_precompute(CLI::App& app) {
   cmd->add_option("--cache", a->cache, "Model cache to write (qpr deform --cache loads it)")->required();
   cmd->add_option("--backend", a->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
-  cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve and columns per gather")
+  cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve")
       ->capture_default_str();
   cmd->callback([a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
 

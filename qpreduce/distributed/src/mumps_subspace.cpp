@@ -6,6 +6,7 @@
 
 #include "dense.h"
 #include "mumps_solver.h"
+#include "subspace_internal.h"  // kRowBlock
 
 #include "qpreduce/support.h"
 
@@ -25,6 +26,7 @@ namespace qpreduce::distributed {
 using SpD = SparseMatrix<double>;
 using MatD = Matrix<double>;
 using detail::MumpsSolver;
+using qpreduce::detail::kRowBlock;
 using detail::Symmetry;
 
 RowRange owned_rows(Index n, int rank, int ranks) {
@@ -41,6 +43,10 @@ RowRange owned_rows(Index n, MPI_Comm comm) {
 bool MumpsOptions::is_valid(std::string* why) const {
   if (workspace_percent < 0 || workspace_percent > 10000) {
     if (why) *why = fmt::format("workspace_percent must lie in [0, 10000], got {}", workspace_percent);
+    return false;
+  }
+  if (gather_columns < 1) {
+    if (why) *why = fmt::format("gather_columns must be at least 1, got {}", gather_columns);
     return false;
   }
   return true;
@@ -63,13 +69,14 @@ bool all_true(MPI_Comm comm, bool v) {
   return x == 1;
 }
 
-// Row counts and offsets of a partition of `total` rows, times `width`, as MPI ints.
+// Row counts and offsets of a row partition, as MPI ints: one column of an
+// n-row column-major matrix moves in one Scatterv/Gatherv without packing.
 struct Counts {
   std::vector<int> count, offset;
-  Counts(const std::vector<RowRange>& parts, Index width) {
+  explicit Counts(const std::vector<RowRange>& parts) {
     for (const RowRange& r : parts) {
-      count.push_back(static_cast<int>(r.size() * width));
-      offset.push_back(static_cast<int>(r.begin * width));
+      count.push_back(static_cast<int>(r.size()));
+      offset.push_back(static_cast<int>(r.begin));
     }
   }
 };
@@ -225,7 +232,8 @@ bool MumpsBuild::solve_columns(MumpsSolver& solver, Index K_order, Index columns
                                const std::function<void(Index, MatD&)>& fill, MatD* owned) {
   owned->resize(rows.size(), columns);
   const Index block = std::min<Index>(options.block_size, std::max<Index>(columns, 1));
-  MatD rhs, packed, mine;
+  const Counts counts(parts);
+  MatD rhs;
   for (Index j = 0; j < columns; j += block) {
     const Index b = std::min(block, columns - j);
     if (rank == 0) {
@@ -233,13 +241,11 @@ bool MumpsBuild::solve_columns(MumpsSolver& solver, Index K_order, Index columns
       fill(j, rhs);
     }
     if (!solver.solve_on_root(rhs)) return fail_mumps(solver, "a MUMPS block solve");
-    // Row-major packing (b values per row) so each owner's rows are contiguous.
-    if (rank == 0) packed = rhs.topRows(n).transpose();
-    mine.resize(b, rows.size());
-    const Counts c(parts, b);
-    MPI_Scatterv(packed.data(), c.count.data(), c.offset.data(), MPI_DOUBLE, mine.data(),
-                 static_cast<int>(mine.size()), MPI_DOUBLE, 0, comm);
-    owned->middleCols(j, b) = mine.transpose();
+    // Column by column: the first n rows of each solution column, to their owners.
+    for (Index c = 0; c < b; ++c) {
+      MPI_Scatterv(rank == 0 ? rhs.col(c).data() : nullptr, counts.count.data(), counts.offset.data(), MPI_DOUBLE,
+                   owned->col(j + c).data(), static_cast<int>(rows.size()), MPI_DOUBLE, 0, comm);
+    }
   }
   return true;
 }
@@ -335,8 +341,13 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
   Sinv = 0.5 * (Sinv + Sinv.transpose()).eval();
   MatD CtF = MatD(C_rows.transpose() * F);
   allreduce_sum(comm, CtF);
-  G = (G * Sinv).eval();
-  if (k > 0) F.noalias() -= G * CtF;
+  MatD tmp;
+  for (Index r = 0; r < G.rows(); r += kRowBlock) {  // in place, one row block of scratch
+    const Index len = std::min(kRowBlock, G.rows() - r);
+    tmp.noalias() = G.middleRows(r, len) * Sinv;
+    G.middleRows(r, len) = tmp;
+    if (k > 0) F.middleRows(r, len).noalias() -= tmp * CtF;
+  }
   return true;
 }
 
@@ -404,19 +415,21 @@ void MumpsBuild::reduced_operators() {
   allreduce_sum(comm, CtC);
   const Eigen::LDLT<MatD> CtC_ldlt(CtC);
   double r1sq = 0.0, r2sq = 0.0;
-  const Index block = options.block_size;
-  std::vector<int> count, offset;
-  MatD mine, gathered;
+  const Index block = std::min(options.block_size, mumps.gather_columns);
+  const Counts counts(parts);
+  const auto column = [&](Index j) { return j < d ? G.col(j) : F.col(j - d); };
+  MatD gathered, mine;
   for (Index j = 0; j < p; j += block) {
     const Index b = std::min(block, p - j);
-    // This rank's rows of columns [j, j + b) of B, row-major for the gather.
-    mine.resize(b, rows.size());
-    for (Index c = 0; c < b; ++c) mine.row(c) = (j + c < d ? G.col(j + c) : F.col(j + c - d)).transpose();
-    gathered.resize(b, n);
-    const Counts cnt(parts, b);
-    MPI_Allgatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, gathered.data(), cnt.count.data(),
-                   cnt.offset.data(), MPI_DOUBLE, comm);
-    MatD HB = H_rows * gathered.transpose();  // owned rows of H·B_j
+    // Columns [j, j + b) of B, whole, on every rank; this rank's rows beside.
+    gathered.resize(n, b);
+    mine.resize(rows.size(), b);
+    for (Index c = 0; c < b; ++c) {
+      mine.col(c) = column(j + c);
+      MPI_Allgatherv(mine.col(c).data(), static_cast<int>(rows.size()), MPI_DOUBLE, gathered.col(c).data(),
+                     counts.count.data(), counts.offset.data(), MPI_DOUBLE, comm);
+    }
+    MatD HB = H_rows * gathered;  // owned rows of H·B_j
     Hr.middleCols(j, b).topRows(d).noalias() = G.transpose() * HB;
     if (k > 0) Hr.middleCols(j, b).bottomRows(k).noalias() = F.transpose() * HB;
     if (options.compute_residual) {
@@ -427,7 +440,7 @@ void MumpsBuild::reduced_operators() {
       allreduce_sum(comm, CtR);
       HB.noalias() -= C_rows * CtC_ldlt.solve(CtR);
       r1sq += HB.squaredNorm();
-      MatD R2 = MatD(C_rows.transpose() * mine.transpose());
+      MatD R2 = MatD(C_rows.transpose() * mine);
       allreduce_sum(comm, R2);
       for (Index c = 0; c < b; ++c) {
         if (j + c < d) R2(j + c, c) -= 1.0;
@@ -536,25 +549,19 @@ void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, 
 
 }  // namespace
 
-void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, Index block_size,
-                     VariationalSubspace<double>* whole) {
+void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, VariationalSubspace<double>* whole) {
   int rank = 0, ranks = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &ranks);
   std::vector<RowRange> parts;
   for (int r = 0; r < ranks; ++r) parts.push_back(owned_rows(part.n, r, ranks));
-  const auto gather = [&](const MatD& mine_cols, MatD* out) {
-    const Index cols = mine_cols.cols();
-    if (rank == root) out->resize(part.n, cols);
-    MatD mine, packed;
-    for (Index j = 0; j < cols; j += block_size) {
-      const Index b = std::min(block_size, cols - j);
-      mine = mine_cols.middleCols(j, b).transpose();  // b × rows: each row's b values contiguous
-      if (rank == root) packed.resize(b, part.n);
-      const Counts c(parts, b);
-      MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, packed.data(), c.count.data(),
-                  c.offset.data(), MPI_DOUBLE, root, comm);
-      if (rank == root) out->middleCols(j, b) = packed.transpose();
+  const Counts counts(parts);
+  const auto gather = [&](const MatD& mine, MatD* out) {
+    if (rank == root) out->resize(part.n, mine.cols());
+    for (Index j = 0; j < mine.cols(); ++j) {  // one column at a time, straight into place
+      MPI_Gatherv(mine.col(j).data(), static_cast<int>(mine.rows()), MPI_DOUBLE,
+                  rank == root ? out->col(j).data() : nullptr, counts.count.data(), counts.offset.data(),
+                  MPI_DOUBLE, root, comm);
     }
   };
   whole->N.resize(0, 0);

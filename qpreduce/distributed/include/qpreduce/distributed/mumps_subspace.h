@@ -17,14 +17,15 @@
 //     host; DistributedSummary::ordering says which was used;
 //   * the p solves — in blocks of SubspaceOptions::block_size columns with a
 //     centralized right-hand side and solution: rank 0 holds one n × b block
-//     at a time and scatters its rows to their owners (MUMPS's own
+//     at a time and scatters its rows, column by column, to their owners (MUMPS's own
 //     distributed solution, ICNTL(21) = 1, comes back in MUMPS's row mapping
 //     and would need the same all-to-all);
 //   * the dense algebra — S = CᵀG (d × d), CᵀF (d × k), Dᵀ·UD (k × k),
 //     H_r = BᵀHB (p × p) and BᵀD (p × k) are per-rank partial sums over owned
 //     rows, reduced with MPI_Allreduce; N = G·S⁻¹ and UD = F − N·CᵀF are then
-//     formed row by row. H·B is computed by column blocks of B gathered to
-//     every rank (n × b at a time). No rank holds the whole n × p basis.
+//     formed by row blocks in place. H·B is computed by column blocks of B
+//     gathered to every rank (n × MumpsOptions::gather_columns at a time).
+//     No rank holds the whole n × p basis.
 //
 // Math and statuses as in subspace.h: with G = H_ρ⁻¹C, F = H_ρ⁻¹D, S = CᵀG,
 //     N = G·S⁻¹,  UD = F − G·S⁻¹·(CᵀF);
@@ -61,6 +62,10 @@ struct MumpsOptions {
   // Percent added to MUMPS's estimated working space (ICNTL(14); MUMPS's
   // default is 20). A too-small estimate gives INFOG(1) = −9, reported.
   int workspace_percent = 40;
+  // Columns of B = [N UD] gathered whole to every rank at once for H·B (the
+  // H_r and residual pass): n × gather_columns doubles per rank. Fewer
+  // columns, less memory, more (narrower) sparse products.
+  Index gather_columns = 16;
   bool is_valid(std::string* why) const;
 };
 
@@ -102,11 +107,10 @@ DistributedSummary build_subspace_mumps(MPI_Comm comm, const SparseMatrix<double
                                         const SubspaceOptions& options, const MumpsOptions& mumps,
                                         DistributedSubspace* out);
 
-// Collective: the whole N (n × d) and UD (n × k) on `root`, gathered by
-// blocks of `block_size` columns (root holds the result plus one n × block
-// buffer); other ranks' `whole` is left empty. For writers of the
-// single-machine model cache, whose format holds the double basis.
-void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, Index block_size,
-                     VariationalSubspace<double>* whole);
+// Collective: the whole N (n × d) and UD (n × k) on `root`, gathered one
+// column at a time straight into place; other ranks' `whole` is left empty.
+// For writers of the single-machine model cache, whose format holds the
+// double basis: root then holds n × p doubles, the other ranks none.
+void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, VariationalSubspace<double>* whole);
 
 }  // namespace qpreduce::distributed
