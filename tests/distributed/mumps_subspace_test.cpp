@@ -75,6 +75,22 @@ void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, cons
   CHECK(relative_difference_by_rows(out.N_rows, N_ref) < kTolerance);
   if (D.cols() > 0) CHECK(relative_difference_by_rows(out.UD_rows, UD_ref) < kTolerance);
   CHECK(relative_difference(out.Hr, reference.reduced_hessian()) < kTolerance);
+
+  // Gathered to rank 0 (what qpr precompute writes into the cache): bit for
+  // bit the rows every rank owns.
+  VariationalSubspace<double> whole;
+  distributed::gather_subspace(MPI_COMM_WORLD, out, 0, &whole);
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  if (rank != 0) {
+    CHECK(whole.N.size() == 0);
+    whole.N.resize(H.rows(), C.cols());
+    whole.UD.resize(H.rows(), D.cols());
+  }
+  MPI_Bcast(whole.N.data(), static_cast<int>(whole.N.size()), MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  MPI_Bcast(whole.UD.data(), static_cast<int>(whole.UD.size()), MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  CHECK(whole.N.middleRows(rows.begin, rows.size()) == out.N_rows);
+  CHECK(whole.UD.middleRows(rows.begin, rows.size()) == out.UD_rows);
   if (D.cols() > 0) CHECK(relative_difference(out.BtD, reference.reduced_linear_map()) < kTolerance);
 }
 
