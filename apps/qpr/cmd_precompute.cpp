@@ -6,6 +6,7 @@
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"
+#include "mpi_session.h"
 
 #include <qpreduce/distributed/mumps_subspace.h>
 #include <qpreduce/problems/families.h>
@@ -40,21 +41,8 @@ double peak_rss_megabytes() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KB on Linux
 }
 
-// MPI for the length of the command: initialized here unless the caller has
-// (a plain run is a singleton job of one rank).
-struct MpiSession {
-  MpiSession() {
-    int initialized = 0;
-    MPI_Initialized(&initialized);
-    if (!initialized) MPI_Init(nullptr, nullptr);
-    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-    MPI_Comm_size(MPI_COMM_WORLD, &size);
-  }
-  int rank = 0, size = 1;
-};
-
 // The deformer's subspace step on MUMPS: every rank hands over its rows of
-// H_u; N and UD are gathered to rank 0 by column blocks, the other ranks end
+// H_u; N and UD are gathered to rank 0 column by column, the other ranks end
 // precompute after the collective build with Status::NotRun.
 qpreduce::deform::Deformer::SubspaceBuilder mumps_builder(const MpiSession& mpi, int block,
                                                           DistributedSummary* record) {
@@ -62,17 +50,11 @@ qpreduce::deform::Deformer::SubspaceBuilder mumps_builder(const MpiSession& mpi,
                                const qpreduce::SparseMatrix<double>& D, const qpreduce::SubspaceOptions& options,
                                qpreduce::VariationalSubspace<double>* B, qpreduce::Matrix<double>* Hr,
                                qpreduce::Matrix<double>* BtD) {
-    const auto rows = qpreduce::distributed::owned_rows(H.rows(), MPI_COMM_WORLD);
-    qpreduce::distributed::DistributedSubspace part;
     qpreduce::SubspaceOptions opts = options;
     opts.block_size = block;
-    *record = qpreduce::distributed::build_subspace_mumps(
-        MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D, opts, {}, &part);
+    *record = qpreduce::distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, H, C, D, opts, {}, 0, B, Hr, BtD);
     qpreduce::SubspaceSummary summary = *record;
     if (!summary.ok()) return summary;
-    qpreduce::distributed::gather_subspace(MPI_COMM_WORLD, part, 0, B);
-    *Hr = std::move(part.Hr);
-    *BtD = std::move(part.BtD);
     if (mpi.rank != 0) {
       summary.status = qpreduce::Status::NotRun;
       summary.message = "the subspace was gathered on rank 0";
@@ -184,21 +166,6 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
               summary.brief_report().c_str(), detail.c_str());
   for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
   return summary.ok() ? 0 : 3;
-}
-
-// Runs `body` with MPI up; a rank that failed alone would leave the others
-// waiting in a collective, so a failure with K > 1 ends the whole job.
-void run_with_mpi(const char* name, const std::function<int(const MpiSession&)>& body) {
-  const MpiSession mpi;
-  int code = 0;
-  try {
-    run_guarded(name, [&] { return body(mpi); });
-  } catch (const CLI::RuntimeError& e) {
-    code = e.get_exit_code();
-  }
-  if (code != 0 && mpi.size > 1) MPI_Abort(MPI_COMM_WORLD, code);
-  MPI_Finalize();
-  if (code != 0) throw CLI::RuntimeError(code);
 }
 
 }  // namespace

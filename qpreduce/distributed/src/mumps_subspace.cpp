@@ -578,4 +578,25 @@ DistributedSummary build_subspace_mumps(MPI_Comm comm, const SpD& H_rows, const 
   return MumpsBuild(comm, H_rows, C, D, options, mumps, out).run();
 }
 
+DistributedSummary build_subspace_mumps_on_root(MPI_Comm comm, const SpD& H, const SpD& C, const SpD& D,
+                                                const SubspaceOptions& options, const MumpsOptions& mumps, int root,
+                                                VariationalSubspace<double>* B, MatD* Hr, MatD* BtD) {
+  if (B == nullptr || Hr == nullptr || BtD == nullptr) {
+    throw std::invalid_argument("build_subspace_mumps_on_root: an output pointer is null");
+  }
+  const RowRange rows = owned_rows(H.rows(), comm);
+  if (H.rows() != C.rows()) {  // agreed: the same whole matrices on every rank
+    throw std::invalid_argument(fmt::format("build_subspace_mumps_on_root: H has {} rows, C {}", H.rows(), C.rows()));
+  }
+  DistributedSubspace part;
+  const DistributedSummary summary =
+      build_subspace_mumps(comm, H.middleRows(rows.begin, rows.size()), C, D, options, mumps, &part);
+  *B = VariationalSubspace<double>{};
+  if (!summary.ok()) return summary;
+  gather_subspace(comm, part, root, B);
+  *Hr = std::move(part.Hr);
+  *BtD = std::move(part.BtD);
+  return summary;
+}
+
 }  // namespace qpreduce::distributed

@@ -113,4 +113,14 @@ DistributedSummary build_subspace_mumps(MPI_Comm comm, const SparseMatrix<double
 // double basis: root then holds n × p doubles, the other ranks none.
 void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, VariationalSubspace<double>* whole);
 
+// build_subspace_mumps for a caller that holds the whole H on every rank
+// (each rank passes its own rows), then gather_subspace to `root`: there B is
+// the whole subspace; H_r and BᵀD are on every rank, B is empty elsewhere.
+// What SubspaceSolver::restore needs, for the single-machine tools.
+DistributedSummary build_subspace_mumps_on_root(MPI_Comm comm, const SparseMatrix<double>& H,
+                                                const SparseMatrix<double>& C, const SparseMatrix<double>& D,
+                                                const SubspaceOptions& options, const MumpsOptions& mumps, int root,
+                                                VariationalSubspace<double>* B, Matrix<double>* Hr,
+                                                Matrix<double>* BtD);
+
 }  // namespace qpreduce::distributed
