@@ -33,6 +33,11 @@
 #include <qpreduce/theorem.h>
 #include <qpreduce/problems/schur_baseline.h>
 #include <qpreduce/subspace_solver.h>
+#ifdef QPREDUCE_HAVE_MPI
+#include <qpreduce/distributed/mumps_subspace.h>
+
+#include "mpi_session.h"
+#endif
 #include <qpreduce/support.h>
 
 #include <CLI/CLI.hpp>
@@ -47,6 +52,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -72,6 +78,7 @@ struct Options {
   bool baseline = false;
   bool no_augment = false;  // H PD: factor H itself (SubspaceOptions::augment = false)
   bool strict = false;      // warnings (least-squares constraints) are failures
+  std::string backend = "auto";  // "mumps": the subspace built over MPI (mpirun -np K), solved on rank 0
   Index theorem_max_n = 3000;  // the bound is a dense analysis (n×n eigendecomposition)
 };
 
@@ -468,7 +475,23 @@ int run_qp(const Options& opt) {
 
   Solvers s;
   s.sopt.augment = !opt.no_augment;
-  const qpreduce::SubspaceSummary pre = s.solver.precompute(p.H, p.C, p.D, s.sopt);
+  qpreduce::SubspaceSummary pre;
+  if (opt.backend == "mumps") {
+#ifdef QPREDUCE_HAVE_MPI
+    // Every rank reads the files and hands MUMPS its rows (docs/scaling.md);
+    // rank 0 receives the subspace and solves the demands.
+    qpreduce::VariationalSubspace<double> B;
+    qpreduce::Matrix<double> Hr, BtD;
+    pre = qpreduce::distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, p.H, p.C, p.D, s.sopt, {}, 0, &B, &Hr,
+                                                              &BtD);
+    int rank = 0;
+    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+    if (rank != 0) return pre.ok() ? 0 : 3;
+    if (pre.ok()) s.solver.restore(std::move(B), std::move(Hr), std::move(BtD), s.sopt);
+#endif
+  } else {
+    pre = s.solver.precompute(p.H, p.C, p.D, s.sopt);
+  }
   fmt::print("precompute: {}\n", pre.brief_report());
   if (!pre.ok()) {
     fmt::print(stderr, "qpr qp: precompute failed: {}\n", pre.message);
@@ -519,7 +542,21 @@ void register_qp(CLI::App& app) {
                 "a demand whose constraints hold only in the least-squares sense is a failure (exit 3), not a warning");
   cmd->add_option("--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
   cmd->add_option("--out", opt->out, "write X_<name>.mtx for every demand into this directory");
-  cmd->callback([opt = opt] { run_guarded("qp", [&] { return run_qp(*opt); }); });
+  cmd->add_option("--backend", opt->backend,
+                  "auto (one process, CHOLMOD or SparseLU) or mumps (MUMPS over MPI: mpirun -np K qpr qp …; "
+                  "docs/scaling.md)")
+      ->check(CLI::IsMember({"auto", "mumps"}))
+      ->capture_default_str();
+  cmd->callback([opt = opt] {
+    if (opt->backend != "mumps") return run_guarded("qp", [&] { return run_qp(*opt); });
+#ifdef QPREDUCE_HAVE_MPI
+    run_with_mpi("qp", [&](const MpiSession&) { return run_qp(*opt); });
+#else
+    run_guarded("qp", [&]() -> int {
+      throw std::invalid_argument("--backend mumps: this qpr was built without MPI and MUMPS (QPREDUCE_WITH_MPI)");
+    });
+#endif
+  });
 }
 
 }  // namespace qpr

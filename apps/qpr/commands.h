@@ -27,4 +27,9 @@ void register_check(CLI::App& app);
 // built when QPREDUCE_BUILD_VIEWER is on (QPREDUCE_HAVE_VIEWER).
 void register_view(CLI::App& app);
 
+// `qpr precompute`: the deformer's precompute on MUMPS over MPI, into a model
+// cache (cmd_precompute.cpp, docs/scaling.md); built when QPREDUCE_WITH_MPI
+// is on (QPREDUCE_HAVE_MPI).
+void register_precompute(CLI::App& app);
+
 }  // namespace qpr

@@ -22,6 +22,9 @@ int main(int argc, char** argv) {
 #ifdef QPREDUCE_HAVE_VIEWER
   qpr::register_view(app);
 #endif
+#ifdef QPREDUCE_HAVE_MPI
+  qpr::register_precompute(app);
+#endif
   CLI11_PARSE(app, argc, argv);
   return 0;
 }

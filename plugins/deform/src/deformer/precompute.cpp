@@ -271,6 +271,11 @@ void reduce_operators(Model& model, const ControlSystem& system, ClusterRotation
 
 PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
                                        const ProgressFn& progress) {
+  return precompute(mesh, options, progress, {});
+}
+
+PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
+                                       const ProgressFn& progress, const SubspaceBuilder& build_subspace) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
   auto report = [&](const char* stage, double f) {
@@ -315,7 +320,14 @@ PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const Deforme
   // otherwise stay resident under the build's peak (factor plus solution).
   release_free_heap();
   t.reset();
-  summary.subspace = model.solver.precompute(system.Hu, C, system.Du, sub);
+  if (build_subspace) {
+    VariationalSubspace<double> B;
+    Matrix<double> Hr, BtD;
+    summary.subspace = build_subspace(system.Hu, C, system.Du, sub, &B, &Hr, &BtD);
+    if (summary.subspace.ok()) model.solver.restore(std::move(B), std::move(Hr), std::move(BtD), sub);
+  } else {
+    summary.subspace = model.solver.precompute(system.Hu, C, system.Du, sub);
+  }
   summary.subspace_seconds = t.seconds();
   if (!summary.subspace.ok()) {
     summary.status = summary.subspace.status;

@@ -132,6 +132,17 @@ class Deformer {
   PrecomputeSummary precompute(const DeformableMesh& model, const DeformerOptions& options = {},
                                const ProgressFn& progress = {});
 
+  // The subspace step of precompute, replaced (e.g. by the MUMPS build over
+  // MPI of qpreduce::distributed, `qpr precompute`): from H_u (n_u × n_u),
+  // C (n_u × nx), D_u (n_u × 9d) and the engine's options, fill B = [N UD],
+  // H_r = BᵀH_uB (p × p) and BᵀD_u (p × 9d) as SubspaceSolver::precompute
+  // would. A summary that is not ok() ends precompute with its status.
+  using SubspaceBuilder = std::function<SubspaceSummary(
+      const SparseMatrix<double>& H, const SparseMatrix<double>& C, const SparseMatrix<double>& D,
+      const SubspaceOptions& options, VariationalSubspace<double>* B, Matrix<double>* Hr, Matrix<double>* BtD)>;
+  PrecomputeSummary precompute(const DeformableMesh& model, const DeformerOptions& options,
+                               const ProgressFn& progress, const SubspaceBuilder& build_subspace);
+
   // Writes the precomputed model to `path` (binary, versioned, CRC-32
   // checked; layout in docs/formats.md), through a temporary file renamed at
   // the end so an existing cache is never left half-written. Throws IoError

@@ -1,0 +1,194 @@
+// `qpr precompute MESH … --backend mumps --cache OUT`, under `mpirun -np K`:
+// the deformer's precompute with its subspace built by MUMPS over the K ranks
+// (qpreduce::distributed), the model cache written by rank 0 in the format
+// `qpr deform --cache` loads (docs/scaling.md). Built with QPREDUCE_WITH_MPI.
+// No math here: the plugin assembles, qpreduce::distributed builds.
+#include "commands.h"
+#include "deform_run.h"
+#include "guard.h"
+#include "mpi_session.h"
+
+#include <qpreduce/distributed/mumps_subspace.h>
+#include <qpreduce/problems/families.h>
+#include <qpreduce/subspace_solver.h>
+
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <mpi.h>
+#include <sys/resource.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <functional>
+#include <stdexcept>
+#include <vector>
+
+namespace qpr {
+
+namespace {
+
+using qpreduce::distributed::DistributedSummary;
+
+struct PrecomputeArgs : ScenarioArgs {
+  std::string cache;
+  std::string backend = "mumps";
+  int block = 16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
+};
+
+double peak_rss_megabytes() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KB on Linux
+}
+
+// The deformer's subspace step on MUMPS: every rank hands over its rows of
+// H_u; N and UD are gathered to rank 0 column by column, the other ranks end
+// precompute after the collective build with Status::NotRun.
+qpreduce::deform::Deformer::SubspaceBuilder mumps_builder(const MpiSession& mpi, int block,
+                                                          DistributedSummary* record) {
+  return [&mpi, block, record](const qpreduce::SparseMatrix<double>& H, const qpreduce::SparseMatrix<double>& C,
+                               const qpreduce::SparseMatrix<double>& D, const qpreduce::SubspaceOptions& options,
+                               qpreduce::VariationalSubspace<double>* B, qpreduce::Matrix<double>* Hr,
+                               qpreduce::Matrix<double>* BtD) {
+    qpreduce::SubspaceOptions opts = options;
+    opts.block_size = block;
+    *record = qpreduce::distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, H, C, D, opts, {}, 0, B, Hr, BtD);
+    qpreduce::SubspaceSummary summary = *record;
+    if (!summary.ok()) return summary;
+    if (mpi.rank != 0) {
+      summary.status = qpreduce::Status::NotRun;
+      summary.message = "the subspace was gathered on rank 0";
+    }
+    return summary;
+  };
+}
+
+int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
+  if (a.backend != "mumps" && a.backend != "cholmod") {
+    throw std::invalid_argument(fmt::format("--backend: expected mumps or cholmod, got \"{}\"", a.backend));
+  }
+  if (a.backend == "cholmod" && mpi.size > 1) {
+    throw std::invalid_argument(
+        fmt::format("--backend cholmod runs on one process; got {} MPI ranks (use --backend mumps)", mpi.size));
+  }
+  if (a.block < 1) throw std::invalid_argument(fmt::format("--block: expected at least 1, got {}", a.block));
+  if (mpi.rank == 0) qpreduce::check_destination(a.cache, "cache");
+  LoadedScenario ls = load_scenario(a);
+  qpreduce::deform::Deformer deformer;
+  DistributedSummary dist;
+  const qpreduce::Timer total;
+  const auto pre = a.backend == "mumps"
+                       ? deformer.precompute(ls.scenario.model, ls.options, {}, mumps_builder(mpi, a.block, &dist))
+                       : deformer.precompute(ls.scenario.model, ls.options);
+  const double seconds = total.seconds();
+  // Every rank's peak memory, printed by rank 0.
+  const double mine = peak_rss_megabytes();
+  std::vector<double> peaks(static_cast<size_t>(mpi.size));
+  MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  if (a.backend == "mumps" && !dist.ok()) {
+    if (mpi.rank == 0) std::fprintf(stderr, "qpr precompute: %s\n", dist.brief_report().c_str());
+    return 3;
+  }
+  if (mpi.rank != 0) return 0;
+  if (!pre.ok()) {
+    std::fprintf(stderr, "qpr precompute: %s: %s\n", qpreduce::to_string(pre.status), pre.message.c_str());
+    return 3;
+  }
+  deformer.save(a.cache);
+  std::printf("%s: precomputed with %s on %d rank(s) in %.2f s (subspace %.2f s)\n", ls.name.c_str(),
+              a.backend.c_str(), mpi.size, seconds, pre.subspace_seconds);
+  if (a.backend == "mumps") {
+    std::printf("  MUMPS: ordering %s, factorization %.2f s, solves %.2f s, reduction %.2f s, factor entries %lld, "
+                "MUMPS memory max/total %.0f/%.0f MB\n",
+                dist.ordering.c_str(), dist.factorize_seconds, dist.solve_seconds, dist.reduce_seconds,
+                static_cast<long long>(dist.factor_nonzeros), dist.factor_megabytes_max, dist.factor_megabytes_total);
+  }
+  std::printf("  n_u = %lld, p = %lld, KKT residual %.2e\n", static_cast<long long>(pre.subspace.n),
+              static_cast<long long>(pre.subspace.d + pre.subspace.k), pre.subspace.kkt_residual);
+  for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
+  std::printf("  cache written: %s\n", a.cache.c_str());
+  return 0;
+}
+
+struct GmrfArgs {
+  long side = 300, candidates = 200;
+  std::string backend = "mumps";
+  int block = 16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
+};
+
+// The engine alone on the seeded GMRF grid (qpreduce/problems, families.h):
+// with mumps nothing is gathered (each rank keeps its rows of N and UD);
+// with cholmod the single-process SubspaceSolver. Prints time and the
+// peak memory of every rank.
+int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
+  if (a.backend != "mumps" && a.backend != "cholmod") {
+    throw std::invalid_argument(fmt::format("--backend: expected mumps or cholmod, got \"{}\"", a.backend));
+  }
+  if (a.backend == "cholmod" && mpi.size > 1) {
+    throw std::invalid_argument(fmt::format("--backend cholmod runs on one process; got {} MPI ranks", mpi.size));
+  }
+  if (a.block < 1) throw std::invalid_argument(fmt::format("--block: expected at least 1, got {}", a.block));
+  qpreduce::families::GmrfOptions g;
+  g.nx = g.ny = a.side;
+  g.candidates = a.candidates;
+  g.observed = std::min<qpreduce::Index>(g.observed, a.candidates);
+  std::string why;
+  if (!g.is_valid(&why)) throw std::invalid_argument("GMRF grid: " + why);
+  const qpreduce::Timer total;
+  const auto family = qpreduce::families::make_gmrf(g);
+  qpreduce::SubspaceOptions options = qpreduce::families::recommended_options(family);
+  options.block_size = a.block;
+  qpreduce::SubspaceSummary summary;
+  std::string detail;
+  if (a.backend == "mumps") {
+    const auto rows = qpreduce::distributed::owned_rows(family.n(), MPI_COMM_WORLD);
+    qpreduce::distributed::DistributedSubspace part;
+    const auto dist = qpreduce::distributed::build_subspace_mumps(
+        MPI_COMM_WORLD, family.H.middleRows(rows.begin, rows.size()), family.C, family.D, options, {}, &part);
+    summary = dist;
+    detail = fmt::format("ordering {}, factorization {:.2f} s, solves {:.2f} s, reduction {:.2f} s, MUMPS memory "
+                         "max/total {:.0f}/{:.0f} MB",
+                         dist.ordering, dist.factorize_seconds, dist.solve_seconds, dist.reduce_seconds,
+                         dist.factor_megabytes_max, dist.factor_megabytes_total);
+  } else {
+    qpreduce::SubspaceSolver<double> solver;
+    summary = solver.precompute(family.H, family.C, family.D, options);
+    detail = fmt::format("factorization {:.2f} s, solves {:.2f} s", summary.factorize_seconds, summary.solve_seconds);
+  }
+  const double seconds = total.seconds();
+  const double mine = peak_rss_megabytes();
+  std::vector<double> peaks(static_cast<size_t>(mpi.size));
+  MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  if (mpi.rank != 0) return summary.ok() ? 0 : 3;
+  std::printf("gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",
+              a.side, a.side, static_cast<long long>(family.n()), static_cast<long long>(family.d()),
+              static_cast<long long>(family.k()), a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
+              summary.brief_report().c_str(), detail.c_str());
+  for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
+  return summary.ok() ? 0 : 3;
+}
+
+}  // namespace
+
+void register_precompute(CLI::App& app) {
+  auto [cmd, a] = add_command<PrecomputeArgs>(
+      app, "precompute", "Precompute a deformation model into a cache, on MUMPS over MPI (mpirun -np K qpr precompute …)");
+  add_scenario_options(cmd, a.get());
+  cmd->add_option("--cache", a->cache, "Model cache to write (qpr deform --cache loads it)")->required();
+  cmd->add_option("--backend", a->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
+      ->capture_default_str();
+  cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve")
+      ->capture_default_str();
+  cmd->callback([a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
+
+  auto [gmrf, g] = add_command<GmrfArgs>(
+      app, "precompute-gmrf", "Subspace build of the seeded GMRF grid family, for scaling runs (mpirun -np K …)");
+  gmrf->add_option("--side", g->side, "grid vertices per side; n = side²")->capture_default_str();
+  gmrf->add_option("--candidates", g->candidates, "candidate sites d")->capture_default_str();
+  gmrf->add_option("--backend", g->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
+      ->capture_default_str();
+  gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")->capture_default_str();
+  gmrf->callback([g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
+}
+
+}  // namespace qpr

@@ -1,0 +1,159 @@
+// The MUMPS subspace build against the single-process CHOLMOD/SparseLU one:
+// N, UD (owned rows), H_r and BᵀD agree to 1e-8 relative on each QP family
+// and route; failures give the same status on every rank; bad input throws
+// on every rank. Run under mpirun -np 1 and -np 2 (tests/distributed/CMakeLists.txt).
+#include <catch2/catch.hpp>
+
+#include "qpreduce/distributed/mumps_subspace.h"
+#include "qpreduce/problems/families.h"
+#include "qpreduce/subspace_solver.h"
+
+#include <mpi.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+namespace {
+
+using namespace qpreduce;
+using distributed::build_subspace_mumps;
+using distributed::DistributedSubspace;
+using distributed::MumpsOptions;
+using distributed::owned_rows;
+using SpD = SparseMatrix<double>;
+using MatD = Matrix<double>;
+
+constexpr double kTolerance = 1e-8;
+
+double sum_over_ranks(double v) {
+  MPI_Allreduce(MPI_IN_PLACE, &v, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  return v;
+}
+
+// ‖A − B‖_F / ‖B‖_F over the whole matrix, A and B given by owned rows.
+double relative_difference_by_rows(const MatD& A, const MatD& B) {
+  const double diff = sum_over_ranks((A - B).squaredNorm());
+  const double ref = sum_over_ranks(B.squaredNorm());
+  return std::sqrt(diff / std::max(ref, 1e-300));
+}
+
+double relative_difference(const MatD& A, const MatD& B) {
+  return (A - B).norm() / std::max(B.norm(), 1e-300);
+}
+
+// Every rank's status equals rank 0's.
+bool same_status_everywhere(Status s) {
+  int mine = static_cast<int>(s), lo = 0, hi = 0;
+  MPI_Allreduce(&mine, &lo, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+  MPI_Allreduce(&mine, &hi, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  return lo == hi;
+}
+
+SpD owned_rows_of(const SpD& H) {
+  const auto rows = owned_rows(H.rows(), MPI_COMM_WORLD);
+  return H.middleRows(rows.begin, rows.size());
+}
+
+// The single-process build (CHOLMOD, or SparseLU on the KKT route) and the
+// distributed one agree on N, UD, H_r and BᵀD.
+void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, const SubspaceOptions& options) {
+  SubspaceSolver<double> reference;
+  const SubspaceSummary ref = reference.precompute(H, C, D, options);
+  REQUIRE(ref.ok());
+
+  DistributedSubspace out;
+  const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(H), C, D, options, {}, &out);
+  INFO(summary.brief_report() << " ordering: " << summary.ordering);
+  REQUIRE(summary.ok());
+  CHECK(same_status_everywhere(summary.status));
+  CHECK(summary.kkt_route == (ref.backend_used == Backend::SparseLU));
+  CHECK(summary.kkt_residual < 1e-8);
+  const auto rows = out.rows;
+  const MatD N_ref = reference.subspace().N.middleRows(rows.begin, rows.size());
+  const MatD UD_ref = reference.subspace().UD.middleRows(rows.begin, rows.size());
+  CHECK(relative_difference_by_rows(out.N_rows, N_ref) < kTolerance);
+  if (D.cols() > 0) CHECK(relative_difference_by_rows(out.UD_rows, UD_ref) < kTolerance);
+  CHECK(relative_difference(out.Hr, reference.reduced_hessian()) < kTolerance);
+
+  // Gathered to rank 0 (what qpr precompute writes into the cache): bit for
+  // bit the rows every rank owns.
+  VariationalSubspace<double> whole;
+  distributed::gather_subspace(MPI_COMM_WORLD, out, 0, &whole);
+  int rank = 0;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  if (rank != 0) {
+    CHECK(whole.N.size() == 0);
+    whole.N.resize(H.rows(), C.cols());
+    whole.UD.resize(H.rows(), D.cols());
+  }
+  MPI_Bcast(whole.N.data(), static_cast<int>(whole.N.size()), MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  MPI_Bcast(whole.UD.data(), static_cast<int>(whole.UD.size()), MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  CHECK(whole.N.middleRows(rows.begin, rows.size()) == out.N_rows);
+  CHECK(whole.UD.middleRows(rows.begin, rows.size()) == out.UD_rows);
+  if (D.cols() > 0) CHECK(relative_difference(out.BtD, reference.reduced_linear_map()) < kTolerance);
+}
+
+}  // namespace
+
+TEST_CASE("MUMPS subspace matches the single-process build on each QP family", "[distributed]") {
+  const auto family = GENERATE(families::Family::Gmrf, families::Family::Trajectory, families::Family::Portfolio);
+  INFO("family " << families::to_string(family));
+  const auto f = families::make_family(family, 900, 7);
+  check_against_single_process(f.H, f.C, f.D, families::recommended_options(f));
+}
+
+TEST_CASE("MUMPS subspace on the KKT route matches SparseLU", "[distributed]") {
+  const auto f = families::make_family(families::Family::Gmrf, 400, 3);
+  SubspaceOptions options;
+  options.backend = Backend::SparseLU;
+  check_against_single_process(f.H, f.C, f.D, options);
+}
+
+TEST_CASE("A singular KKT gives SingularKKT on every rank", "[distributed]") {
+  // The GMRF with κ² = 0 has ker H = constants; factoring H itself
+  // (augment = false) must fail, with the same status everywhere.
+  const auto f = families::make_family(families::Family::Gmrf, 400, 5);
+  REQUIRE_FALSE(f.positive_definite());
+  SubspaceOptions options;
+  options.augment = false;
+  DistributedSubspace out;
+  const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(f.H), f.C, f.D, options, {}, &out);
+  INFO(summary.message);
+  CHECK(summary.status == Status::SingularKKT);
+  CHECK(same_status_everywhere(summary.status));
+  CHECK(out.N_rows.size() == 0);
+}
+
+TEST_CASE("An indefinite H gives IndefiniteH on every rank", "[distributed]") {
+  const auto f = families::make_family(families::Family::Trajectory, 400, 5);
+  SpD H = f.H;
+  H.coeffRef(3, 3) = -10.0 * H.coeff(3, 3);  // one strongly negative direction
+  for (const bool augment : {true, false}) {
+    SubspaceOptions options;
+    options.augment = augment;
+    DistributedSubspace out;
+    const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(H), f.C, f.D, options, {}, &out);
+    INFO("augment " << augment << ": " << summary.message);
+    CHECK(summary.status == Status::IndefiniteH);
+    CHECK(same_status_everywhere(summary.status));
+    CHECK(out.N_rows.size() == 0);
+  }
+}
+
+TEST_CASE("Bad input throws on every rank, naming the problem", "[distributed]") {
+  const auto f = families::make_family(families::Family::Gmrf, 400, 5);
+  int rank = 0, size = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  DistributedSubspace out;
+  // The last rank alone passes the wrong rows: every rank must throw.
+  SpD H_rows = owned_rows_of(f.H);
+  if (rank == size - 1) H_rows = f.H.topRows(H_rows.rows() + 1);
+  CHECK_THROWS_WITH(build_subspace_mumps(MPI_COMM_WORLD, H_rows, f.C, f.D, {}, {}, &out),
+                    Catch::Contains("H_rows rows"));
+  MumpsOptions bad;
+  bad.workspace_percent = -1;
+  CHECK_THROWS_WITH(build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(f.H), f.C, f.D, {}, bad, &out),
+                    Catch::Contains("workspace_percent"));
+}

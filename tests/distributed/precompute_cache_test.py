@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""`qpr precompute --backend mumps` under mpirun writes a cache `qpr deform` loads.
+
+    precompute_cache_test.py QPR_BINARY MPIRUN SHARED_DIR WORK_DIR
+
+On the Botsch–Sorkine cactus (.sel/.def): a cache from `mpirun -np 2 qpr
+precompute --backend mumps` and one from the single-process CHOLMOD build
+(`qpr precompute --backend cholmod`) are each loaded by `qpr deform --cache`
+(which must say "loaded from"); the two deformed meshes agree to 1e-6 of the
+mesh size. Then a failure: an unwritable cache path makes the MPI job end
+with a message and a non-zero exit, within the CTest timeout. Exits 77
+(skipped) when the shared data is absent.
+"""
+import os
+import subprocess
+import sys
+
+
+def run(cmd, expect_ok=True):
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=240)
+    if expect_ok and p.returncode != 0:
+        sys.exit(f"FAILED ({p.returncode}): {' '.join(cmd)}\n{p.stdout}\n{p.stderr}")
+    return p
+
+
+def vertices(path):
+    with open(path) as f:
+        return [tuple(float(x) for x in line.split()[1:4]) for line in f if line.startswith("v ")]
+
+
+def main():
+    qpr, mpirun, shared, work = sys.argv[1:5]
+    data = os.path.join(shared, "data", "meshes", "botsch-sorkine")
+    mesh = os.path.join(data, "cactus.off")
+    if not os.path.exists(mesh):
+        print(f"skipped: {mesh} is absent (the shared data lives in ../shared next to the checkout)")
+        return 77
+    os.makedirs(work, exist_ok=True)
+    scenario = [mesh, "--sel", os.path.join(data, "cactus.sel"), "--def", os.path.join(data, "cactus.def")]
+    caches = {"mumps": os.path.join(work, "cactus_mumps_np2.cache"),
+              "cholmod": os.path.join(work, "cactus_cholmod.cache")}
+    for c in caches.values():
+        if os.path.exists(c):
+            os.remove(c)
+    run([mpirun, "--oversubscribe", "-np", "2", qpr, "precompute", *scenario, "--backend", "mumps",
+         "--cache", caches["mumps"]])
+    run([qpr, "precompute", *scenario, "--backend", "cholmod", "--cache", caches["cholmod"]])
+    poses = {}
+    for name, cache in caches.items():
+        out = os.path.join(work, f"cactus_{name}.obj")
+        p = run([qpr, "deform", *scenario, "--cache", cache, "--out", out])
+        if "loaded from" not in p.stdout + p.stderr:
+            sys.exit(f"FAILED: qpr deform did not load {cache}:\n{p.stdout}\n{p.stderr}")
+        poses[name] = vertices(out)
+    a, b = poses["mumps"], poses["cholmod"]
+    if len(a) != len(b) or not a:
+        sys.exit(f"FAILED: {len(a)} and {len(b)} vertices")
+    size = max(max(v[i] for v in b) - min(v[i] for v in b) for i in range(3))
+    worst = max(abs(x - y) for u, v in zip(a, b) for x, y in zip(u, v))
+    print(f"max vertex difference MUMPS (np 2) vs CHOLMOD caches: {worst:.3e} (mesh size {size:.3g})")
+    if not worst <= 1e-6 * size:
+        sys.exit("FAILED: the poses differ by more than 1e-6 of the mesh size")
+
+    # A rank-0 failure (no such directory) ends the job with a message.
+    p = run([mpirun, "--oversubscribe", "-np", "2", qpr, "precompute", *scenario, "--backend", "mumps",
+             "--cache", os.path.join(work, "no-such-dir", "x.cache")], expect_ok=False)
+    if p.returncode == 0 or "qpr precompute: error" not in p.stderr:
+        sys.exit(f"FAILED: expected a failed job with a message, got {p.returncode}:\n{p.stderr}")
+    print("ok")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
