@@ -1,4 +1,4 @@
-// `qpr check MESH [--sel F | --scene F] [--report F] [--strict]`: the mesh
+// `qpr check MESH [--sel F | --anim F | --scene F] [--report F] [--strict]`: the mesh
 // pre-flight (diagnose_mesh) on its own: every finding, the scale, and an
 // exit code — 0 clean, 1 warnings only, 2 errors (or warnings with --strict,
 // or an input that cannot be read).
@@ -27,7 +27,7 @@ namespace {
 using namespace qpreduce::deform;
 
 struct CheckArgs {
-  std::string mesh, sel, scene, report;
+  std::string mesh, sel, scene, anim, report;
   bool strict = false;
 };
 
@@ -35,7 +35,8 @@ struct CheckArgs {
 constexpr int kCheckWarnings = 1, kCheckErrors = 2;
 
 // The mesh and its anchors: from the scene, or from MESH with the fixed and
-// handle vertices of --sel (none without it: anchoring is then not checked).
+// handle vertices of --sel or the handles' vertices of --anim (none without
+// either: anchoring is then not checked).
 struct CheckInputs {
   Vertices V;
   Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> E;
@@ -76,6 +77,11 @@ CheckInputs read_inputs(const CheckArgs& a) {
     for (size_t v = 0; v < sel.roles.size(); ++v) in.anchored[v] = sel.roles[v] != SelRole::Free;
     in.anchors = a.sel;
   }
+  if (!a.anim.empty()) {
+    if (in.E.cols() != 3) throw std::invalid_argument("--anim: recorded handle poses are for triangle meshes");
+    in.anchored = anchored_vertices(scenario_from_anim(in.V, read_anim(a.anim)));
+    in.anchors = a.anim;
+  }
   return in;
 }
 
@@ -84,7 +90,7 @@ void print_summary(const CheckInputs& in, const MeshCheckSummary& s, bool strict
   const char* element = s.corners == 4 ? "tet" : "triangle";
   fmt::print("{}: {} vertices, {} {}s, {} connected component{}\n", in.name, s.vertices, s.elements, element,
              s.components, s.components == 1 ? "" : "s");
-  fmt::print("  anchors: {}\n", in.anchors.empty() ? "not checked (no --sel or --scene)" : "from " + in.anchors);
+  fmt::print("  anchors: {}\n", in.anchors.empty() ? "not checked (no --sel, --anim or --scene)" : "from " + in.anchors);
   if (s.diagonal > 0.0) {
     fmt::print("  scale: bounding box ({:.4g}, {:.4g}, {:.4g}) to ({:.4g}, {:.4g}, {:.4g}), diagonal {:.4g}\n",
                s.box_min(0), s.box_min(1), s.box_min(2), s.box_max(0), s.box_max(1), s.box_max(2), s.diagonal);
@@ -99,7 +105,8 @@ void print_summary(const CheckInputs& in, const MeshCheckSummary& s, bool strict
 }
 
 int run_check(const CheckArgs& a) {
-  if (!a.sel.empty() && !a.scene.empty()) throw std::invalid_argument("give --sel or --scene, not both");
+  if (!a.sel.empty() + !a.scene.empty() + !a.anim.empty() > 1)
+    throw std::invalid_argument("give one of --sel, --anim and --scene, not several");
   if (!a.report.empty()) qpreduce::check_destination(a.report, "report");
   const CheckInputs in = read_inputs(a);
   const MeshCheckSummary s = diagnose_mesh(in.V, in.E, in.anchored);
@@ -123,6 +130,8 @@ void register_check(CLI::App& app) {
       "parts, inverted tets, unanchored components, scale (exit 0 clean, 1 warnings, 2 errors)");
   cmd->add_option("mesh", a->mesh, "Mesh: .obj .off .ply (surface) or .mesh .node/.ele (tets)");
   cmd->add_option("--sel", a->sel, "Botsch–Sorkine selection: its fixed and handle vertices anchor the components")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--anim", a->anim, "Recorded handle poses (.anim): the handles' vertices anchor the components")
       ->check(CLI::ExistingFile);
   cmd->add_option("--scene", a->scene, "JSON scene: its mesh, and its handles and fixed patches as anchors")
       ->check(CLI::ExistingFile);

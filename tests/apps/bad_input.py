@@ -335,6 +335,26 @@ case("check", "an unanchored component with --sel", check("--sel", "{W}/two.sel"
      {"two.off": TWO, "two.sel": SEL + "1\n" * NV},
      stdout_words=["2 connected components", "connected component 1 (48 vertices, first vertex 48) has no handle or "
                    "fixed region anchoring it"])
+
+
+def two_anim(second):
+    """An .anim for TWO: handle 0 at vertex 0, handle 1 at vertex `second`, one pose."""
+    rows = []
+    for v in (0, second):
+        w = ["0"] * (2 * NV)
+        w[v] = "1"
+        rows.append(" ".join(w))
+    return "1 2 %d 1 0 0 0\n%s\n0 0 0\n1 0 0\n" % (2 * NV, "\n".join(rows))
+
+
+case("check", "an unanchored component with --anim", check("--anim", "{W}/two.anim", mesh="{W}/two.off"), ERRORS,
+     [], {"two.off": TWO, "two.anim": two_anim(1)},
+     stdout_words=["anchors: from", "two.anim", "connected component 1 (48 vertices, first vertex 48) has no handle"])
+case("check", "both components held by --anim handles", check("--anim", "{W}/two.anim", mesh="{W}/two.off"), CLEAN,
+     [], {"two.off": TWO, "two.anim": two_anim(NV)}, stdout_words=["2 connected components", "status: clean"])
+case("check", "--sel and --anim together are refused",
+     check("--sel", "{W}/tube.sel", "--anim", "{W}/a.anim"), ERRORS, ["give one of --sel, --anim and --scene"],
+     {"a.anim": "1 1 %d 1 0 0 0\n1%s\n0 0 0\n" % (NV, " 0" * (NV - 1))})
 case("check", "two components without anchors are clean", check(mesh="{W}/two.off"), CLEAN, [], {"two.off": TWO},
      stdout_words=["2 connected components", "status: clean"])
 case("check", "an inverted tet", check(mesh="{W}/t.mesh"), WARNINGS, [], {"t.mesh": MEDIT_TETS % "1 2 3 5"},
@@ -350,7 +370,7 @@ case("check", "a scene: its mesh and anchors", ["check", "--scene", "{W}/s.json"
 case("check", "a scene that names another mesh than MESH", ["check", "{W}/tube.obj", "--scene", "{W}/s.json"], RUN,
      ["s.json names the mesh", "tube.off, not", "tube.obj"], {"s.json": scene(', ' + PATCH)})
 case("check", "--sel and --scene together", check("--sel", "{W}/tube.sel", "--scene", "{W}/s.json"), RUN,
-     ["--sel or --scene, not both"], {"s.json": scene(', ' + PATCH)})
+     ["give one of --sel, --anim and --scene, not several"], {"s.json": scene(', ' + PATCH)})
 case("check", "no MESH", ["check"], RUN, ["give MESH, or --scene"])
 case("check", "a selection of the wrong size", check("--sel", "{W}/tube.sel"), RUN, ["tube.sel", "expected 48 entries"],
      {"tube.sel": SEL + "1\n"})
