@@ -115,13 +115,10 @@ void bind_refiner_class(py::module_& m) {
             const Index n = self.vertices;
             Vertices input;
             if (!pose.is_none()) input = matrix_view<double>("pose", pose, {n, "n"}, {3, "3"}, false);
-            py::array_t<double> result;
-            if (out.is_none()) {
-              result = py::array_t<double>({static_cast<py::ssize_t>(n), static_cast<py::ssize_t>(3)});
-            } else {
-              matrix_view<double>("out", out, {n, "n"}, {3, "3"}, true);  // checks dtype, shape, layout
-              result = py::reinterpret_borrow<py::array_t<double>>(out);
-            }
+            // out, or a new (n, 3) array; matrix_view checks out's dtype, shape and layout.
+            const py::object result =
+                out.is_none() ? py::array_t<double>({static_cast<py::ssize_t>(n), static_cast<py::ssize_t>(3)})
+                              : py::reinterpret_borrow<py::object>(out);
             RowMap<double> target = matrix_view<double>("out", result, {n, "n"}, {3, "3"}, true);
             RefineSummary summary;
             {
