@@ -6,7 +6,8 @@
 //   soak [--model cactus|bumpy_plane|builtin|PATH.off] [--frames N]
 //        [--set-every K] [--seed S] [--warmup-sets W] [--energy-bound F]
 //        [--energy-every E] [--rss-limit-kib L] [--json PATH] [--verbose 1]
-//        [--hostile 1] [--anderson W]
+//        [--hostile 1] [--anderson W] [--rounds R] [--trace-set N]
+//        [--first-set N]
 //
 // One precompute (DeformerOptions defaults: 33 linear proxies, 27 clusters,
 // 8 accelerated rounds per frame), then N frames (default 10⁵); every K
@@ -86,6 +87,9 @@ struct Args {
   bool verbose = false;  // a line per handle set
   bool hostile = false;  // also over-determined sets (docs/robustness.md, "Soak")
   int anderson = -1;     // DeformerOptions::anderson_window (−1: the default)
+  int rounds = -1;       // DeformerOptions::iterations (−1: the default)
+  long trace_set = -1;   // print every frame of this handle set (E′, classic energy, residual)
+  long first_set = 0;    // draw the handle sets before this one but do not run their frames
 };
 
 // Handles move at most this far (× the bounding-box diagonal) from rest.
@@ -102,7 +106,8 @@ constexpr long kInvalidEvery = 10;
   std::fprintf(stderr,
                "soak: %s\nusage: soak [--model cactus|bumpy_plane|builtin|PATH.off] [--frames N] [--set-every K]\n"
                "            [--seed S] [--warmup-sets W] [--energy-bound F] [--energy-every E]\n"
-               "            [--rss-limit-kib L] [--json PATH] [--verbose 1] [--hostile 1] [--anderson W]\n",
+               "            [--rss-limit-kib L] [--json PATH] [--verbose 1] [--hostile 1] [--anderson W] [--rounds R]\n"
+               "            [--trace-set N] [--first-set N]\n",
                problem.c_str());
   std::exit(2);
 }
@@ -126,12 +131,15 @@ Args parse(int argc, char** argv) {
       else if (key == "--verbose") a.verbose = value != "0";
       else if (key == "--hostile") a.hostile = value != "0";
       else if (key == "--anderson") a.anderson = std::stoi(value);
+      else if (key == "--rounds") a.rounds = std::stoi(value);
+      else if (key == "--trace-set") a.trace_set = std::stol(value);
+      else if (key == "--first-set") a.first_set = std::stol(value);
       else usage("unknown option " + key);
     } catch (const std::logic_error&) {
       usage(key + ": not a number: " + value);
     }
   }
-  if (a.frames < 1 || a.set_every < 1 || a.energy_every < 1 || a.warmup_sets < 0)
+  if (a.frames < 1 || a.set_every < 1 || a.energy_every < 1 || a.warmup_sets < 0 || a.first_set < 0)
     usage("--frames, --set-every and --energy-every must be ≥ 1, --warmup-sets ≥ 0");
   if (!(a.energy_bound > 0) || !(a.rss_limit_kib >= 0)) usage("--energy-bound must be > 0, --rss-limit-kib ≥ 0");
   return a;
@@ -429,6 +437,7 @@ int run(const Args& a) {
   Deformer deformer;
   DeformerOptions options;
   if (a.anderson >= 0) options.anderson_window = a.anderson;  // 0: plain rounds, for an A/B
+  if (a.rounds >= 1) options.iterations = a.rounds;
   const PrecomputeSummary pre = deformer.precompute(model, options);
   if (!pre.ok()) {
     std::fprintf(stderr, "soak: precompute failed: %s\n", pre.brief_report().c_str());
@@ -448,9 +457,17 @@ int run(const Args& a) {
   HandleTargets targets;
   Motion motion;
   ConstraintSummary cs;
-  const long warm_frames = std::min(a.frames, a.warmup_sets * a.set_every);
+  const long warm_frames = std::min(a.frames, (a.first_set + a.warmup_sets) * a.set_every);
   const Timer wall;
-  for (long f = 0; f < a.frames; ++f) {
+  if (a.first_set > 0 && a.first_set % kInvalidEvery == kInvalidEvery - 1)
+    usage(fmt::format("--first-set {} is an invalid handle set (every {}th); start one later", a.first_set, kInvalidEvery));
+  for (long index = 0; index < a.first_set; ++index) {  // --first-set: drawn, not run
+    const SetKind kind = maker.kind_of(index, a.hostile);
+    std::string what;
+    if (kind == SetKind::Invalid && index > 0) maker.make_invalid(&what);
+    else maker.motion(maker.make(kind == SetKind::Invalid ? SetKind::FewPoints : kind, index < 4, a.hostile));
+  }
+  for (long f = a.first_set * a.set_every; f < a.frames; ++f) {
     if (f % a.set_every == 0) {  // a new handle set
       const long index = f / a.set_every;
       const SetKind kind = maker.kind_of(index, a.hostile);
@@ -488,6 +505,12 @@ int run(const Args& a) {
     // E-th frame, and the first and last of every handle set.
     const bool classic = f % a.energy_every == 0 || f % a.set_every == 0 || (f + 1) % a.set_every == 0;
     check_frame(f, fs, cs, out, elements, model.V, e2, motion.gradient, a.energy_bound, classic, maker, &tally);
+    if (f / a.set_every == a.trace_set) {
+      const double e = arap_energy(model.V, elements, out);
+      std::printf("  frame %ld: E' %.6g, E/(G²E(2V)) %.4g, residual %.3g, rounds %d, rejected %d, %.3f ms\n", f,
+                  fs.model_energy, e / (motion.gradient * motion.gradient * e2), fs.fixed_point_residual,
+                  fs.iterations, fs.rejected_steps, 1e3 * fs.total_seconds);
+    }
     if (f + 1 == warm_frames) tally.rss_warm_kib = resident_kib();
     if ((f + 1) % a.set_every == 0 || f + 1 == a.frames) {
       tally.rss_max_kib = std::max(tally.rss_max_kib, resident_kib());

@@ -9,6 +9,8 @@
 
 #include "qpreduce/support.h"
 
+#include <Eigen/Eigenvalues>
+#include <Spectra/SymEigsSolver.h>
 #include <fmt/format.h>
 
 #include <omp.h>
@@ -162,6 +164,137 @@ void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phas
   er.F_f = er.F.cast<float>();
 }
 
+// Q·v = −(F_y′·v) for the Lanczos run of correct_for_y: F_y′ = F_y − A_yᵀΛ_y
+// as the rounds now apply it (before L), in double, or in float after a
+// Float set (whose G_z·T exists in float only).
+class NegatedRounds {
+ public:
+  using Scalar = double;
+  NegatedRounds(const FusedModel& M, Index k)
+      : M_(M), k_(k), scratch_(M.rounds().scratch_size()), scratch_f_(scratch_.size()), xf_(k), yf_(k) {}
+  Index rows() const { return k_; }
+  Index cols() const { return k_; }
+  void perform_op(const double* x, double* y) const {
+    if (M_.float_set) {
+      xf_ = Eigen::Map<const Vector<double>>(x, k_).cast<float>();
+      yf_.setZero();
+      M_.rounds().add_rows(xf_.data(), 0, k_, scratch_f_.data(), yf_.data());
+      Eigen::Map<Vector<double>>(y, k_) = -yf_.cast<double>();
+      return;
+    }
+    std::fill(y, y + k_, 0.0);
+    M_.rounds().add_rows(x, 0, k_, scratch_.data(), y);
+    for (Index i = 0; i < k_; ++i) y[i] = -y[i];
+  }
+
+ private:
+  const FusedModel& M_;
+  Index k_;
+  mutable Vector<double> scratch_;
+  mutable Vector<float> scratch_f_, xf_, yf_;
+};
+
+// λ_max(Q) from a Lanczos run (Spectra), raised by 1 % (a Ritz value
+// approaches λ_max from below; float rounds carry ~1e-7 relative error); NaN
+// when Lanczos does not converge.
+double largest_eigenvalue(const FusedModel& M, Index k) {
+  if (k < 3) return std::numeric_limits<double>::quiet_NaN();
+  NegatedRounds op(M, k);
+  Spectra::SymEigsSolver<NegatedRounds> eigs(op, 1, std::min<Index>(k, 24));
+  const Vector<double> start = Vector<double>::Ones(k);  // deterministic
+  eigs.init(start.data());
+  eigs.compute(Spectra::SortRule::LargestAlge, 300, 1e-6);
+  if (eigs.info() != Spectra::CompInfo::Successful) return std::numeric_limits<double>::quiet_NaN();
+  const double theta = eigs.eigenvalues()(0);
+  return theta + 0.01 * std::abs(theta);
+}
+
+// Block Gershgorin bound of Q (blocks of s entries; needs Q explicitly):
+// D_a = λ_max(sym Q_aa) + Σ_{b≠a} ‖Q_ab‖_F, clamped at 0, gives Q ⪯ diag(D_a·I)
+// since 2x_aᵀQ_ab x_b ≤ ‖Q_ab‖(‖x_a‖² + ‖x_b‖²). Small for blocks far from
+// the constraints, where the scalar λ_max would hold back the whole vector.
+Vector<double> block_gershgorin(const MatD& Q, Index s) {
+  const Index blocks = Q.rows() / s;
+  Vector<double> D(blocks);
+  Eigen::SelfAdjointEigenSolver<MatD> eig;
+  for (Index a = 0; a < blocks; ++a) {
+    const MatD Qaa = 0.5 * (Q.block(s * a, s * a, s, s) + Q.block(s * a, s * a, s, s).transpose());
+    eig.compute(Qaa, Eigen::EigenvaluesOnly);
+    double Da = eig.eigenvalues()(s - 1);
+    for (Index b = 0; b < blocks; ++b)
+      if (b != a) Da += 0.5 * (Q.block(s * a, s * b, s, s).norm() + Q.block(s * b, s * a, s, s).norm());
+    D(a) = std::max(Da, 0.0);
+  }
+  return D;
+}
+
+// The proximal weights D ⪰ Q of the corrected rounds: zero when Q ⪯ 0
+// (λ_max ≤ 0: the corrected step descends as it is); else the block
+// Gershgorin weights (explicit form, blocks of M.block) or the scalar λ_max,
+// whichever is smaller in total; a bound on ‖Q‖ when Lanczos fails.
+void form_proximal_weights(FusedModel& M, Index k) {
+  const Index s = M.block > 0 && k % M.block == 0 ? M.block : k;
+  const Index blocks = k / s;
+  const double lambda = largest_eigenvalue(M, k);
+  if (lambda <= 0.0) {
+    M.proximal.setZero(blocks);
+  } else {
+    double scalar = lambda;
+    if (!std::isfinite(scalar)) {  // ‖Q‖_F from Q's parts: safe, if slower rounds
+      const auto& fr = M.factored_rounds;
+      scalar = M.factored ? static_cast<double>(fr.F0_f.norm()) + static_cast<double>(fr.GzT_f.norm()) * fr.R.norm()
+                          : M.explicit_rounds.F.norm();
+    }
+    M.proximal.setConstant(blocks, scalar);
+    if (!M.factored && s < k) {
+      const Vector<double> D = block_gershgorin(-M.explicit_rounds.F, s);
+      if (D.sum() < M.proximal.sum()) M.proximal = D;
+    }
+  }
+  M.proximal_entries.resize(k);
+  for (Index a = 0; a < blocks; ++a) M.proximal_entries.segment(s * a, s).setConstant(M.proximal(a));
+}
+
+// Constraints on y (alternating.h): F_b ← F_b − A_yᵀΛ_b, F_y ← F_y − A_yᵀΛ_y
+// + D when Phase 1 has its energy terms, A_y ≠ 0 and q = k.
+void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
+  M.energy_seen = phase1.shared_energy_terms();
+  M.energy.reset();
+  M.proximal.resize(0);
+  M.proximal_entries.resize(0);
+  M.factored_rounds.shift.resize(0);
+  if (!M.energy_seen) return;
+  const detail::PhaseOneEnergy& E = *M.energy_seen;
+  const Index m = E.Lb.rows(), k = M.k();
+  const auto Ay = E.AyLy.topRows(m), Ly = E.AyLy.bottomRows(m);
+  if (M.q() != k || m == 0 || Ay.cwiseAbs().maxCoeff() == 0.0) return;
+  M.Fb.noalias() -= Ay.transpose() * E.Lb;
+  if (M.factored) {
+    detail::FactoredRounds& fr = M.factored_rounds;
+    const Index mu = fr.R.rows();
+    fr.R.conservativeResize(mu + m, Eigen::NoChange);
+    fr.R.bottomRows(m) = Ly;
+    fr.R_f = fr.R.cast<float>();
+    const Index cols = fr.GzT_f.cols();
+    fr.GzT_f.conservativeResize(Eigen::NoChange, cols + m);
+    fr.GzT_f.rightCols(m) = Ay.transpose().cast<float>();
+    if (fr.GzT.size() > 0) {
+      fr.GzT.conservativeResize(Eigen::NoChange, cols + m);
+      fr.GzT.rightCols(m) = Ay.transpose();
+    }
+  } else {
+    M.explicit_rounds.F.noalias() -= Ay.transpose() * Ly;
+  }
+  form_proximal_weights(M, k);
+  if (M.factored) {
+    if (M.proximal.maxCoeff() > 0.0) M.factored_rounds.shift = M.proximal_entries;
+  } else {
+    M.explicit_rounds.F.diagonal() += M.proximal_entries;
+    M.explicit_rounds.F_f = M.explicit_rounds.F.cast<float>();
+  }
+  M.energy = M.energy_seen;
+}
+
 void size_workspace(const FusedModel& M, FusedWorkspace& W) {
   const Index q = M.q(), k = M.k(), mu = M.rounds().scratch_size();
   W.gb.resize(q);
@@ -249,16 +382,25 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
 // The energy (*) of alternating.h at y, with g = g(y) in W.g:
 // ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀ(λ_b + Λ_y·y), and a bound on its round-off
 // (`slack`, relative to the terms' sizes: 1e-6 with float rounds, 1e-11 in double).
+// With the rounds corrected for constraints on y (proximal weights D, one
+// per entry, g′ = g − A_yᵀλ + D∘y in W.g): ½yᵀN_S y − ½g′ᵀy + ½yᵀDy − ½bᵀλ,
+// the same value.
 double reduced_energy(const detail::PhaseOneEnergy& E, FusedWorkspace& W, const InputProjection<double>& projection,
                       const Eigen::Ref<const Vector<double>>& b, const Eigen::Ref<const Vector<double>>& y,
-                      bool float_rounds, double* slack) {
+                      bool float_rounds, const Vector<double>* D, double* slack) {
+  const bool corrected = D != nullptr;
   const Index m = E.Lb.rows();
   detail::gemv(E.AyLy, y.data(), W.ay_ly.data(), false);  // [A_y·y; Λ_y·y]
   double constraint = 0.0;
-  for (Index i = 0; i < m; ++i) constraint += (b(i) - W.ay_ly(i)) * (W.lambda_b(i) + W.ay_ly(m + i));
+  for (Index i = 0; i < m; ++i) {
+    const double lambda = W.lambda_b(i) + W.ay_ly(m + i);
+    constraint += (corrected ? b(i) : b(i) - W.ay_ly(i)) * lambda;
+  }
   const double quadratic = projection.quadratic_term(y), linear = W.g.dot(y);
-  *slack = (float_rounds ? 1e-6 : 1e-11) * (std::abs(quadratic) + std::abs(linear) + std::abs(constraint));
-  return quadratic - 0.5 * linear - 0.5 * constraint;
+  const double proximal = corrected ? y.dot(D->cwiseProduct(y)) : 0.0;
+  *slack = (float_rounds ? 1e-6 : 1e-11) *
+           (std::abs(quadratic) + std::abs(linear) + std::abs(constraint) + std::abs(proximal));
+  return quadratic - 0.5 * linear + 0.5 * proximal - 0.5 * constraint;
 }
 
 // Accelerated rounds (AlternatingOptions::anderson_window): Anderson on the
@@ -269,6 +411,7 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
                                    const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
   AlternatingSummary summary;
   const bool use_float = options.float_products;
+  const bool corrected = M.energy != nullptr;
   auto product = [&](const Vector<double>& at) {
     if (use_float) W.yf = at.cast<float>();
     round_product(M, W, at.data(), use_float ? W.yf.data() : nullptr, 0, M.q(), W.scratch.data(),
@@ -282,11 +425,11 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
   bool extrapolated = false;  // y_try is an extrapolation (else the plain step itself)
   for (int it = 0; it < options.iterations; ++it) {
     product(W.y_try);
-    double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, &slack);
+    double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, corrected ? &M.proximal_entries : nullptr, &slack);
     if (extrapolated && !(energy <= accepted + slack)) {  // the safeguard: back to the plain step
       W.y_try = W.y_plain;
       product(W.y_try);
-      energy = reduced_energy(E, W, projection, b, W.y_try, use_float, &slack);
+      energy = reduced_energy(E, W, projection, b, W.y_try, use_float, corrected ? &M.proximal_entries : nullptr, &slack);
       W.anderson.restart();
       ++summary.rejected;
     }
@@ -398,6 +541,23 @@ bool FusedAlternation<Scalar>::factored() const {
 }
 
 template <typename Scalar>
+bool FusedAlternation<Scalar>::constrained_y() const {
+  return model_->energy != nullptr;
+}
+
+template <typename Scalar>
+const Vector<double>& FusedAlternation<Scalar>::proximal_weights() const {
+  return model_->proximal;
+}
+
+template <typename Scalar>
+void FusedAlternation<Scalar>::set_proximal_block_size(Index block) {
+  if (block < 0) throw std::invalid_argument(fmt::format("FusedAlternation: proximal block size {} < 0", block));
+  model_->block = block;
+  model_->ready = false;
+}
+
+template <typename Scalar>
 bool FusedAlternation<Scalar>::float_set() const {
   return model_->float_set;
 }
@@ -446,6 +606,7 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   } else {
     set_explicit_plain(M, phase1, M.Gz, M.Gy);
   }
+  correct_for_y(M, phase1);
   size_workspace(M, *workspace_);
   M.ready = true;
 }
@@ -489,6 +650,18 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
         "FusedAlternation::run: set with FusedPrecision::Float needs float rounds "
         "(AlternatingOptions::float_products)");
   }
+  if (M.energy_seen != phase1.shared_energy_terms()) {
+    throw std::invalid_argument(
+        "FusedAlternation::run: Phase 1's energy terms changed after `set` (form_energy_terms before set, which "
+        "reads them for constraints on y)");
+  }
+  if (M.energy && projection.proximal_block_size() != M.block) {
+    throw std::invalid_argument(fmt::format(
+        "FusedAlternation::run: the projection's proximal blocks ({}) are not those the rounds were set for ({}; "
+        "set_proximal_block_size before set)",
+        projection.proximal_block_size(), M.block));
+  }
+  projection.set_proximal_weights(M.proximal);
   // The products go through the run-time dispatched AVX2/FMA kernels
   // (simd_kernels.h) when the CPU has them.
   detail::gemv(M.Fb, b.data(), W.gb.data(), false);

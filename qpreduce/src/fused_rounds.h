@@ -52,6 +52,7 @@ class FactoredRounds final : public RoundOperator {
   bool base_valid = false;          // F0 is current for (C0, G_y)
   Matrix<double> GzT, R;            // G_z·T (q × μ; empty after a Float set), R (μ × k)
   Matrix<float> GzT_f, R_f;         // in float
+  Vector<double> shift;             // diag(D)·y added to the rows (q = k; constraints on y), or empty
 
   void add_rows(const double* y, Index r0, Index r1, double* scratch, double* out) const override {
     add_rows_of(F0, GzT, R, y, r0, r1, scratch, out);
@@ -62,16 +63,18 @@ class FactoredRounds final : public RoundOperator {
   Index scratch_size() const override { return R.rows(); }
 
  private:
-  // out += F0·y − (G_z·T)·(R·y) on rows [r0, r1); scratch = −R·y (μ).
+  // out += F0·y − (G_z·T)·(R·y) + shift∘y on rows [r0, r1); scratch = −R·y (μ).
   template <typename T>
-  static void add_rows_of(const Matrix<T>& F0, const Matrix<T>& GzT, const Matrix<T>& R, const T* y, Index r0,
-                          Index r1, T* scratch, T* out) {
+  void add_rows_of(const Matrix<T>& F0, const Matrix<T>& GzT, const Matrix<T>& R, const T* y, Index r0, Index r1,
+                   T* scratch, T* out) const {
     const Index rows = r1 - r0, mu = R.rows();
     gemv_add(F0.data() + r0, rows, F0.cols(), F0.outerStride(), y, out + r0);
     std::fill(scratch, scratch + mu, T(0));
     gemv_add(R.data(), mu, R.cols(), R.outerStride(), y, scratch);
     for (Index i = 0; i < mu; ++i) scratch[i] = -scratch[i];
     gemv_add(GzT.data() + r0, rows, mu, GzT.outerStride(), scratch, out + r0);
+    if (shift.size() > 0)
+      for (Index r = r0; r < r1; ++r) out[r] += static_cast<T>(shift[r]) * y[r];
   }
 };
 
@@ -92,6 +95,18 @@ struct FusedModel {
   bool factored = false;   // the rounds use factored_rounds
   bool float_set = false;  // factored_rounds.GzT_f and Fb were formed in float
   bool ready = false;
+  // Constraints on y (alternating.h, "Constraints on y"): the energy terms
+  // the rounds were corrected with (null: not corrected), and the proximal
+  // weights D (one per block of `block` entries; empty when not corrected).
+  // In the explicit form D sits on F_y's diagonal; in the factored form G_z·T
+  // and R carry A_yᵀ and Λ_y as m more columns and rows, and D is `shift`.
+  std::shared_ptr<const PhaseOneEnergy> energy;
+  Index block = 0;          // the projection's proximal_block_size (0: one scalar weight)
+  Vector<double> proximal;  // D per block
+  Vector<double> proximal_entries;  // D per entry of y (k), for ‖y‖²_D
+  // Phase 1's energy terms when `set` ran (corrected or not), so that `run`
+  // can tell when they changed after it.
+  std::shared_ptr<const PhaseOneEnergy> energy_seen;
 
   const RoundOperator& rounds() const {
     return factored ? static_cast<const RoundOperator&>(factored_rounds) : explicit_rounds;

@@ -586,3 +586,156 @@ TEST_CASE("Phase 1 fast path follows its solver through restore, and C0 its G_z"
   CHECK_THROWS_WITH(fused.set(phase1, Gz, Gy), Catch::Contains("G_y"));
   CHECK_FALSE(fused.ready());
 }
+
+namespace {
+// Constraints on y: a model with the deformer's structure, E(z, y) =
+// ½XᵀHX − XᵀD·y + ½‖y‖², X = N z + UD·y, whose Phase 2 input is the exact
+// y-coefficient g = DᵀX (G_z = DᵀN, G_y = DᵀUD), with y on a product of
+// unit spheres (blocks of 3: ‖y‖ is constant there, so Π(g) normalises
+// each block of g). Point constraints AᵀX = b at vertices that are not
+// proxies involve y (A_y = AᵀUD ≠ 0).
+struct UnitBlocks : InputProjection<double> {
+  static constexpr Index kBlock = 3;
+  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y) override {
+    const Vector<double> old = y;
+    for (Index j = 0; j < g.size() / kBlock; ++j) y.segment(kBlock * j, kBlock) = g.segment(kBlock * j, kBlock).normalized();
+    return (y - old).norm();
+  }
+  double quadratic_term(const Eigen::Ref<const Vector<double>>& y) const override { return 0.5 * y.squaredNorm(); }
+  void retract(Eigen::Ref<Vector<double>> y) const override {
+    for (Index j = 0; j < y.size() / kBlock; ++j) y.segment(kBlock * j, kBlock).normalize();
+  }
+  Index proximal_block_size() const override { return kBlock; }
+};
+
+struct SphereModel {
+  Index nx = 14, ny = 11, n = nx * ny, d = 9, k = 12, m = 6;
+  SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
+  std::vector<Index> proxies = gen::random_subset(n, d, 5);
+  SparseMatrix<double> C = gen::selection(n, proxies);
+  SparseMatrix<double> D = gen::gaussian_sparse(n, k, 6);
+  SubspaceSolver<double> solver;
+  SparseMatrix<double> A;
+  Vector<double> b;
+  Matrix<double> Gz, Gy;
+  SphereModel() {
+    REQUIRE(solver.precompute(H, C, D).ok());
+    std::vector<Index> rows;  // constrained vertices away from the proxies
+    for (Index v : gen::random_subset(n, 3 * m, 41))
+      if (std::find(proxies.begin(), proxies.end(), v) == proxies.end() && static_cast<Index>(rows.size()) < m)
+        rows.push_back(v);
+    REQUIRE(static_cast<Index>(rows.size()) == m);
+    A = gen::selection(n, rows);
+    b = 3.0 * gen::gaussian_vector(m, 42);
+    const Matrix<double> Dd(D);
+    Gz = Dd.transpose() * solver.subspace().N;
+    Gy = Dd.transpose() * solver.subspace().UD;
+  }
+  // E(y) with z the Phase 1 minimiser, by a dense KKT solve (independent of
+  // the engine's energy terms).
+  double energy(const Vector<double>& y) const {
+    const Matrix<double>& N = solver.subspace().N;
+    const Matrix<double>& U = solver.subspace().UD;
+    const Matrix<double> Hd(H), Ad(A), Dd(D);
+    Matrix<double> K = Matrix<double>::Zero(d + m, d + m);
+    K.topLeftCorner(d, d) = N.transpose() * Hd * N;
+    K.topRightCorner(d, m) = N.transpose() * Ad;
+    K.bottomLeftCorner(m, d) = Ad.transpose() * N;
+    Vector<double> rhs(d + m);
+    rhs.head(d) = N.transpose() * (Dd * y) - N.transpose() * Hd * U * y;
+    rhs.tail(m) = b - Ad.transpose() * U * y;
+    const Vector<double> z = K.fullPivLu().solve(rhs).head(d);
+    const Vector<double> X = N * z + U * y;
+    return 0.5 * X.dot(Hd * X) - X.dot(Dd * y) + 0.5 * y.squaredNorm();
+  }
+  Vector<double> start() const {
+    Vector<double> y = gen::gaussian_vector(k, 43);
+    UnitBlocks().retract(y);
+    return y;
+  }
+};
+}  // namespace
+
+TEST_CASE("constraints on y: the rounds descend on E(y) and stop at its stationary points", "[alternating][constrained_y]") {
+  SphereModel s;
+  FixedCoordinateSolver<double> phase1;
+  REQUIRE(phase1.set_constraints(s.solver, s.A).ok());
+  phase1.form_energy_terms(s.solver);
+  FusedAlternation<double> fused;
+  fused.set_proximal_block_size(UnitBlocks::kBlock);
+  fused.set(phase1, s.Gz, s.Gy);
+  REQUIRE(fused.constrained_y());
+  CHECK(fused.proximal_weights().size() == s.k / UnitBlocks::kBlock);
+  UnitBlocks proj;
+  Vector<double> z(s.d);
+
+  // Plain rounds, one at a time: E(y) never rises (majorise–minimise).
+  AlternatingOptions one;
+  one.iterations = 1;
+  Vector<double> y = s.start();
+  double previous = s.energy(y);
+  for (int round = 0; round < 60; ++round) {
+    fused.run(phase1, proj, s.b, one, z, y);
+    const double e = s.energy(y);
+    CAPTURE(round, e, previous);
+    CHECK(e <= previous + 1e-10 * std::abs(previous));
+    previous = e;
+  }
+
+  // Accelerated to convergence: the reported energy is E(y), and y is a
+  // stationary point of E on the spheres (central differences along each
+  // block's tangent directions).
+  AlternatingOptions aa;
+  aa.iterations = 2000;
+  aa.tolerance = 1e-13;
+  aa.anderson_window = 5;
+  y = s.start();
+  const AlternatingSummary sum = fused.run(phase1, proj, s.b, aa, z, y);
+  CAPTURE(sum.iterations, sum.rejected, sum.last_change);
+  REQUIRE(sum.last_change <= 1e-12);
+  const double e_star = s.energy(y);
+  CHECK(sum.energy == Approx(e_star).epsilon(1e-8));
+  const double h = 1e-5;
+  double slope = 0.0;
+  for (Index j = 0; j < s.k / UnitBlocks::kBlock; ++j) {
+    const Eigen::Vector3d yj = y.segment<3>(3 * j);
+    const Eigen::Vector3d t1 = yj.unitOrthogonal(), t2 = yj.cross(t1);
+    for (const Eigen::Vector3d& t : {t1, t2}) {
+      Vector<double> yp = y, ym = y;
+      yp.segment<3>(3 * j) = (yj + h * t).normalized();
+      ym.segment<3>(3 * j) = (yj - h * t).normalized();
+      slope = std::max(slope, std::abs(s.energy(yp) - s.energy(ym)) / (2 * h));
+    }
+  }
+  CAPTURE(e_star, slope);
+  CHECK(slope <= 1e-6 * (1.0 + std::abs(e_star)));
+
+  // The rounds without the energy terms (the input the paper's Phase 2
+  // sees) stop elsewhere: a point with a clear slope and no lower energy.
+  FixedCoordinateSolver<double> uncorrected;
+  REQUIRE(uncorrected.set_constraints(s.solver, s.A).ok());
+  FusedAlternation<double> old;
+  old.set(uncorrected, s.Gz, s.Gy);
+  CHECK_FALSE(old.constrained_y());
+  AlternatingOptions plain;
+  plain.iterations = 2000;
+  Vector<double> y_old = s.start();
+  old.run(uncorrected, proj, s.b, plain, z, y_old);
+  CHECK(s.energy(y_old) >= e_star - 1e-9 * std::abs(e_star));
+  CHECK((y_old - y).norm() > 1e-4);
+}
+
+TEST_CASE("constraints on y: misuse is refused with the words", "[alternating][constrained_y][errors]") {
+  SphereModel s;
+  FixedCoordinateSolver<double> phase1;
+  REQUIRE(phase1.set_constraints(s.solver, s.A).ok());
+  FusedAlternation<double> fused;
+  fused.set(phase1, s.Gz, s.Gy);
+  phase1.form_energy_terms(s.solver);  // after set: the rounds did not see them
+  UnitBlocks proj;
+  Vector<double> z(s.d), y = s.start();
+  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternatingOptions{}, z, y), Catch::Contains("energy terms changed"));
+  fused.set(phase1, s.Gz, s.Gy);  // blocks of 0 (one weight) for a projection with blocks of 3
+  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternatingOptions{}, z, y), Catch::Contains("proximal blocks"));
+  CHECK_THROWS_WITH(fused.set_proximal_block_size(-1), Catch::Contains("block size"));
+}

@@ -90,6 +90,10 @@ class FixedCoordinateSolver {
   // λ = 2δ·(A_z·z + A_y·y − b). O(m·d·k) per constraint set; dropped by the
   // next set_constraints. Precondition: ready(), and `solver` the one the
   // constraints were set for. Throws std::invalid_argument otherwise.
+  //
+  // FusedAlternation::set reads them too: with them, and A_y ≠ 0, its rounds
+  // step on E(y) itself (see "Constraints on y" at FusedAlternation), so
+  // form them before that `set`.
   void form_energy_terms(const SubspaceSolver<Scalar>& solver);
   bool has_energy_terms() const { return energy_ != nullptr; }
 
@@ -98,6 +102,7 @@ class FixedCoordinateSolver {
   const detail::PhaseOneOperator* phase_one_operator() const { return op_.get(); }
   const std::shared_ptr<const detail::FixedCoordinatePrep>& preparation() const { return prep_; }
   const detail::PhaseOneEnergy* energy_terms() const { return energy_.get(); }
+  const std::shared_ptr<const detail::PhaseOneEnergy>& shared_energy_terms() const { return energy_; }
 
  private:
   void prepare_impl(const SubspaceSolver<Scalar>& solver);
@@ -183,6 +188,18 @@ class InputProjection {
     return std::numeric_limits<double>::quiet_NaN();
   }
   virtual void retract(Eigen::Ref<Vector<Scalar>> y) const { (void)y; }
+
+  // Proximal Phase 2, for constraints that involve y (FusedAlternation,
+  // "Constraints on y"): from now on `project` must (at least) decrease its
+  // Phase 2 energy plus ½·Σ_j w_j‖y_j‖², y_j the blocks of
+  // proximal_block_size() entries (one block, the whole y, when that is 0),
+  // for the input it is given, which the engine forms as g + w∘y_old.
+  // Projections onto a set on which each block's norm is constant
+  // (rotations, unit blocks) need do nothing, which is the default; one
+  // whose output's norm varies (scaled rotations) must add w_j to block j's
+  // curvature. Weights ≥ 0; all 0 (or empty) restores the plain Phase 2.
+  virtual Index proximal_block_size() const { return 0; }
+  virtual void set_proximal_weights(const Eigen::Ref<const Vector<Scalar>>& weights) { (void)weights; }
   virtual double project_blocks(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y,
                                 Index first, Index last) {
     (void)g, (void)y, (void)first, (void)last;
@@ -209,7 +226,30 @@ enum class FusedPrecision { Double, Float };
 //     g = G_z·z + G_y·y = F_b·b + F_y·y,   F_b = G_z·M_b (q × m),
 //                                          F_y = G_z·M_Y + G_y (q × k),
 // so a round is one q × k product and Π; z is formed once after the last
-// round. The iterates are those of the plain alternation. Double only.
+// round. Without constraints on y (A_y = 0) the iterates are those of the
+// plain alternation. Double only.
+//
+// Constraints on y (A_y ≠ 0: e.g. a point handle at a vertex that the
+// cluster rotations move). A plain round fits y to g at fixed z, but a new y
+// breaks A_z z + A_y y = b and Phase 1 then moves z: the rounds are not
+// descent on the reduced energy E(y) (FixedCoordinateSolver::
+// form_energy_terms, (*)) and converge to a stationary point of another
+// problem, far from E's minimiser when the constraints are stiff
+// (docs/robustness.md, "Soak"). E's gradient is N_S·y − (g − A_yᵀλ(y)),
+// λ = Λ_b·b + Λ_y·y Phase 1's multipliers, and its Hessian is N_S + Q with
+// Q = −(F_y − A_yᵀΛ_y) (symmetric), whose positive part is the stiff,
+// rank ≤ m term of the constraints. So when `set` finds Phase 1's energy
+// terms, A_y ≠ 0 and q = k, it forms the rounds of the majorise–minimise step
+//     y ← Π(g − A_yᵀλ + D·y),   D = diag(w_j·I) ⪰ Q  (0 when Q ⪯ 0),
+//     i.e.  F_b ← F_b − A_yᵀΛ_b,   F_y ← F_y − A_yᵀΛ_y + D,
+// with the projection told w (InputProjection::set_proximal_weights), so
+// that E(y) = ½yᵀN_S y − ½g′ᵀy + ½yᵀDy − ½bᵀλ never rises over a plain
+// round and the fixed points are E's stationary points on the manifold. D is
+// λ_max(Q)·I (a Lanczos run, Spectra) or, per block of the projection's
+// proximal_block_size() in the explicit form, the block Gershgorin bound of
+// Q, whichever is smaller in total (it leaves the blocks far from the
+// constraints free). O(k²·m) per constraint set with the correction itself.
+// Nothing changes when A_y = 0.
 template <typename Scalar>
 class FusedAlternation {
   static_assert(std::is_same_v<Scalar, double>, "FusedAlternation is double only");
@@ -259,6 +299,15 @@ class FusedAlternation {
 
   bool ready() const;
   bool factored() const;   // the rounds use the factored form
+  // The rounds step on E(y) for constraints on y ("Constraints on y"), and
+  // their proximal weights D, one per block of the projection's
+  // proximal_block_size() (empty otherwise).
+  bool constrained_y() const;
+  const Vector<double>& proximal_weights() const;
+  // The projection's InputProjection::proximal_block_size(), which the
+  // weights D are formed for (0, the default: one scalar weight). Resets
+  // ready(): call before `set`. Throws std::invalid_argument when < 0.
+  void set_proximal_block_size(Index block);
   bool float_set() const;  // the factored form's G_z·T (and F_b) were formed in float
 
  private:

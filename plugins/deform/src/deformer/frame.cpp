@@ -197,8 +197,7 @@ void Deformer::set_anderson_window(int window) {
         "Deformer::set_anderson_window: accelerated rounds need rotation_fit Exact (this model was precomputed "
         "with the paper's Eq. 19 step)");
   }
-  // A handle set made with plain rounds has no energy terms yet.
-  if (st.ready && st.onsite.phase1.ready()) detail_deformer::prepare_acceleration(st.model, window, &st.onsite);
+  // set_handles formed the energy terms (or said why not: plain_reason).
   st.settings.alternating.anderson_window = window;
 }
 

@@ -117,10 +117,13 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
 
 namespace detail_deformer {
 
-void prepare_acceleration(const Model& model, int window, OnSite* onsite) {
-  // The energy terms assume no ties; a custom projection may not define its
-  // energy on Phase 2 outputs (quadratic_term NaN: InputProjection).
-  if (!onsite->tied_patches.empty()) {
+void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* onsite) {
+  // The energy terms assume no ties and the exact Phase 2 input; a custom
+  // projection may not define its energy on Phase 2 outputs (quadratic_term
+  // NaN: InputProjection).
+  if (!exact_rotation_fit) {
+    onsite->plain_reason = "the model uses the paper's Eq. 19 rotation step";
+  } else if (!onsite->tied_patches.empty()) {
     onsite->plain_reason = "this handle set ties a free Rigid patch to its cluster";
   } else if (!onsite->constraints_ok || !onsite->phase1.ready()) {
     onsite->plain_reason = "this handle set's constraints were not solved exactly";
@@ -129,7 +132,9 @@ void prepare_acceleration(const Model& model, int window, OnSite* onsite) {
   } else {
     onsite->plain_reason.clear();
   }
-  if (window > 0 && onsite->plain_reason.empty() && !onsite->phase1.has_energy_terms()) {
+  // Formed for plain rounds too: with point handles the handle rows involve
+  // the rotations (A_y ≠ 0), and the fused rounds need them to step on E′.
+  if (onsite->plain_reason.empty() && !onsite->phase1.has_energy_terms()) {
     onsite->phase1.form_energy_terms(model.solver);
   }
 }
@@ -149,10 +154,12 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   const ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
   make_tie_map(model, layout, &onsite);
-  set_fused(model, !layout.tied.empty(), options.threads, st.fused_precision(), &onsite);
   onsite.tied_patches = std::move(layout.tied);
   onsite.constraints_ok = cs.ok();
-  detail_deformer::prepare_acceleration(model, st.settings.alternating.anderson_window, &onsite);
+  // The energy terms first: the fused rounds read them for point handles,
+  // whose rows involve the cluster rotations (alternating.h, "Constraints on y").
+  detail_deformer::prepare_energy_terms(model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, &onsite);
+  set_fused(model, !onsite.tied_patches.empty(), options.threads, st.fused_precision(), &onsite);
   onsite.tie_row0 = layout.tie_row0;
   onsite.handles = handles;
   onsite.rows = layout.cols;

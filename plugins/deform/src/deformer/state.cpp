@@ -239,6 +239,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   // its responses P0, C0 = M_N·P0) belong to the precompute: the first handle
   // set then costs what the later ones do.
   onsite.phase1.prepare(model.solver);
+  onsite.fused.set_proximal_block_size(model.projection->proximal_block_size());
   onsite.fused.prepare(onsite.phase1, model.MN, model.MU, fused_precision());
   onsite.fused_inputs_plain = true;
   ready = true;

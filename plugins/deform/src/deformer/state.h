@@ -147,10 +147,12 @@ struct OnSite {
   bool constraints_ok = false;  // the set_reduced_constraints status was Success
 };
 
-// Sets onsite->plain_reason for the current handle set and, when the rounds
-// are to be accelerated (window > 0) and may be, forms Phase 1's energy terms
-// once (O(m·d·k)). Called by set_handles and set_anderson_window.
-void prepare_acceleration(const Model& model, int window, OnSite* onsite);
+// Sets onsite->plain_reason for the current handle set (why its rounds
+// cannot be accelerated nor corrected for point handles) and otherwise forms
+// Phase 1's energy terms once (O(m·d·k)), which accelerated rounds and the
+// fused rounds' correction for constraints on the rotations read. Called by
+// set_handles before the fused rounds are set.
+void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* onsite);
 
 // The results of the last frame (warm start of the next one).
 struct Pose {

@@ -76,6 +76,7 @@ class ScaledRotationProjection final : public ClusterProjection {
   ScaledRotationProjection(ClusterGeometry geometry, double gamma, double psi_max)
       : g_(std::move(geometry)), gamma_(gamma), psi_max_(psi_max) {
     denominator_ = g_.stiffness;
+    proximal_.setZero(g_.d);
     if (gamma_ > 0.0)
       for (Index a = 0; a < g_.d; ++a)
         for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
@@ -102,6 +103,19 @@ class ScaledRotationProjection final : public ClusterProjection {
       if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)])
         psi = std::clamp(t.cwiseProduct(s).sum() / 3.0, 1.0 / psi_max_, psi_max_);
       s = psi * t;
+    }
+  }
+
+  // Constraints on the rotations (point handles): Phase 2 then also pays
+  // ½w_a‖s_a‖²_F = (3/2)·w_a·ψ_a², which moves only the scale's denominator
+  // (rotations have constant norm).
+  Index proximal_block_size() const override { return 9; }
+  void set_proximal_weights(const Eigen::Ref<const Vector<double>>& weights) override {
+    if (weights.size() == 0) {
+      proximal_.setZero(g_.d);
+    } else {
+      check_size("ScaledRotationProjection::set_proximal_weights", g_.d, weights.size());
+      proximal_ = weights;
     }
   }
 
@@ -163,7 +177,7 @@ class ScaledRotationProjection final : public ClusterProjection {
       const Eigen::Matrix3d t = fit_rotation(G);
       double psi = 1.0;
       if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)]) {
-        psi = std::clamp(t.cwiseProduct(G).sum() / denominator_(a), 1.0 / psi_max_, psi_max_);
+        psi = std::clamp(t.cwiseProduct(G).sum() / (denominator_(a) + 3.0 * proximal_(a)), 1.0 / psi_max_, psi_max_);
       }
       Eigen::Map<Eigen::Matrix3d> s(y.data() + 9 * a);
       change2 += (psi * t - s).squaredNorm();
@@ -176,6 +190,7 @@ class ScaledRotationProjection final : public ClusterProjection {
   double gamma_;
   double psi_max_;
   Eigen::VectorXd denominator_;  // C_a + 6γ·Σ_b W_ab
+  Eigen::VectorXd proximal_;     // w_a of set_proximal_weights (d): ½w_a‖s_a‖² = (3/2)·w_a·ψ_a²
 };
 
 class ArapFamilyModel final : public DeformationModel {

@@ -65,8 +65,10 @@ struct DeformerOptions {
   // Anderson acceleration of the rounds (AlternatingOptions::anderson_window,
   // Peng et al. 2018) with the energy safeguard: 0 off, else the window
   // (1–16). Needs rotation_fit Exact (the safeguard's energy is E′ at the
-  // exact Phase 2 input); set_handles then also forms the energy terms
-  // (O(m·d·k) per handle set). Handle sets that tie a free Rigid patch to its
+  // exact Phase 2 input). With rotation_fit Exact set_handles forms Phase 1's
+  // energy terms whatever the window (O(m·d·k) per handle set): point
+  // handles at vertices move with the cluster rotations, and the rounds then
+  // step on E′ itself (qpreduce/alternating.h, "Constraints on y"). Handle sets that tie a free Rigid patch to its
   // cluster run plain rounds (FrameSummary::message says so). The default 5
   // (docs/quality.md, "Accelerated rounds"): with the exact step, plain rounds
   // converge more slowly than the paper's, and 8 accelerated rounds reach a
@@ -160,7 +162,8 @@ class Deformer {
 
   // The on-site step: forms the reduced constraint operators for this handle
   // set. Fixed patches are always included. Cost independent of n (a few rows
-  // of the subspace per handle).
+  // of the subspace per handle; with point handles also O(k²·m) for the
+  // rounds' correction and its proximal weights, k = 9·rotational proxies).
   ConstraintSummary set_handles(const Handles& handles, const ConstraintOptions& options = {});
 
   // One frame: alternation warm-started from the previous frame, then
@@ -185,10 +188,10 @@ class Deformer {
   // Changes DeformerOptions::iterations (≥ 1, the cap) and tolerance (finite,
   // ≥ 0) for the following frames. Throws std::invalid_argument.
   void set_rounds(int iterations, double tolerance = 0.0);
-  // Changes DeformerOptions::anderson_window (0–16) for the following frames;
-  // turning acceleration on forms the current handle set's energy terms
-  // (O(m·d·k)) when they are missing. Throws std::invalid_argument on a
-  // window out of range, or a window > 0 with rotation_fit PaperPhase2.
+  // Changes DeformerOptions::anderson_window (0–16) for the following frames
+  // (set_handles forms the energy terms both kinds of rounds read). Throws
+  // std::invalid_argument on a window out of range, or a window > 0 with
+  // rotation_fit PaperPhase2.
   void set_anderson_window(int window);
 
   bool ready() const;
