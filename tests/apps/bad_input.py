@@ -364,6 +364,15 @@ case("check", "every tet inverted", check(mesh="{W}/t.mesh"), WARNINGS, [],
      stdout_words=["every tet is negatively oriented"])
 case("check", "positive tets are clean", check(mesh="{W}/t.mesh"), CLEAN, [], {"t.mesh": MEDIT_TETS % "1 3 2 5"},
      stdout_words=["status: clean"])
+# Two tets touching only at vertex 0 (MEDIT is 1-based): a non-manifold vertex of the solid.
+PINCHED_TETS = ("MeshVersionFormatted 1\nDimension 3\nVertices\n7\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n-1 0 0 0\n"
+                "0 -1 0 0\n0 0 -1 0\nTetrahedra\n2\n1 2 3 4 0\n1 6 5 7 0\nEnd\n")
+case("check", "two tets touching at one vertex", check(mesh="{W}/t.mesh"), WARNINGS, [], {"t.mesh": PINCHED_TETS},
+     stdout_words=["7 vertices, 2 tets, 1 connected component",
+                   "warning: vertex 0 joins 2 separate groups of tets", "the solid is not a manifold there",
+                   "status: warnings"])
+case("check", "two tets touching at one vertex with --strict", check("--strict", mesh="{W}/t.mesh"), ERRORS, [],
+     {"t.mesh": PINCHED_TETS}, stdout_words=["error: vertex 0 joins 2 separate groups of tets", "status: errors"])
 case("check", "a scene: its mesh and anchors", ["check", "--scene", "{W}/s.json"], CLEAN, [],
      {"s.json": scene(', %s, "handles": [{"vertices": [44], "targets": [[[1, 0, 5]]]}]' % PATCH)},
      stdout_words=["anchors: from", "s.json", "status: clean"])
