@@ -431,7 +431,7 @@ TEST_CASE("errors are listed before warnings", "[mesh_check]") {
   CHECK(s.first(CheckSeverity::Error) == &s.findings[0]);
 }
 
-TEST_CASE("shared meshes: no errors; the README's unreferenced vertices are found", "[mesh_check][data]") {
+TEST_CASE("shared meshes: no errors and the README counts of unreferenced vertices", "[mesh_check][data]") {
   REQUIRE_SHARED_DATA(data);
   const std::pair<const char*, Index> surfaces[] = {
       {"meshes/botsch-sorkine/cactus.off", 0},       {"meshes/botsch-sorkine/bumpy_plane.off", 0},
