@@ -7,9 +7,11 @@ file is left intact and that no temporary file stays behind. Run:
 
     bad_input.py QPR_BINARY [--group NAME] [--list]
 
-Groups: options, meshes, handles, scenes, check, matrix, writers. Exit status 0 when
+Groups: options, meshes, handles, scenes, check, matrix, writers, view. Exit status 0 when
 every case of the selected groups passed; a failing case prints its command,
-exit code and stderr.
+exit code and stderr. The view group (the viewer's writers) needs a display:
+without DISPLAY the suite runs itself again under `xvfb-run -a`; it is skipped,
+saying so, when this qpr was built without the viewer.
 """
 import argparse
 import os
@@ -364,6 +366,15 @@ case("check", "every tet inverted", check(mesh="{W}/t.mesh"), WARNINGS, [],
      stdout_words=["every tet is negatively oriented"])
 case("check", "positive tets are clean", check(mesh="{W}/t.mesh"), CLEAN, [], {"t.mesh": MEDIT_TETS % "1 3 2 5"},
      stdout_words=["status: clean"])
+# Two tets touching only at vertex 0 (MEDIT is 1-based): a non-manifold vertex of the solid.
+PINCHED_TETS = ("MeshVersionFormatted 1\nDimension 3\nVertices\n7\n0 0 0 0\n1 0 0 0\n0 1 0 0\n0 0 1 0\n-1 0 0 0\n"
+                "0 -1 0 0\n0 0 -1 0\nTetrahedra\n2\n1 2 3 4 0\n1 6 5 7 0\nEnd\n")
+case("check", "two tets touching at one vertex", check(mesh="{W}/t.mesh"), WARNINGS, [], {"t.mesh": PINCHED_TETS},
+     stdout_words=["7 vertices, 2 tets, 1 connected component",
+                   "warning: vertex 0 joins 2 separate groups of tets", "the solid is not a manifold there",
+                   "status: warnings"])
+case("check", "two tets touching at one vertex with --strict", check("--strict", mesh="{W}/t.mesh"), ERRORS, [],
+     {"t.mesh": PINCHED_TETS}, stdout_words=["error: vertex 0 joins 2 separate groups of tets", "status: errors"])
 case("check", "a scene: its mesh and anchors", ["check", "--scene", "{W}/s.json"], CLEAN, [],
      {"s.json": scene(', %s, "handles": [{"vertices": [44], "targets": [[[1, 0, 5]]]}]' % PATCH)},
      stdout_words=["anchors: from", "s.json", "status: clean"])
@@ -542,6 +553,44 @@ CASES.append(dict(group="writers", name="compare --out-dir meshes under a file-s
                   files={"cmp/reduced.off": EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[], fsize=16,
                   intact="cmp/reduced.off"))
 
+# ---------------------------------------------------------------- view
+# The viewer's writers, headless (--screenshot renders the last frame, then
+# writes the PNG, the --out mesh and the --stats JSON in that order) and in the
+# window mode (--max-frames with --window-screenshot), each against /dev/full,
+# a missing directory and a file-size limit like the writers above. The
+# screenshot goes to /dev/null where another writer is under test: a device
+# is written in place and knows no file-size limit, so the limit reaches the
+# writer under test. Mesa renders in software; its shader cache stays off so
+# that the limit meets no other file.
+VIEW_ENV = {"LIBGL_ALWAYS_SOFTWARE": "1", "MESA_SHADER_CACHE_DISABLE": "true"}
+VIEW_TUBE = ["view", "{W}/tube.off", "--sel", "{W}/tube.sel", "--def", "{W}/tube.def"] + SMALL + ["--size", "32x32"]
+VIEW_BOX = ["view", "{W}/box.mesh", "--sel", "{W}/box.sel", "--def", "{W}/tube.def"] + SMALL + ["--size", "32x32"]
+VIEW_WRITERS = [
+    # (name, args with {OUT}, extension, extra input files)
+    ("view --screenshot", VIEW_TUBE + ["--screenshot", "{OUT}"], ".png", {}),
+    ("view --stats", VIEW_TUBE + ["--screenshot", "/dev/null", "--stats", "{OUT}"], ".json", {}),
+    ("view --out .off", VIEW_TUBE + ["--screenshot", "/dev/null", "--out", "{OUT}"], ".off", {}),
+    ("view --out .mesh (tets)", VIEW_BOX + ["--screenshot", "/dev/null", "--out", "{OUT}"], ".mesh", TETS),
+    ("view --window-screenshot", VIEW_TUBE + ["--max-frames", "3", "--window-screenshot", "{OUT}"], ".png", {}),
+]
+for name, args, ext, inputs in VIEW_WRITERS:
+    view = dict(group="view", code=RUN, max_seconds=None, stdout_words=[], env=VIEW_ENV, display=True)
+    CASES.append(dict(view, name=name + " to /dev/full", args=[a.replace("{OUT}", "{W}/full" + ext) for a in args],
+                      words=["full" + ext, "No space left on device"], files=dict(inputs),
+                      links={"full" + ext: "/dev/full"}))
+    CASES.append(dict(view, name=name + " into a missing directory",
+                      args=[a.replace("{OUT}", "{W}/missing/out" + ext) for a in args],
+                      words=["missing/out" + ext, "does not exist"], files=dict(inputs)))
+    CASES.append(dict(view, name=name + " under a file-size limit",
+                      args=[a.replace("{OUT}", "{W}/out" + ext) for a in args], words=["out" + ext, "File too large"],
+                      files=dict(inputs, **{"out" + ext: EARLIER + "x" * 4096}), fsize=16, intact="out" + ext))
+# The mesh failing stops the run: the earlier --stats file (written last) stays.
+CASES.append(dict(group="view", name="view: --out on /dev/full keeps the earlier --stats file",
+                  args=VIEW_TUBE + ["--screenshot", "{W}/shot.png", "--out", "{W}/full.off", "--stats", "{W}/s.json"],
+                  code=RUN, words=["full.off", "No space left on device"], files={"s.json": EARLIER},
+                  max_seconds=None, stdout_words=[], env=VIEW_ENV, display=True, links={"full.off": "/dev/full"},
+                  intact="s.json"))
+
 # ---------------------------------------------------------------- runner
 
 
@@ -574,7 +623,7 @@ def run_case(qpr, c):
 
         start = time.monotonic()
         p = subprocess.run(args, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=limit,
-                           timeout=300)
+                           timeout=300, env=dict(os.environ, **c.get("env", {})))
         seconds = time.monotonic() - start
         err = p.stderr.decode("utf-8", "replace")
         out = p.stdout.decode("utf-8", "replace")
@@ -615,6 +664,17 @@ def main():
             print("%-8s %s" % (c["group"], c["name"]))
         print("%d cases" % len(cases))
         return 0
+    if any(c.get("display") for c in cases):
+        if subprocess.run([a.qpr, "view", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
+            print("skipped [view]: %s has no `view` command (built with QPREDUCE_BUILD_VIEWER=OFF)" % a.qpr)
+            cases = [c for c in cases if not c.get("display")]
+        elif not os.environ.get("DISPLAY"):
+            xvfb = shutil.which("xvfb-run")
+            if not xvfb:
+                print("FAIL: the view cases need a display and xvfb-run is not installed (scripts/install-deps.sh)")
+                return 1
+            # Again under a virtual X server; only qpr gets the cases' file-size limits, not the server.
+            return subprocess.run([xvfb, "-a", sys.executable] + sys.argv).returncode
     failed = 0
     for c in cases:
         problems, cmd, code, err = run_case(a.qpr, c)

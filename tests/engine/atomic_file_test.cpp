@@ -3,21 +3,22 @@
 // exception before commit).
 #include <qpreduce/atomic_file.h>
 
+#include "../file_size_limit.h"
+
 #include <catch2/catch.hpp>
 
-#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <sstream>
 #include <string>
 
-#include <sys/resource.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
 using qpreduce::AtomicFile;
 using qpreduce::FileError;
+using qpreduce_test::FileSizeLimit;
 
 namespace {
 
@@ -51,27 +52,6 @@ std::string message_of(const std::function<void()>& f) {
   }
   return "";
 }
-
-// Lowers the soft file-size limit for the scope (SIGXFSZ ignored so that
-// write() fails with EFBIG instead of the signal ending the test).
-class FileSizeLimit {
- public:
-  explicit FileSizeLimit(rlim_t bytes) {
-    old_handler_ = std::signal(SIGXFSZ, SIG_IGN);
-    getrlimit(RLIMIT_FSIZE, &old_);
-    rlimit r = old_;
-    r.rlim_cur = bytes;
-    setrlimit(RLIMIT_FSIZE, &r);
-  }
-  ~FileSizeLimit() {
-    setrlimit(RLIMIT_FSIZE, &old_);
-    std::signal(SIGXFSZ, old_handler_);
-  }
-
- private:
-  rlimit old_{};
-  void (*old_handler_)(int) = nullptr;
-};
 
 }  // namespace
 

@@ -67,3 +67,13 @@ def test_tets_and_argument_errors():
         deform.diagnose_mesh(V, T, np.ones(3, dtype=bool))
     with pytest.raises(ValueError, match="max_listed must be at least 1"):
         deform.diagnose_mesh(V, T, max_listed=0)
+
+
+def test_tets_touching_at_one_vertex():
+    # Two positive tets sharing vertex 0 and nothing else: one piece of solid each.
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], dtype=float)
+    T = np.array([[0, 1, 2, 3], [0, 5, 4, 6]], dtype=np.int32)
+    s = deform.diagnose_mesh(V, T)
+    assert [f["defect"] for f in s["findings"]] == ["non_manifold_vertex"]
+    assert s["findings"][0]["first"] == [[0]] and s["findings"][0]["severity"] == "warning"
+    assert "vertex 0 joins 2 separate groups of tets" in s["findings"][0]["message"]

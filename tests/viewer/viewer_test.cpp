@@ -1,7 +1,9 @@
 // The viewer's GL paths, run headless (ctest runs this under `xvfb-run -a`):
 // GPU reconstruction (basis in a texture buffer, transform feedback) against
 // the Deformer's own CPU reconstruction, a scripted drag that must change the
-// picture, recorded motion round trips, and bad input.
+// picture, recorded motion round trips, bad input, and the window's writers
+// (recordings, screenshots) on a full device, a missing directory and a
+// file-size limit.
 #include <camera.h>
 #include <context.h>
 #include <image.h>
@@ -14,6 +16,8 @@
 #include <qpreduce/deform/mesh/shapes.h>
 #include <qpreduce/deform/mesh/tet_boundary.h>
 
+#include "../file_size_limit.h"
+
 #include <Eigen/Geometry>
 #include <catch2/catch.hpp>
 
@@ -21,8 +25,15 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <sstream>
+#include <string>
+
+#include <unistd.h>
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
@@ -343,6 +354,57 @@ TEST_CASE("recorded handle motion round trips and bad files are refused") {
   CHECK_THROWS_WITH(read_motion(path), Catch::Contains("/handles/0/vertices"));
   std::remove(path.c_str());
   CHECK_THROWS_AS(read_motion("no-such-motion.json"), std::runtime_error);
+}
+
+// The writers behind the window's buttons ("Save screenshot" and a
+// recording's "Stop and save"; the window shows their message): on a full
+// device, in a missing directory and over a file-size limit each throws
+// naming the file, keeps the earlier file byte for byte and leaves no
+// temporary. No GL needed. The command-line writers of `qpr view` are cases
+// of tests/apps/bad_input.py --group view.
+TEST_CASE("the window's writers fail naming the file and keep the earlier one", "[writers]") {
+  namespace fs = std::filesystem;
+  HandleMotion motion;
+  motion.vertex_count = 10;
+  motion.handles = {{"h0", {1, 2}, -1}};
+  motion.frames.assign(40, {Eigen::Matrix4d::Identity()});
+  Image image;
+  image.width = image.height = 16;
+  image.rgb.assign(3 * 16 * 16, 0);
+  for (size_t i = 0; i < image.rgb.size(); ++i) image.rgb[i] = static_cast<std::uint8_t>(i * 37 % 251);
+  const std::pair<const char*, std::function<void(const std::string&)>> writers[] = {
+      {"recording", [&](const std::string& path) { write_motion(path, motion); }},
+      {"screenshot", [&](const std::string& path) { write_png(path, image); }}};
+  const std::string earlier = "earlier contents\n" + std::string(4096, 'x');
+  for (const auto& [what, write] : writers) {
+    INFO(what);
+    const fs::path dir = fs::temp_directory_path() / ("qpreduce_viewer_writers_" + std::to_string(::getpid()));
+    fs::remove_all(dir);
+    fs::create_directories(dir);
+    const std::string out = (dir / "out").string();
+    std::ofstream(out, std::ios::binary) << earlier;
+    write(out + ".ok");  // the writer works at all
+    CHECK(fs::file_size(out + ".ok") > 16);
+    if (fs::exists("/dev/full")) {
+      fs::create_symlink("/dev/full", dir / "full");
+      CHECK_THROWS_WITH(write((dir / "full").string()),
+                        Catch::Contains("full") && Catch::Contains("No space left on device"));
+    }
+    CHECK_THROWS_WITH(write((dir / "missing" / "out").string()),
+                      Catch::Contains("missing/out") && Catch::Contains("does not exist"));
+    {
+      const qpreduce_test::FileSizeLimit limit(16);
+      CHECK_THROWS_WITH(write(out), Catch::Contains(out) && Catch::Contains("File too large"));
+    }
+    std::ostringstream now;
+    now << std::ifstream(out, std::ios::binary).rdbuf();
+    CHECK(now.str() == earlier);
+    for (const auto& e : fs::directory_iterator(dir)) {
+      const std::string name = e.path().filename().string();
+      CHECK((name == "out" || name == "out.ok" || name == "full"));  // no temporary
+    }
+    fs::remove_all(dir);
+  }
 }
 
 TEST_CASE("boundary faces of a tet box are its surface") {

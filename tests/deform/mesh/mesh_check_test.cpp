@@ -10,6 +10,7 @@
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/tet_io.h"
 #include "qpreduce/deform/mesh/mesh_check.h"
+#include "qpreduce/deform/mesh/shapes.h"
 
 #include <random>
 #include <stdexcept>
@@ -67,6 +68,30 @@ Vertices two_tet_vertices() {
   Vertices V(5, 3);
   V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -1;
   return V;
+}
+
+// `a` and a copy of `b` moved so that b's vertex `at_b` lies on a's vertex
+// `at_a`, and merged into it: two solids sharing exactly that vertex.
+TetMesh glued_at_vertex(const TetMesh& a, Index at_a, const TetMesh& b, Index at_b) {
+  const Index na = a.V.rows();
+  TetMesh m;
+  m.V.resize(na + b.V.rows() - 1, 3);
+  m.V.topRows(na) = a.V;
+  const Eigen::RowVector3d shift = a.V.row(at_a) - b.V.row(at_b);
+  std::vector<int> index(static_cast<size_t>(b.V.rows()));
+  for (Index v = 0, next = na; v < b.V.rows(); ++v) {
+    if (v == at_b) {
+      index[v] = static_cast<int>(at_a);
+      continue;
+    }
+    m.V.row(next) = b.V.row(v) + shift;
+    index[v] = static_cast<int>(next++);
+  }
+  m.T.resize(a.T.rows() + b.T.rows(), 4);
+  m.T.topRows(a.T.rows()) = a.T;
+  for (Index t = 0; t < b.T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) m.T(a.T.rows() + t, k) = index[static_cast<size_t>(b.T(t, k))];
+  return m;
 }
 
 }  // namespace
@@ -284,6 +309,51 @@ TEST_CASE("tets: inverted, all inverted, degenerate, a face in three tets", "[me
   }
 }
 
+TEST_CASE("tets: a vertex where pieces of solid share no face is non-manifold", "[mesh_check]") {
+  SECTION("two tets touching at one vertex") {
+    Vertices V(7, 3);
+    V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, -1, 0, 0, 0, -1, 0, 0, 0, -1;
+    Tetrahedra T(2, 4);
+    T << 0, 1, 2, 3, 0, 5, 4, 6;
+    const MeshCheckSummary s = diagnose_mesh(V, T);
+    REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::NonManifoldVertex});
+    CHECK(s.findings[0].count == 1);
+    CHECK(s.findings[0].first == std::vector<std::vector<Index>>{{0}});
+    CHECK(s.findings[0].item == "vertex");
+    CHECK_THAT(s.findings[0].message, Catch::Contains("vertex 0 joins 2 separate groups of tets"));
+    CHECK_THAT(s.findings[0].message, Catch::Contains("the solid is not a manifold there"));
+    CHECK(s.status == MeshCheckStatus::Warnings);
+    CHECK(s.components == 1);  // sharing a vertex couples the Laplacian
+  }
+  SECTION("two tets sharing only an edge: both its ends") {
+    Vertices V = two_tet_vertices();
+    const Index p = add_vertex(&V, 0.5, -1, -1);
+    Tetrahedra T(2, 4);
+    T << 0, 1, 2, 3, 0, 1, static_cast<int>(p), 4;
+    const MeshCheckSummary s = diagnose_mesh(V, T);
+    REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::NonManifoldVertex});
+    CHECK(s.findings[0].count == 2);
+    CHECK(s.findings[0].first == std::vector<std::vector<Index>>{{0}, {1}});
+    CHECK_THAT(s.findings[0].message, Catch::Contains("(2 vertices in all)"));
+  }
+  SECTION("two boxes of tets glued at a corner") {
+    const TetMesh box = shapes::box_tets(1, 1, 1, 2, 2, 2);
+    const Index corner = box.V.rows() - 1;  // (1, 1, 1)
+    const TetMesh m = glued_at_vertex(box, corner, box, 0);
+    const MeshCheckSummary s = diagnose_mesh(m.V, m.T);
+    REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::NonManifoldVertex});
+    CHECK(s.findings[0].count == 1);
+    CHECK(s.findings[0].first == std::vector<std::vector<Index>>{{corner}});
+  }
+  SECTION("a cube in six tets and a box of 3 × 3 × 3 cubes (interior vertices) are clean") {
+    for (const TetMesh& m : {shapes::box_tets(1, 1, 1, 1, 1, 1), shapes::box_tets(1, 2, 3, 3, 3, 3)}) {
+      const MeshCheckSummary s = diagnose_mesh(m.V, m.T);
+      CHECK(s.status == MeshCheckStatus::Clean);
+      CHECK(s.findings.empty());
+    }
+  }
+}
+
 TEST_CASE("components: the unanchored one is named with its size and first vertex", "[mesh_check]") {
   TriangleMesh m = square();
   const TriangleMesh other = square(10.0);
@@ -361,7 +431,7 @@ TEST_CASE("errors are listed before warnings", "[mesh_check]") {
   CHECK(s.first(CheckSeverity::Error) == &s.findings[0]);
 }
 
-TEST_CASE("shared meshes: no errors; the README's unreferenced vertices are found", "[mesh_check][data]") {
+TEST_CASE("shared meshes: no errors and the README counts of unreferenced vertices", "[mesh_check][data]") {
   REQUIRE_SHARED_DATA(data);
   const std::pair<const char*, Index> surfaces[] = {
       {"meshes/botsch-sorkine/cactus.off", 0},       {"meshes/botsch-sorkine/bumpy_plane.off", 0},
@@ -410,5 +480,19 @@ TEST_CASE("shared meshes: no errors; the README's unreferenced vertices are foun
     const MeshCheckSummary ts = diagnose_mesh(t.V, t.T);
     CHECK_FALSE(ts.has_errors());
     CHECK_FALSE(find(ts, MeshDefect::InvertedTet));  // the README: all tets positive
+    CHECK_FALSE(find(ts, MeshDefect::NonManifoldVertex));
   }
+  // The octopus and a copy of it touching at one vertex (the copy's leftmost
+  // on the original's rightmost, both on the boundary): that vertex alone.
+  const TetMesh octopus = read_tet_mesh(data + "/tets/octopus-low.mesh");
+  Index right = 0, left = 0;
+  octopus.V.col(0).maxCoeff(&right);
+  octopus.V.col(0).minCoeff(&left);
+  const TetMesh two = glued_at_vertex(octopus, right, octopus, left);
+  const MeshCheckSummary gs = diagnose_mesh(two.V, two.T);
+  const MeshFinding* pinched = find(gs, MeshDefect::NonManifoldVertex);
+  REQUIRE(pinched);
+  CHECK(pinched->count == 1);
+  CHECK(pinched->first == std::vector<std::vector<Index>>{{right}});
+  CHECK(gs.components == 1);
 }

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <numeric>
 #include <stdexcept>
+#include <tuple>
 
 namespace qpreduce::deform {
 
@@ -376,8 +377,13 @@ void check_duplicates(const Inputs& in, const MeshCheckSummary& s, std::vector<M
 }
 
 // Every element side as a sortable key: a triangle edge (a < b) as
-// (a·2³² + b, triangle); a tet face (a < b < c) as (a·2³² + b, c).
-using SideKey = std::pair<std::uint64_t, std::uint32_t>;
+// (a·2³² + b, 0, triangle); a tet face (a < b < c) as (a·2³² + b, c, tet).
+struct SideKey {
+  std::uint64_t ab = 0;
+  std::uint32_t c = 0, element = 0;
+  bool operator<(const SideKey& o) const { return std::tie(ab, c, element) < std::tie(o.ab, o.c, o.element); }
+  bool same_side(const SideKey& o) const { return ab == o.ab && c == o.c; }
+};
 
 std::vector<SideKey> sorted_sides(const Inputs& in) {
   std::vector<SideKey> sides;
@@ -389,22 +395,25 @@ std::vector<SideKey> sorted_sides(const Inputs& in) {
       for (int j = 0; j < in.p - 1; ++j) c[j] = static_cast<std::uint32_t>(in.E(e, (k + 1 + j) % in.p));
       std::sort(c.begin(), c.begin() + (in.p - 1));
       const std::uint64_t ab = (std::uint64_t{c[0]} << 32) | c[1];
-      sides.emplace_back(ab, in.p == 3 ? static_cast<std::uint32_t>(e) : c[2]);
+      sides.push_back(SideKey{ab, in.p == 3 ? 0u : c[2], static_cast<std::uint32_t>(e)});
     }
   }
   std::sort(sides.begin(), sides.end());
   return sides;
 }
 
+// The corners of side `key`: (a, b, ·) of an edge, (a, b, c) of a face; the
+// first p − 1 count.
+std::array<Index, 3> side_corners(const SideKey& key) {
+  return {static_cast<Index>(key.ab >> 32), static_cast<Index>(key.ab & 0xffffffffu), static_cast<Index>(key.c)};
+}
+
 // Calls run(i, j) for each run [i, j) of the same side.
 template <typename Run>
-void for_each_side(const Inputs& in, const std::vector<SideKey>& sides, Run run) {
-  const auto same = [tri = in.p == 3](const SideKey& x, const SideKey& y) {
-    return x.first == y.first && (tri || x.second == y.second);
-  };
+void for_each_side(const std::vector<SideKey>& sides, Run run) {
   for (size_t i = 0; i < sides.size();) {
     size_t j = i;
-    while (j < sides.size() && same(sides[j], sides[i])) ++j;
+    while (j < sides.size() && sides[j].same_side(sides[i])) ++j;
     run(i, j);
     i = j;
   }
@@ -415,10 +424,10 @@ void check_manifold_sides(const Inputs& in, const std::vector<SideKey>& sides, s
   const bool tri = in.p == 3;
   FindingBuilder many(tri ? MeshDefect::NonManifoldEdge : MeshDefect::NonManifoldFace, CheckSeverity::Warning,
                       tri ? "edge" : "face", in.o.max_listed);
-  for_each_side(in, sides, [&](size_t i, size_t j) {
+  for_each_side(sides, [&](size_t i, size_t j) {
     if (j - i <= 2) return;
-    std::vector<Index> corners{static_cast<Index>(sides[i].first >> 32), static_cast<Index>(sides[i].first & 0xffffffffu)};
-    if (!tri) corners.push_back(sides[i].second);
+    const std::array<Index, 3> at = side_corners(sides[i]);
+    const std::vector<Index> corners(at.begin(), at.begin() + (in.p - 1));
     if (many.add(corners))
       many.sentence(fmt::format("{} ({}) is shared by {} {}s: the {} is not a manifold there", tri ? "edge" : "face",
                                 fmt::join(corners, ", "), j - i, in.element(), tri ? "surface" : "solid"));
@@ -437,44 +446,54 @@ void unite(std::vector<Index>& parent, Index x, Index y) {
   if (rx != ry) parent[std::max(rx, ry)] = std::min(rx, ry);
 }
 
-// Surface vertices whose triangles form more than one fan ("bow-ties"): the
-// corners at a vertex are joined when their triangles share an edge at it;
-// more than one group of corners is non-manifold. `sides`: sorted_sides.
-void check_fans(const Inputs& in, const std::vector<SideKey>& sides, std::vector<MeshFinding>* out) {
-  FindingBuilder bowtie(MeshDefect::NonManifoldVertex, CheckSeverity::Warning, "vertex", in.o.max_listed);
-  std::vector<Index> parent(static_cast<size_t>(3 * in.m));
+// Vertices whose elements fall apart into more than one group when elements
+// are joined across the sides they share: on a surface, triangles that form
+// more than one fan (a "bow-tie"); in a solid, tets that form more than one
+// piece (solids touching at the vertex, or only along an edge through it).
+// The corners at a vertex are joined when their elements share a side
+// containing it (union–find over the p·m corners), then each vertex's
+// distinct roots are counted by one sort. `sides`: sorted_sides.
+void check_vertex_stars(const Inputs& in, const std::vector<SideKey>& sides, std::vector<MeshFinding>* out) {
+  FindingBuilder pinched(MeshDefect::NonManifoldVertex, CheckSeverity::Warning, "vertex", in.o.max_listed);
+  const Index corners = in.p * in.m;
+  std::vector<Index> parent(static_cast<size_t>(corners));
   std::iota(parent.begin(), parent.end(), 0);
-  const auto corner = [&](std::uint32_t f, std::uint64_t v) {
-    const Index k = in.E(f, 0) == static_cast<int>(v) ? 0 : in.E(f, 1) == static_cast<int>(v) ? 1 : 2;
-    return 3 * static_cast<Index>(f) + k;
+  const auto corner = [&](std::uint32_t e, Index v) {
+    int k = 0;
+    while (k + 1 < in.p && in.E(e, k) != v) ++k;
+    return in.p * static_cast<Index>(e) + k;
   };
-  for_each_side(in, sides, [&](size_t i, size_t j) {
-    const std::uint64_t a = sides[i].first >> 32, b = sides[i].first & 0xffffffffu;
-    for (size_t t = i + 1; t < j; ++t) {
-      unite(parent, corner(sides[t].second, a), corner(sides[i].second, a));
-      unite(parent, corner(sides[t].second, b), corner(sides[i].second, b));
-    }
+  for_each_side(sides, [&](size_t i, size_t j) {
+    const std::array<Index, 3> at = side_corners(sides[i]);
+    const std::uint32_t first = sides[i].element;
+    const auto end = sides.begin() + static_cast<std::ptrdiff_t>(j);
+    for (auto it = sides.begin() + static_cast<std::ptrdiff_t>(i + 1); it != end; ++it)
+      for (int q = 0; q + 1 < in.p; ++q) unite(parent, corner(it->element, at[q]), corner(first, at[q]));
   });
-  std::vector<std::uint64_t> fans;  // vertex·2³² + root of a corner at it
-  fans.reserve(static_cast<size_t>(3 * in.m));
-  for (Index f = 0; f < in.m; ++f)
-    if (in.topological[f])
-      for (int k = 0; k < 3; ++k)
-        fans.push_back((static_cast<std::uint64_t>(in.E(f, k)) << 32) |
-                       static_cast<std::uint64_t>(find_root(parent, 3 * f + k)));
-  std::sort(fans.begin(), fans.end());
-  fans.erase(std::unique(fans.begin(), fans.end()), fans.end());
-  for (size_t i = 0; i < fans.size();) {
+  std::vector<std::uint64_t> stars;  // vertex·2³² + root of a corner at it
+  stars.reserve(static_cast<size_t>(corners));
+  for (Index e = 0; e < in.m; ++e)
+    if (in.topological[e])
+      for (int k = 0; k < in.p; ++k)
+        stars.push_back((static_cast<std::uint64_t>(in.E(e, k)) << 32) |
+                        static_cast<std::uint64_t>(find_root(parent, in.p * e + k)));
+  std::sort(stars.begin(), stars.end());
+  stars.erase(std::unique(stars.begin(), stars.end()), stars.end());
+  for (size_t i = 0; i < stars.size();) {
     size_t j = i;
-    while (j < fans.size() && fans[j] >> 32 == fans[i] >> 32) ++j;
-    const Index v = static_cast<Index>(fans[i] >> 32);
-    if (j - i > 1 && bowtie.add({v}))
-      bowtie.sentence(fmt::format("vertex {} joins {} separate fans of triangles (a bow-tie): the surface is not a "
-                                  "manifold there",
-                                  v, j - i));
+    while (j < stars.size() && stars[j] >> 32 == stars[i] >> 32) ++j;
+    const Index v = static_cast<Index>(stars[i] >> 32);
+    if (j - i > 1 && pinched.add({v}))
+      pinched.sentence(in.p == 3 ? fmt::format("vertex {} joins {} separate fans of triangles (a bow-tie): the surface "
+                                               "is not a manifold there",
+                                               v, j - i)
+                                 : fmt::format("vertex {} joins {} separate groups of tets (pieces of solid that meet "
+                                               "only at the vertex or along an edge through it, sharing no face): the "
+                                               "solid is not a manifold there",
+                                               v, j - i));
     i = j;
   }
-  bowtie.finish(out);
+  pinched.finish(out);
 }
 
 void check_components(const Inputs& in, MeshCheckSummary* s, std::vector<MeshFinding>* out) {
@@ -549,7 +568,7 @@ MeshCheckSummary diagnose_mesh(const VerticesRef& V, const ElementsRef& E, const
     check_duplicates(in, s, &out);
     const std::vector<SideKey> sides = sorted_sides(in);
     check_manifold_sides(in, sides, &out);
-    if (in.p == 3) check_fans(in, sides, &out);
+    check_vertex_stars(in, sides, &out);
     check_components(in, &s, &out);
   }
   std::stable_sort(out.begin(), out.end(), [](const MeshFinding& a, const MeshFinding& b) {

@@ -32,8 +32,10 @@
 //     bounding box of the referenced vertices                    Error
 //   non-manifold edge (a triangle edge in more than 2 triangles) Warning
 //   non-manifold face (a tet face in more than 2 tets)           Warning
-//   non-manifold vertex (surfaces: its triangles form more than
-//     one fan, a "bow-tie")                                      Warning
+//   non-manifold vertex: its elements, joined across the sides
+//     they share, form more than one group (surfaces: more than
+//     one fan, a "bow-tie"; solids: more than one piece of tets,
+//     pieces touching only at the vertex or along an edge)      Warning
 //   connected component no anchored vertex touches (its pose is
 //     not determined: the KKT system is singular)                Error
 // "diagonal" is the bounding-box diagonal of the referenced vertices with
