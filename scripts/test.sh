@@ -2,8 +2,9 @@
 # Installs what is missing, builds, and runs every test:
 #   1. the Release build and its full Catch2 suite (ctest);
 #   2. the same suite built with AddressSanitizer + UBSan (./build-asan);
-#   3. two tiny consumer projects built against the installed package config
-#      (the engine and deformer without Ceres; the reference component), and
+#   3. tiny consumer projects built against the installed package config
+#      (the engine and deformer without Ceres; the reference component; in a
+#      build with MPI, qpreduce::distributed under mpirun -np 2), and
 #      the Python tests of the solver, deformer and refine run against the
 #      Python package as installed;
 #   4. the readers' libFuzzer targets (clang-14, ./build-fuzz): the corpus of
@@ -32,7 +33,7 @@ echo "== installed package consumers"
 # consumer: the engine and the deformer, with Ceres hidden from find_package
 # (they must not need it); reference_consumer: the optional reference component.
 prefix="$root/build/install-test"
-rm -rf "$prefix" "$root/build/consumer" "$root/build/reference_consumer"
+rm -rf "$prefix" "$root/build/consumer" "$root/build/reference_consumer" "$root/build/distributed_consumer"
 cmake --install "$root/build" --prefix "$prefix" >/dev/null
 cmake -S "$root/tests/packaging/consumer" -B "$root/build/consumer" -DCMAKE_PREFIX_PATH="$prefix" \
   -DCMAKE_DISABLE_FIND_PACKAGE_Ceres=ON >/dev/null
@@ -42,6 +43,15 @@ cmake -S "$root/tests/packaging/reference_consumer" -B "$root/build/reference_co
   -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
 cmake --build "$root/build/reference_consumer" -j "$jobs"
 "$root/build/reference_consumer/reference_consumer"
+# distributed_consumer: qpreduce::distributed, in a package built with MPI only.
+if grep -q '^QPREDUCE_WITH_MPI:BOOL=ON$' "$root/build/CMakeCache.txt"; then
+  mpiexec="$(sed -n 's/^MPIEXEC_EXECUTABLE:[A-Z]*=//p' "$root/build/CMakeCache.txt")"
+  cmake -S "$root/tests/packaging/distributed_consumer" -B "$root/build/distributed_consumer" \
+    -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+  cmake --build "$root/build/distributed_consumer" -j "$jobs"
+  OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 \
+    "$mpiexec" --oversubscribe -np 2 "$root/build/distributed_consumer/distributed_consumer"
+fi
 
 echo "== installed Python package"
 # The package `cmake --install` put under the prefix (the interpreter's
