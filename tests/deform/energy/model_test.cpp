@@ -226,7 +226,7 @@ TEST_CASE("the kit catches broken energies and projections", "[model][kit]") {
   CHECK_FALSE(testing::check_projection(identity, 9).ok);
 }
 
-TEST_CASE("conformal: uniform scaling of the handles scales the mesh uniformly; ARAP stays near-isometric",
+TEST_CASE("conformal: uniform scaling of the handles scales the mesh uniformly, ARAP stays near-isometric",
           "[model][conformal]") {
   const Index around = 10, rings = 13;
   DeformableMesh model = bar_model();

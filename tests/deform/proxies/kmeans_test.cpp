@@ -41,7 +41,7 @@ TEST_CASE("k-means is deterministic for a seed and returns exactly k non-empty c
   }
 }
 
-TEST_CASE("k-means with coincident points still gives k non-empty clusters; bad k throws", "[kmeans][errors]") {
+TEST_CASE("k-means with coincident points still gives k non-empty clusters, bad k throws", "[kmeans][errors]") {
   const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> X =
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>::Ones(10, 2);
   check_partition(kmeans(X, 4).labels, 4);
