@@ -99,6 +99,8 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
                   "Anderson acceleration of the rounds with this window (1-16; energy safeguard; needs "
                   "--rotation-step exact), 0: off; default 5 with exact, 0 with paper")
       ->check(whole_number_between(0, 16));
+  cmd->add_flag("--no-second-order", a->no_second_order,
+                "Rounds even on stiff point-handle sets (default: Newton steps on the rotations there)");
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")
       ->check(number_between(0, kMaxPenalty));
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(number_between(0, kMaxPenalty));
@@ -180,6 +182,7 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   } else if (options.rotation_fit != ClusterRotationFit::Exact) {
     options.anderson_window = 0;  // the paper's step runs plain rounds
   }
+  options.second_order = !a.no_second_order;
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
   if (a.gamma) options.energy.gamma = *a.gamma;
@@ -316,6 +319,7 @@ void report_model(const Deformer& deformer, const Scenario& scenario, const Defo
   report["tolerance"] = options.tolerance;
   report["rotation_step"] = to_string(options.rotation_fit);
   report["anderson_window"] = options.anderson_window;
+  report["second_order"] = options.second_order;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
   report["gamma"] = options.energy.gamma;
@@ -424,6 +428,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["fixed_point_residual"] = s.last.fixed_point_residual;
   report["rounds"] = s.last.iterations;
   report["rounds_total"] = std::accumulate(s.rounds.begin(), s.rounds.end(), 0);
+  report["second_order_steps"] = s.last.second_order;  // the last frame took Newton steps, not rounds
   if (std::isfinite(s.last.model_energy)) {
     report["model_energy"] = s.last.model_energy;
     report["rejected_steps"] = s.last.rejected_steps;

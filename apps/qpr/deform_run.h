@@ -33,6 +33,7 @@ struct ScenarioArgs {
   std::string rotation_step = "exact";  // "exact" or "paper"
   double tolerance = 0.0;
   std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
+  bool no_second_order = false;        // DeformerOptions::second_order = false
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

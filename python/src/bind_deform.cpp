@@ -104,6 +104,8 @@ void bind_deformer_options(py::module_& m) {
       .rw("iterations", &DeformerOptions::iterations, "Phase 1/Phase 2 rounds per frame (the cap). Default 8.")
       .rw("tolerance", &DeformerOptions::tolerance, "Stop once fixed_point_residual ≤ this; 0 (default): never.")
       .rw("anderson_window", &DeformerOptions::anderson_window, "Anderson acceleration window (0 off, 1–16).")
+      .rw("second_order", &DeformerOptions::second_order,
+          "Newton steps on stiff point-handle sets instead of rounds (default True).")
       .rw("global_rotation", &DeformerOptions::global_rotation, "Factor out a global rotation. Default True.")
       .rw("float_rounds", &DeformerOptions::float_rounds, "Phase 2 inputs from float products. Default True.")
       .rw("round_threads", &DeformerOptions::round_threads, "OpenMP threads of a frame's rounds. Default 1.")
@@ -139,6 +141,7 @@ void bind_deformer_options(py::module_& m) {
       .ro("fixed_point_residual", &FrameSummary::fixed_point_residual, "‖ΔS‖/‖S‖ of the last round.")
       .ro("model_energy", &FrameSummary::model_energy, "E′ of the reduced model (accelerated rounds), else NaN.")
       .ro("rejected_steps", &FrameSummary::rejected_steps, "Extrapolations the Anderson safeguard rejected.")
+      .ro("second_order", &FrameSummary::second_order, "This frame took Newton steps instead of rounds.")
       .ro("solve_seconds", &FrameSummary::solve_seconds, "")
       .ro("reconstruct_seconds", &FrameSummary::reconstruct_seconds, "")
       .ro("total_seconds", &FrameSummary::total_seconds, "")

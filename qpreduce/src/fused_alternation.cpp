@@ -10,6 +10,7 @@
 #include "qpreduce/support.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <Spectra/SymEigsSolver.h>
 #include <fmt/format.h>
 
@@ -262,6 +263,7 @@ void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
   M.energy.reset();
   M.proximal.resize(0);
   M.proximal_entries.resize(0);
+  M.second_order = false;
   M.factored_rounds.shift.resize(0);
   if (!M.energy_seen) return;
   const detail::PhaseOneEnergy& E = *M.energy_seen;
@@ -286,6 +288,9 @@ void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
     M.explicit_rounds.F.noalias() -= Ay.transpose() * Ly;
   }
   form_proximal_weights(M, k);
+  // Damped rounds (some w_j > 0) crawl on stiff sets: second-order steps
+  // there, in the explicit double form, for blocks of 3 × 3.
+  M.second_order = !M.factored && !M.float_set && k % 9 == 0 && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0;
   if (M.factored) {
     if (M.proximal.maxCoeff() > 0.0) M.factored_rounds.shift = M.proximal_entries;
   } else {
@@ -448,6 +453,106 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
   return summary;
 }
 
+// Second-order steps for stiff constraints on rotation blocks
+// (AlternatingOptions::second_order; alternating.h, "Constraints on y"): a
+// Riemannian Newton step with Levenberg–Marquardt damping on E(y) over
+// SO(3)^d, y_a ← y_a·exp([ω_a]×). E is quadratic in y with Hessian N_S + Q
+// (Q = −(F_y′ − D), explicit), N_S is constant on rotations, so along
+// y_a(ω) = S_a·exp([ω]×):
+//     E ≈ E(y) + Σ_a gω_a·ω_a + ½ωᵀ(TᵀQT + diag(tr(M_a)·I − sym M_a))ω,
+// with c = g′ − D∘y (the corrected input without the damping), M_a = S_aᵀc_a,
+// gω_a = −(M₃₂ − M₂₃, M₁₃ − M₃₁, M₂₁ − M₁₂) and T_a (9 × 3) the columns
+// vec(S_a·[e_i]×). A step is kept only when (*) does not rise; a rejected one
+// raises the damping μ. O(k²·d + d³) per step (a dozen rounds' work); it
+// reaches in a few steps what damped rounds need thousands of rounds for.
+AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                                    const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
+                                    const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+  const Index k = M.k(), d = k / 9, t = 3 * d;
+  const MatD& F = M.explicit_rounds.F;  // F_y − A_yᵀΛ_y + D
+  const Vector<double>& D = M.proximal_entries;
+  detail::gemv(E.Lb, b.data(), W.lambda_b.data(), false);
+  double slack = 0.0;
+  auto evaluate = [&](const Vector<double>& at) {  // W.g ← g′(at); returns (*)
+    round_product(M, W, at.data(), nullptr, 0, k, W.scratch.data(), W.scratch_f.data());
+    return reduced_energy(E, W, projection, b, at, false, &D, &slack);
+  };
+  AlternatingSummary summary;
+  summary.second_order = true;
+  W.y_try = y;
+  double energy = evaluate(W.y_try);
+  double mu = -1.0;  // set from the Hessian's scale at the first step
+  bool hessian_current = false;
+  for (int it = 0; it < options.iterations; ++it) {
+    summary.iterations = it + 1;
+    W.c = W.g - D.cwiseProduct(W.y_try);
+    for (Index a = 0; a < d; ++a) {
+      const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a), C(W.c.data() + 9 * a);
+      const Eigen::Matrix3d Ma = S.transpose() * C;
+      W.grad.segment<3>(3 * a) = -Eigen::Vector3d(Ma(2, 1) - Ma(1, 2), Ma(0, 2) - Ma(2, 0), Ma(1, 0) - Ma(0, 1));
+      if (!hessian_current) W.curvature[static_cast<size_t>(a)] = Ma.trace() * Eigen::Matrix3d::Identity() -
+                                                                   0.5 * (Ma + Ma.transpose());
+    }
+    if (!hessian_current) {
+      for (Index a = 0; a < d; ++a) {
+        const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a);
+        for (int i = 0; i < 3; ++i) {
+          Eigen::Matrix3d Ei = Eigen::Matrix3d::Zero();  // [e_i]×
+          Ei((i + 2) % 3, (i + 1) % 3) = 1.0;
+          Ei((i + 1) % 3, (i + 2) % 3) = -1.0;
+          Eigen::Map<Eigen::Matrix3d>(W.T.col(3 * a + i).data()) = S * Ei;
+        }
+        W.QT.middleCols(3 * a, 3).noalias() = -F.middleCols(9 * a, 9) * W.T.middleCols(3 * a, 3);
+        W.QT.block(9 * a, 3 * a, 9, 3) += D.segment(9 * a, 9).asDiagonal() * W.T.middleCols(3 * a, 3);
+      }
+      for (Index a = 0; a < d; ++a)
+        W.H.middleRows(3 * a, 3).noalias() = W.T.middleCols(3 * a, 3).transpose() * W.QT.middleRows(9 * a, 9);
+      W.H = 0.5 * (W.H + W.H.transpose()).eval();
+      for (Index a = 0; a < d; ++a) W.H.block<3, 3>(3 * a, 3 * a) += W.curvature[static_cast<size_t>(a)];
+      hessian_current = true;
+      if (mu < 0.0) mu = 1e-6 * std::max(W.H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
+    }
+    const double gnorm = W.grad.norm();
+    if (!(gnorm > 0.0)) break;
+    // (H + μI)ω = −grad, with μ raised until the system is positive definite.
+    for (int tries = 0;; ++tries) {
+      W.Hmu = W.H;
+      W.Hmu.diagonal().array() += mu;
+      W.ldlt.compute(W.Hmu);
+      if (W.ldlt.info() == Eigen::Success && W.ldlt.isPositive() && (W.ldlt.vectorD().array() > 0.0).all()) break;
+      mu = std::max(4.0 * mu, 1e-12);
+      if (tries > 60) return summary;  // cannot happen for finite H; keeps y
+    }
+    W.omega = W.ldlt.solve(-W.grad);
+    W.y_next = W.y_try;
+    for (Index a = 0; a < d; ++a) {
+      const Eigen::Vector3d w = W.omega.segment<3>(3 * a);
+      const double angle = w.norm();
+      if (angle == 0.0) continue;
+      Eigen::Map<Eigen::Matrix3d> S(W.y_next.data() + 9 * a);
+      S = (S * Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()).eval();
+    }
+    W.g_keep = W.g;
+    const double next = evaluate(W.y_next);
+    if (std::isfinite(next) && next <= energy + slack) {
+      summary.last_change = (W.y_next - W.y_try).norm();
+      W.y_try.swap(W.y_next);
+      energy = next;
+      mu = std::max(mu / 3.0, 1e-15 * std::abs(W.H(0, 0)));
+      hessian_current = false;
+      if (options.tolerance > 0 && summary.last_change <= options.tolerance * std::max(1.0, W.y_try.norm())) break;
+    } else {
+      summary.last_change = (W.y_next - W.y_try).norm();  // the step tried: a stalled run does not claim 0
+      W.g.swap(W.g_keep);  // g′ of the kept y
+      mu *= 4.0;
+      ++summary.rejected;
+    }
+  }
+  y = W.y_try;
+  summary.energy = energy;
+  return summary;
+}
+
 // The serial rounds.
 AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                               const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
@@ -487,6 +592,27 @@ void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const Inp
   W.y_try.resize(k);
   W.y_plain.resize(k);
   W.y_next.resize(k);
+  W.ay_ly.resize(2 * m);
+  W.lambda_b.resize(m);
+}
+
+// Sizes the second-order steps' workspace (allocates only when k changes).
+void prepare_second_order(const FixedCoordinateSolver<double>& phase1, Index k, FusedWorkspace& W) {
+  const Index d = k / 9, t = 3 * d, m = phase1.m();
+  if (W.H.rows() != t) {
+    W.c.resize(k);
+    W.grad.resize(t);
+    W.omega.resize(t);
+    W.T.resize(9, t);
+    W.QT.resize(k, t);
+    W.H.resize(t, t);
+    W.Hmu.resize(t, t);
+    W.ldlt = Eigen::LDLT<Matrix<double>>(t);
+    W.curvature.resize(static_cast<size_t>(d));
+  }
+  W.y_try.resize(k);
+  W.y_next.resize(k);
+  W.g_keep.resize(k);
   W.ay_ly.resize(2 * m);
   W.lambda_b.resize(m);
 }
@@ -670,7 +796,10 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
                         q * k >= options.parallel_min_entries && q / block >= 2;
   AlternatingSummary summary;
-  if (options.anderson_window > 0) {
+  if (M.second_order && options.second_order && projection.rotation_blocks()) {
+    prepare_second_order(phase1, k, W);
+    summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, y);
+  } else if (options.anderson_window > 0) {
     prepare_acceleration(phase1, projection, options, y, W);
     summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, y);
   } else {

@@ -16,8 +16,11 @@
 #include "qpreduce/anderson.h"
 #include "qpreduce/common.h"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <memory>
+#include <vector>
 
 namespace qpreduce::detail {
 
@@ -104,6 +107,7 @@ struct FusedModel {
   Index block = 0;          // the projection's proximal_block_size (0: one scalar weight)
   Vector<double> proximal;  // D per block
   Vector<double> proximal_entries;  // D per entry of y (k), for ‖y‖²_D
+  bool second_order = false;        // stiff set: second-order steps available (run_second_order)
   // Phase 1's energy terms when `set` ran (corrected or not), so that `run`
   // can tell when they changed after it.
   std::shared_ptr<const PhaseOneEnergy> energy_seen;
@@ -132,6 +136,14 @@ struct FusedWorkspace {
   AndersonAcceleration anderson;
   int anderson_window = 0;
   Vector<double> y_try, y_plain, y_next, ay_ly, lambda_b;
+  // Second-order steps: c = g′ − D∘y (k), the gradient and step in the
+  // tangent coordinates ω (3d), T (9 × 3d: block a's tangent basis in
+  // columns 3a..3a+2), Q·T (k × 3d), the model Hessian and its damped copy
+  // (3d × 3d), the blocks' curvature terms, g′ of the kept y.
+  Vector<double> c, grad, omega, g_keep;
+  Matrix<double> T, QT, H, Hmu;
+  Eigen::LDLT<Matrix<double>> ldlt;
+  std::vector<Eigen::Matrix3d> curvature;
 };
 
 }  // namespace qpreduce::detail

@@ -147,6 +147,13 @@ struct AlternatingOptions {
   // form_energy_terms and a projection with quadratic_term; the answer is
   // always a plain step from an accepted iterate.
   int anderson_window = 0;
+  // Stiff constraints on rotation blocks (FusedAlternation, "Constraints on
+  // y": a set whose rounds need proximal weights, explicit double form,
+  // InputProjection::rotation_blocks): Riemannian Newton steps with
+  // Levenberg–Marquardt damping on E(y) instead of rounds, `iterations` of
+  // them (each costs about a dozen rounds; it reaches in a few steps what the
+  // damped rounds need thousands for). false: rounds always.
+  bool second_order = true;
 
   bool is_valid(std::string* why) const;
 };
@@ -159,6 +166,7 @@ struct AlternatingSummary : Outcome {  // Success after a run
   // rejected.
   double energy = std::numeric_limits<double>::quiet_NaN();
   int rejected = 0;
+  bool second_order = false;  // second-order steps ran (AlternatingOptions::second_order); energy is E(y)
 };
 
 // A Phase 2 projection whose input is linear in (z, y): g = G_z·z + G_y·y
@@ -199,6 +207,10 @@ class InputProjection {
   // whose output's norm varies (scaled rotations) must add w_j to block j's
   // curvature. Weights ≥ 0; all 0 (or empty) restores the plain Phase 2.
   virtual Index proximal_block_size() const { return 0; }
+  // Whether y is d blocks of 3 × 3 matrices (column-major, 9 entries each) on
+  // SO(3) on which quadratic_term is constant, so that stiff constraints on
+  // y may take second-order steps (AlternatingOptions::second_order).
+  virtual bool rotation_blocks() const { return false; }
   virtual void set_proximal_weights(const Eigen::Ref<const Vector<Scalar>>& weights) { (void)weights; }
   virtual double project_blocks(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y,
                                 Index first, Index last) {

@@ -404,18 +404,18 @@ TEST_CASE("accelerated rounds with point handles and the conformal model reach t
   }
 }
 
-TEST_CASE("point handles off the proxies: E' never rises over the rounds and plain and accelerated agree",
+TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton steps reach one fixed point",
           "[reference][anderson][point_handles]") {
   // Point handles at vertices that are not linear proxies: their rows
   // involve the cluster rotations (A_y ≠ 0). The rounds must step on E′ with
   // z following Phase 1 (alternating.h, "Constraints on y"); before that
-  // fix they converged elsewhere and could blow up (docs/robustness.md, "Soak").
+  // fix they converged elsewhere and could blow up (docs/robustness.md,
+  // "Soak"). Stiff sets take Newton steps (DeformerOptions::second_order).
   for (const ModelKind kind : {ModelKind::Arap, ModelKind::Conformal}) {
     CAPTURE(static_cast<int>(kind));
     Case c = bend_case(false, 0.9);
     const Index n = c.model.V.rows();
     c.handles.points.clear();
-    c.targets.points.resize(0, 3);
     std::vector<Index> picked;
     const double zmax = c.model.V.col(2).maxCoeff();
     for (Index v = 1; v < n && picked.size() < 5; v += 5)  // free vertices only (not in a .sel patch)
@@ -425,37 +425,48 @@ TEST_CASE("point handles off the proxies: E' never rises over the rounds and pla
     for (size_t i = 0; i < picked.size(); ++i) {
       c.handles.points.push_back({{picked[i]}, {}});
       const Eigen::RowVector3d p = c.model.V.row(picked[i]);
-      c.targets.points.row(static_cast<Index>(i)) = p + 0.35 * Eigen::RowVector3d(std::sin(3 * p(2)), std::cos(2 * p(0)), 0.5 * p(1));
+      c.targets.points.row(static_cast<Index>(i)) =
+          p + 0.35 * Eigen::RowVector3d(std::sin(3 * p(2)), std::cos(2 * p(0)), 0.5 * p(1));
     }
+    const double diag = bounding_box_diagonal(c.model.V);
     DeformerOptions options;
     options.linear_proxies = 16;
     options.model = kind;
     options.global_rotation = false;
     options.float_rounds = false;
-    Deformer deformer;
-    REQUIRE(deformer.precompute(c.model, options).ok());
-    const ConstraintSummary cs = deformer.set_handles(c.handles);
-    INFO(cs.brief_report());
-    REQUIRE(cs.ok());
-    double previous = std::numeric_limits<double>::infinity();
-    for (int k = 1; k <= 30; ++k) {
-      deformer.reset_pose();
-      deformer.set_rounds(k);
-      const FrameSummary fs = deformer.frame(c.targets, nullptr);
-      REQUIRE(fs.ok());
-      CAPTURE(k, fs.model_energy, previous, fs.rejected_steps);
-      CHECK(fs.model_energy <= previous + 1e-9 * std::abs(previous));
-      previous = fs.model_energy;
+    Converged newton;
+    for (const bool second_order : {false, true}) {
+      CAPTURE(second_order);
+      options.second_order = second_order;
+      Deformer deformer;
+      REQUIRE(deformer.precompute(c.model, options).ok());
+      const ConstraintSummary cs = deformer.set_handles(c.handles);
+      INFO(cs.brief_report());
+      REQUIRE(cs.ok());
+      double previous = std::numeric_limits<double>::infinity();
+      for (int k = 1; k <= 30; ++k) {  // from rest, k rounds or steps: E′ never goes up
+        deformer.reset_pose();
+        deformer.set_rounds(k);
+        const FrameSummary fs = deformer.frame(c.targets, nullptr);
+        REQUIRE(fs.ok());
+        CAPTURE(k, fs.model_energy, previous, fs.rejected_steps);
+        // ARAP takes Newton steps on this stiff set when asked; conformal never.
+        CHECK(fs.second_order == (second_order && kind == ModelKind::Arap));
+        CHECK(fs.model_energy <= previous + 1e-9 * std::abs(previous));
+        previous = fs.model_energy;
+      }
+      if (second_order) newton = converge_reduced(c, options);
     }
+    options.second_order = false;
     options.anderson_window = 0;
     const Converged plain = converge_reduced(c, options);
     options.anderson_window = 5;
     const Converged fast = converge_reduced(c, options);
-    const double diag = bounding_box_diagonal(c.model.V);
-    CAPTURE(plain.rounds, fast.rounds);
+    CAPTURE(plain.rounds, fast.rounds, newton.rounds);
     CHECK(plain.last.fixed_point_residual < 1e-12);
     CHECK(max_distance(plain.V, fast.V) < 1e-6 * diag);
-    CHECK(fast.last.model_energy <= previous + 1e-9 * std::abs(previous));
+    CHECK(max_distance(plain.V, newton.V) < 1e-6 * diag);
+    CHECK(newton.last.model_energy == Approx(fast.last.model_energy).epsilon(1e-9));
   }
 }
 

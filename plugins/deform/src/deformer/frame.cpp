@@ -118,6 +118,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
   summary.model_energy = as.energy;
   summary.rejected_steps = as.rejected;
+  summary.second_order = as.second_order;
   if (!onsite.plain_reason.empty() && st.settings.alternating.anderson_window > 0) {
     summary.message = "plain rounds: " + onsite.plain_reason + " (no acceleration)";
   }

@@ -110,6 +110,8 @@ class ScaledRotationProjection final : public ClusterProjection {
   // ½w_a‖s_a‖²_F = (3/2)·w_a·ψ_a², which moves only the scale's denominator
   // (rotations have constant norm).
   Index proximal_block_size() const override { return 9; }
+  // Rotations without γ: ½yᵀN_S y = Σ_a ½‖s_a‖²·C_a/3 is constant on SO(3).
+  bool rotation_blocks() const override { return psi_max_ <= 1.0 && gamma_ == 0.0; }
   void set_proximal_weights(const Eigen::Ref<const Vector<double>>& weights) override {
     if (weights.size() == 0) {
       proximal_.setZero(g_.d);

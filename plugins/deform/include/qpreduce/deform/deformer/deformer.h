@@ -74,6 +74,12 @@ struct DeformerOptions {
   // converge more slowly than the paper's, and 8 accelerated rounds reach a
   // lower E′ than 8 plain rounds of either. Set 0 with PaperPhase2.
   int anderson_window = 5;
+  // Stiff point-handle sets (qpreduce/alternating.h, "Constraints on y"):
+  // Riemannian Newton steps on E′ over the cluster rotations instead of
+  // rounds, `iterations` of them per frame (ARAP without γ; each costs about
+  // a dozen rounds). false: rounds always (they then crawl on such sets:
+  // docs/robustness.md, "Soak").
+  bool second_order = true;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
   // Phase 2 inputs from a float product in each round
@@ -114,8 +120,13 @@ struct FrameSummary : Outcome {  // Success after a frame
   // Accelerated rounds (DeformerOptions::anderson_window): E′ of the reduced
   // model at the pose's rotations, in the frame of the global rotation (NaN
   // for plain rounds), and how many extrapolations the safeguard rejected.
+  // With second-order steps (second_order below) E′ too, and rejected_steps
+  // counts the steps the energy test refused.
   double model_energy = std::numeric_limits<double>::quiet_NaN();
   int rejected_steps = 0;
+  // This frame took second-order steps (DeformerOptions::second_order on a
+  // stiff point-handle set) instead of rounds: `iterations` counts steps.
+  bool second_order = false;
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
