@@ -106,6 +106,8 @@ void bind_deformer_options(py::module_& m) {
       .rw("anderson_window", &DeformerOptions::anderson_window, "Anderson acceleration window (0 off, 1–16).")
       .rw("second_order", &DeformerOptions::second_order,
           "Newton steps on stiff point-handle sets instead of rounds (default True).")
+      .rw("settle_iterations", &DeformerOptions::settle_iterations,
+          "Least steps of the first frame after set_handles on a stiff set (0 off; default 16).")
       .rw("global_rotation", &DeformerOptions::global_rotation, "Factor out a global rotation. Default True.")
       .rw("float_rounds", &DeformerOptions::float_rounds, "Phase 2 inputs from float products. Default True.")
       .rw("round_threads", &DeformerOptions::round_threads, "OpenMP threads of a frame's rounds. Default 1.")

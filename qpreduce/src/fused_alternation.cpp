@@ -672,6 +672,11 @@ bool FusedAlternation<Scalar>::constrained_y() const {
 }
 
 template <typename Scalar>
+bool FusedAlternation<Scalar>::second_order() const {
+  return model_->second_order;
+}
+
+template <typename Scalar>
 const Vector<double>& FusedAlternation<Scalar>::proximal_weights() const {
   return model_->proximal;
 }

@@ -434,6 +434,7 @@ TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton 
     options.model = kind;
     options.global_rotation = false;
     options.float_rounds = false;
+    options.settle_iterations = 0;  // k steps on every frame below
     Converged newton;
     for (const bool second_order : {false, true}) {
       CAPTURE(second_order);
@@ -456,6 +457,17 @@ TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton 
         previous = fs.model_energy;
       }
       if (second_order) newton = converge_reduced(c, options);
+      // settle_iterations: the first frame after set_handles on a stiff set
+      // takes at least that many steps, the next ones `iterations`.
+      DeformerOptions settle = options;
+      settle.settle_iterations = 16;
+      Deformer d2;
+      REQUIRE(d2.precompute(c.model, settle).ok());
+      REQUIRE(d2.set_handles(c.handles).ok());
+      const FrameSummary first = d2.frame(c.targets, nullptr), second = d2.frame(c.targets, nullptr);
+      const bool stiff = second_order && kind == ModelKind::Arap;
+      CHECK(first.iterations == (stiff ? 16 : settle.iterations));
+      CHECK(second.iterations == settle.iterations);
     }
     options.second_order = false;
     options.anderson_window = 0;
@@ -486,6 +498,9 @@ TEST_CASE("bad acceleration settings give clear errors", "[reference][anderson]"
   CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("tolerance must be finite and ≥ 0"));
   options.tolerance = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("tolerance"));
+  options = DeformerOptions{};
+  options.settle_iterations = -1;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("settle_iterations must be in [0, 10000]"));
   AlternatingOptions ao;
   ao.anderson_window = 0;
   CHECK(ao.is_valid(nullptr));

@@ -109,6 +109,10 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   rotate_clusters(model.d, r0t, pose.S, &work.s_local);
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
+  // A stiff set's first frame is a cold start (DeformerOptions::settle_iterations).
+  if (!onsite.settled && opts.second_order && onsite.fused.second_order() && model.projection->rotation_blocks())
+    opts.iterations = std::max(opts.iterations, st.settings.settle_iterations);
+  st.onsite.settled = true;
   const bool tied = !onsite.tied_patches.empty();
   if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);

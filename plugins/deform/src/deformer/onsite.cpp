@@ -163,6 +163,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   onsite.tie_row0 = layout.tie_row0;
   onsite.handles = handles;
   onsite.rows = layout.cols;
+  onsite.settled = false;
   st.work.b.setZero(layout.cols);
   return cs;
 }

@@ -131,6 +131,7 @@ struct OnSite {
   FixedCoordinateSolver<double> phase1;
   FusedAlternation<double> fused;
   bool fused_inputs_plain = false;  // fused was last set with G_z = MN, G_y = MU (MN, MU never change after precompute)
+  bool settled = false;             // a frame ran since set_handles (DeformerOptions::settle_iterations)
   Handles handles;
   Index rows = 0;  // constraint rows
   // Ties of the current handle set: free Rigid patches, their rows start at
@@ -177,6 +178,7 @@ struct Workspace {
 struct Settings {
   AlternatingOptions alternating;
   bool global_rotation = true;
+  int settle_iterations = 16;
 };
 
 // Sets the sizes of `model` in *summary (vertices, elements, proxies,

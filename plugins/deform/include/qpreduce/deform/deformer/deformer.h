@@ -80,6 +80,11 @@ struct DeformerOptions {
   // a dozen rounds). false: rounds always (they then crawl on such sets:
   // docs/robustness.md, "Soak").
   bool second_order = true;
+  // On such a set the first frame after set_handles takes at least this many
+  // steps (0: `iterations`): new handles whose targets jump away from the
+  // pose are a cold start, which 8 steps leave up to 40× the settled energy
+  // on the stiffest soak sets (docs/robustness.md, "Soak").
+  int settle_iterations = 16;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
   // Phase 2 inputs from a float product in each round
