@@ -184,6 +184,18 @@ def test_accelerated_rounds_report_the_model_energy():
     assert summary.ok() and math.isfinite(summary.model_energy) and summary.rejected_steps >= 0
 
 
+def test_newton_options_are_exposed_and_checked():
+    opts = deform.DeformerOptions(**OPTIONS)
+    assert opts.second_order is True and opts.settle_iterations == 16
+    deformer, scenario = make_deformer(second_order=False, settle_iterations=0)
+    assert deformer.options.second_order is False and deformer.options.settle_iterations == 0
+    deformer.frame(scenario.frames[-1])
+    assert deformer.last_frame.second_order is False  # patch handles: rounds, never Newton steps
+    V, F, _ = small_cylinder()
+    with pytest.raises(ValueError, match="settle_iterations must be in"):
+        deform.Deformer(V, F, deform.DeformerOptions(**{**OPTIONS, "settle_iterations": -1})).precompute()
+
+
 def test_point_handles_from_vertex_indices_and_weighted_groups():
     V, F, _ = small_cylinder()
     deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS))
