@@ -507,7 +507,9 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       }
       for (Index a = 0; a < d; ++a)
         W.H.middleRows(3 * a, 3).noalias() = W.T.middleCols(3 * a, 3).transpose() * W.QT.middleRows(9 * a, 9);
-      W.H = 0.5 * (W.H + W.H.transpose()).eval();
+      W.Hmu = W.H.transpose();  // symmetrise without a temporary (run does not allocate)
+      W.H += W.Hmu;
+      W.H *= 0.5;
       for (Index a = 0; a < d; ++a) W.H.block<3, 3>(3 * a, 3 * a) += W.curvature[static_cast<size_t>(a)];
       hessian_current = true;
       if (mu < 0.0) mu = 1e-6 * std::max(W.H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
@@ -672,8 +674,9 @@ bool FusedAlternation<Scalar>::constrained_y() const {
 }
 
 template <typename Scalar>
-bool FusedAlternation<Scalar>::second_order() const {
-  return model_->second_order;
+bool FusedAlternation<Scalar>::second_order(const InputProjection<Scalar>& projection,
+                                            const AlternatingOptions& options) const {
+  return model_->second_order && options.second_order && projection.rotation_blocks();
 }
 
 template <typename Scalar>
@@ -801,7 +804,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
                         q * k >= options.parallel_min_entries && q / block >= 2;
   AlternatingSummary summary;
-  if (M.second_order && options.second_order && projection.rotation_blocks()) {
+  if (second_order(projection, options)) {
     prepare_second_order(phase1, k, W);
     summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, y);
   } else if (options.anderson_window > 0) {

@@ -315,9 +315,10 @@ class FusedAlternation {
   // their proximal weights D, one per block of the projection's
   // proximal_block_size() (empty otherwise).
   bool constrained_y() const;
-  // Stiff constraints on y: `run` takes second-order steps with a projection
-  // whose rotation_blocks() is true and AlternatingOptions::second_order.
-  bool second_order() const;
+  // Whether `run` takes second-order steps for this projection and these
+  // options: stiff constraints on y, a projection whose rotation_blocks() is
+  // true, and AlternatingOptions::second_order.
+  bool second_order(const InputProjection<Scalar>& projection, const AlternatingOptions& options) const;
   const Vector<double>& proximal_weights() const;
   // The projection's InputProjection::proximal_block_size(), which the
   // weights D are formed for (0, the default: one scalar weight). Resets

@@ -110,7 +110,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
   // A stiff set's first frame is a cold start (DeformerOptions::settle_iterations).
-  if (!onsite.settled && opts.second_order && onsite.fused.second_order() && model.projection->rotation_blocks())
+  if (!onsite.settled && onsite.fused.second_order(*model.projection, opts))
     opts.iterations = std::max(opts.iterations, st.settings.settle_iterations);
   st.onsite.settled = true;
   const bool tied = !onsite.tied_patches.empty();
