@@ -35,8 +35,9 @@
 // std::invalid_argument and a message, and the frames then go on with the
 // previous handle set.
 // --hostile 1 adds over-determined sets (up to 40 single vertices, or every
-// vertex of a patch of 10–150 as its own handle): least squares in the
-// subspace. These fail today (docs/robustness.md, "Soak").
+// vertex of a patch of 10–150 as its own handle) which the subspace cannot
+// meet: set_handles solves them as soft constraints and says so
+// (DeformerOptions::soften_unreachable_handles; docs/robustness.md, "Soak").
 // Resident memory (/proc/self/statm) is sampled after the warm-up (the first
 // W handle sets, default 10, which begin with the largest set of each kind)
 // and at the end: growth above L KiB (default 1024) fails. Storage for the

@@ -101,6 +101,9 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
       ->check(whole_number_between(0, 16));
   cmd->add_flag("--no-second-order", a->no_second_order,
                 "Rounds even on stiff point-handle sets (default: Newton steps on the rotations there)");
+  cmd->add_flag("--exact-unreachable", a->exact_unreachable,
+                "Keep the exact (least-squares) form of point-handle sets the subspace cannot meet reliably "
+                "(default: soft constraints, with a warning; see docs/robustness.md)");
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")
       ->check(number_between(0, kMaxPenalty));
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(number_between(0, kMaxPenalty));
@@ -183,6 +186,7 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
     options.anderson_window = 0;  // the paper's step runs plain rounds
   }
   options.second_order = !a.no_second_order;
+  options.soften_unreachable_handles = !a.exact_unreachable;
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
   if (a.gamma) options.energy.gamma = *a.gamma;
@@ -320,6 +324,7 @@ void report_model(const Deformer& deformer, const Scenario& scenario, const Defo
   report["rotation_step"] = to_string(options.rotation_fit);
   report["anderson_window"] = options.anderson_window;
   report["second_order"] = options.second_order;
+  report["soften_unreachable_handles"] = options.soften_unreachable_handles;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
   report["gamma"] = options.energy.gamma;

@@ -34,6 +34,7 @@ struct ScenarioArgs {
   double tolerance = 0.0;
   std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
   bool no_second_order = false;        // DeformerOptions::second_order = false
+  bool exact_unreachable = false;      // DeformerOptions::soften_unreachable_handles = false
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

@@ -294,7 +294,10 @@ case("scenes", "proxy counts are used (were ignored)", ["deform", "--scene", "{W
                       '"targets": [[[1, 0, 5]]]}]' % PATCH)}, stdout_words=["7 linear / 3 rotational proxies"])
 HELD = ', "proxies": {"linear": 9}, %s, "handles": [{"vertices": [40, 41, 42, 43, 44, 45, 46, 47], "targets": [[%s]]}]' % (
     PATCH, ", ".join("[%d, %d, 9]" % (i % 3, i % 2) for i in range(8)))
-case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}/s.json"], 0,
+case("scenes", "handles the subspace cannot meet are a warning (soft)", ["deform", "--scene", "{W}/s.json"], 0,
+     ["warning", "cannot meet these handles", "rank 36 in the full space but 33", "soft constraints"],
+     {"s.json": scene(HELD)})
+case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}/s.json", "--exact-unreachable"], 0,
      ["warning", "least-squares sense"], {"s.json": scene(HELD)})
 case("scenes", "least-squares handles with --strict are an error", ["deform", "--scene", "{W}/s.json", "--strict"],
      RUN, ["--strict", "constraints-least-squares"], {"s.json": scene(HELD)})

@@ -7,6 +7,9 @@
 #include "handle_checks.h"
 #include "state.h"
 
+#include <Eigen/Eigenvalues>
+#include <fmt/format.h>
+
 #include <cmath>
 
 #include <algorithm>
@@ -113,6 +116,51 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
   }
 }
 
+// Rank of the handle set's rows in the full space: of A (control rows ×
+// cols) through its Gram matrix AᵀA (cols × cols), eigenvalues above 10⁻¹⁰
+// of the largest (σ above 10⁻⁵ of σ_max). A row that is an exact combination
+// of others (a vertex held twice, a group over handled vertices) leaves an
+// eigenvalue of round-off size, ~10⁻¹⁶; rows of distinct vertices are
+// orthogonal. Only called for sets the subspace solved in the least-squares
+// sense, so its O(cols³) stays off the common path.
+Index full_space_rank(const ConstraintLayout& layout) {
+  if (layout.cols == 0) return 0;
+  Index rows = 0;
+  for (const auto& e : layout.a) rows = std::max<Index>(rows, e.row() + 1);
+  SparseMatrix<double> A(rows, layout.cols);
+  A.setFromTriplets(layout.a.begin(), layout.a.end());  // repeated entries add up, as in reduced_constraints
+  const Eigen::MatrixXd gram = Eigen::MatrixXd(A.transpose() * A);
+  const Eigen::VectorXd lambda =
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(gram, Eigen::EigenvaluesOnly).eigenvalues();
+  const double top = lambda.cwiseAbs().maxCoeff();
+  return top > 0 ? (lambda.array() > 1e-10 * top).count() : 0;
+}
+
+// Why a hard set's exact answer cannot be trusted (DeformerOptions::
+// soften_unreachable_handles), or "": its rank in the subspace (of A_z) is
+// below its rank in the full space, or its condition there is above
+// kSoftCondition (the float basis's round-off, 6·10⁻⁸ relative, times the
+// condition then passes 1 %).
+constexpr double kSoftCondition = 1e5;
+
+std::string unreachable_reason(const ConstraintLayout& layout, const ConstraintSummary& cs) {
+  if (cs.status == Status::ConstraintsLeastSquares) {
+    const Index full_rank = full_space_rank(layout);
+    if (cs.rank >= full_rank) return {};  // merely dependent rows: the subspace meets what the full space can
+    return fmt::format(
+        "their {} constraint rows have rank {} in the full space but {} in the subspace (more point handles than the "
+        "proxies can follow)",
+        cs.m, full_rank, cs.rank);
+  }
+  if (cs.status == Status::Success && cs.condition > kSoftCondition) {
+    return fmt::format(
+        "their {} constraint rows have condition {:.3g} in the subspace, above {:.0e}: the float basis's round-off "
+        "(6·10⁻⁸) alone can move the exact answer by more than 1 %",
+        cs.m, cs.condition, kSoftCondition);
+  }
+  return {};
+}
+
 }  // namespace
 
 namespace detail_deformer {
@@ -151,11 +199,35 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   add_point_rows(model, handles, &layout);
   add_patch_rows(model, handles, &layout);
   const RowMatrixD Ar = reduced_constraints(model, layout);
-  const ConstraintSummary cs =
+  ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+  bool softened = false;
+  // (Not with ties: a free Rigid patch's tie to its cluster must hold exactly.)
+  if (st.settings.soften_unreachable_handles && !options.soft && layout.tied.empty()) {
+    const std::string why = unreachable_reason(layout, cs);
+    if (!why.empty()) {
+      // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
+      ConstraintOptions soft = options;
+      soft.soft = true;
+      ConstraintSummary ss =
+          onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), soft);
+      if (ss.ok()) {
+        ss.status = Status::ConstraintsLeastSquares;
+        ss.message = fmt::format(
+            "the subspace cannot meet these handles reliably: {}; they are met as soft constraints (Eq. 18, δ = "
+            "{:.3g}), the closest fit at bounded energy",
+            why, options.delta);
+        cs = ss;
+        softened = true;
+      } else {  // keep the exact form, as before
+        cs = onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d),
+                                                   options);
+      }
+    }
+  }
   make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
-  onsite.constraints_ok = cs.ok();
+  onsite.constraints_ok = cs.ok() || softened;
   // The energy terms first: the fused rounds read them for point handles,
   // whose rows involve the cluster rotations (alternating.h, "Constraints on y").
   detail_deformer::prepare_energy_terms(model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, &onsite);

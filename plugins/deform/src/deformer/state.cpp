@@ -234,6 +234,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   settings.alternating.anderson_window = options.anderson_window;
   settings.alternating.second_order = options.second_order;
   settings.settle_iterations = options.settle_iterations;
+  settings.soften_unreachable_handles = options.soften_unreachable_handles;
   settings.alternating.float_products = options.float_rounds;
   settings.alternating.threads = options.round_threads;
   settings.global_rotation = options.global_rotation;

@@ -145,7 +145,7 @@ struct OnSite {
   // (empty: they may be accelerated): a tied free Rigid patch, constraints
   // not solved exactly, or a projection without quadratic_term.
   std::string plain_reason;
-  bool constraints_ok = false;  // the set_reduced_constraints status was Success
+  bool constraints_ok = false;  // Success, or softened (DeformerOptions::soften_unreachable_handles)
 };
 
 // Sets onsite->plain_reason for the current handle set (why its rounds
@@ -179,6 +179,7 @@ struct Settings {
   AlternatingOptions alternating;
   bool global_rotation = true;
   int settle_iterations = 16;
+  bool soften_unreachable_handles = true;  // DeformerOptions::soften_unreachable_handles
 };
 
 // Sets the sizes of `model` in *summary (vertices, elements, proxies,

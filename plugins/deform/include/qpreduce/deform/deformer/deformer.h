@@ -85,6 +85,20 @@ struct DeformerOptions {
   // pose are a cold start, which 8 steps leave up to 40× the settled energy
   // on the stiffest soak sets (docs/robustness.md, "Soak").
   int settle_iterations = 16;
+  // A hard handle set the subspace cannot meet reliably: its rows have lower
+  // rank in the subspace than in the full space (more point handles than the
+  // proxies can follow, e.g. every vertex of a region as its own handle), or
+  // condition above 10⁵ there (the float basis's round-off, 6·10⁻⁸, can then
+  // move the exact answer by more than 1 %). Its exact (least-squares) answer
+  // is ill-posed: the singular values decay to round-off without a gap, and
+  // fitting targets along them blows the pose up (docs/robustness.md, "Soak",
+  // hostile sets). true: set_handles solves such a set as soft constraints
+  // (Eq. 18, ConstraintOptions::delta), bounded, and returns
+  // ConstraintsLeastSquares with the reason. Sets that are merely dependent
+  // (a vertex held twice, a group over handled vertices) have the same rank
+  // in both spaces and stay exact; so do sets that tie a free Rigid patch.
+  // false: the exact (least-squares) form always.
+  bool soften_unreachable_handles = true;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
   // Phase 2 inputs from a float product in each round
