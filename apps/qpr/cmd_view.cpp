@@ -30,7 +30,8 @@ int run_view(ViewArgs& a) {
   for (const auto& [path, what] : {std::pair{&a.view.screenshot, "screenshot"},
                                    {&a.view.out_mesh, "mesh"},
                                    {&a.view.stats_json, "stats"},
-                                   {&a.view.window_screenshot, "window screenshot"}})
+                                   {&a.view.window_screenshot, "window screenshot"},
+                                   {&a.view.window_log, "window log"}})
     if (!path->empty()) qpreduce::check_destination(*path, what);
   LoadedScenario ls = load_scenario(a);
   viewer::ViewerOptions& o = a.view;
@@ -84,10 +85,13 @@ void register_view(CLI::App& app) {
   add_refine_options(cmd, &a->refine);
   cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--max-frames", a->view.max_frames, "Interactive: close after N frames (smoke tests)")
+  cmd->add_option("--max-frames", a->view.max_frames,
+                  "Interactive: close after N frames (smoke tests; with --replay, N frames after the precompute)")
       ->check(whole_number_between(0, 1000000000));
   cmd->add_option("--window-screenshot", a->view.window_screenshot,
                   "Interactive with --max-frames: save the whole window (panels too) at the last frame");
+  cmd->add_option("--window-log", a->view.window_log,
+                  "Interactive: write a JSON log of every frame (times, refine start / shown / cancel) at exit");
   cmd->callback([a = a]() { run_guarded("view", [&] { return run_view(*a); }); });
 }
 

@@ -4,7 +4,10 @@
 #include "modes.h"
 #include "view_support.h"
 
+#include "app_support.h"
+
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 #include <imgui.h>
 #include <backends/imgui_impl_glfw.h>
 #include <backends/imgui_impl_opengl3.h>
@@ -68,7 +71,15 @@ Interactive::~Interactive() {
 
 int Interactive::run() {
   int frame = 0;
+  const bool logging = !o_.window_log.empty();
   while (!glfwWindowShouldClose(context_.window())) {
+    if (logging) {
+      const double now = glfwGetTime();
+      if (!log_.empty()) log_.back().frame_ms = 1e3 * (now - log_.back().start_s);
+      log_.push_back({});
+      log_.back().start_s = now;
+      frame_log_ = &log_.back();
+    }
     glfwPollEvents();
     if (session_.poll()) on_precomputed();
     ImGui_ImplOpenGL3_NewFrame();
@@ -86,6 +97,7 @@ int Interactive::run() {
       if (ready_ && !showing_refined_) {
         try {
           stats_ = session_.step(&renderer_);
+          if (frame_log_ != nullptr) frame_log_->stepped = true;
           smooth();
         } catch (const std::exception& e) {
           message_ = e.what();
@@ -112,12 +124,42 @@ int Interactive::run() {
     ImGui::Render();
     glViewport(0, 0, fb_w_, fb_h_);
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-    const bool last = o_.max_frames > 0 && ++frame >= o_.max_frames;
+    // With a replay, the frames count from the end of the precompute (the
+    // replay starts then), so that a test sees all of it on any machine.
+    const bool counting = o_.replay.empty() || ready_;
+    const bool last = o_.max_frames > 0 && counting && ++frame >= o_.max_frames;
     if (last && !o_.window_screenshot.empty()) write_png(o_.window_screenshot, read_window(fb_w_, fb_h_));
     glfwSwapBuffers(context_.window());
+    if (frame_log_ != nullptr) frame_log_->refined_shown = showing_refined_;
     if (last) break;
   }
+  if (logging) {
+    log_.back().frame_ms = 1e3 * (glfwGetTime() - log_.back().start_s);
+    frame_log_ = nullptr;
+    write_window_log();
+  }
   return 0;
+}
+
+void Interactive::write_window_log() const {
+  nlohmann::json frames = nlohmann::json::array();
+  for (const FrameLog& f : log_) {
+    nlohmann::json j = {{"start_s", f.start_s},   {"frame_ms", f.frame_ms}, {"moved", f.moved},
+                        {"stepped", f.stepped}, {"refined_shown", f.refined_shown}};
+    if (!f.event.empty()) j["event"] = f.event;
+    if (f.cancel_ms >= 0) {
+      j["cancel_ms"] = f.cancel_ms;
+      j["worker_state"] = f.worker_state;
+      j["worker_rounds"] = f.worker_rounds;
+    }
+    frames.push_back(std::move(j));
+  }
+  write_json(o_.window_log,
+             {{"format", "qpr-window-log"},
+              {"version", 1},
+              {"refine_after_still_s", o_.refine_after_still_s},
+              {"frames", std::move(frames)}},
+             "window log");
 }
 
 void Interactive::on_precomputed() {
@@ -208,21 +250,34 @@ void Interactive::watch_handles() {
   const auto& handles = session_.handles();
   bool moved = drag_ == Drag::Translate || drag_ == Drag::Rotate || handles.size() != last_transforms_.size();
   for (size_t h = 0; !moved && h < handles.size(); ++h) moved = handles[h].transform != last_transforms_[h];
+  if (frame_log_ != nullptr) frame_log_->moved = moved;
   if (moved) {
     last_transforms_.resize(handles.size());
     for (size_t h = 0; h < handles.size(); ++h) last_transforms_[h] = handles[h].transform;
-    cancel_refine();
+    if (frame_log_ != nullptr && refine_started_) {
+      const RefineStatus before = refine_worker().status();
+      const double t0 = glfwGetTime();
+      cancel_refine();
+      frame_log_->cancel_ms = 1e3 * (glfwGetTime() - t0);
+      frame_log_->event = "refine-cancel";
+      frame_log_->worker_state = to_string(before.state);
+      frame_log_->worker_rounds = before.rounds;
+    } else {
+      cancel_refine();
+    }
   }
   const bool posed = session_.last_pose().rows() == session_.rest().rows() &&
                      (!session_.handle_set().points.empty() || !session_.handle_set().patches.empty());
   if (rest_.update(moved, glfwGetTime()) && auto_refine_ && posed) {
     refine_worker().start(session_.handle_set(), session_.targets(), session_.last_pose());
     refine_started_ = true;
+    if (frame_log_ != nullptr) frame_log_->event = "refine-start";
   }
   if (refine_started_ && !showing_refined_ && refine_worker().poll(&refined_)) {
     session_.show_pose(refined_, &renderer_);
     showing_refined_ = true;
     shown_arap_ = -1.0;
+    if (frame_log_ != nullptr) frame_log_->event = "refine-shown";
   }
 }
 

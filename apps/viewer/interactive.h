@@ -69,6 +69,18 @@ class Interactive {
   // still for o.refine_after_still_s, cancelled as soon as one moves; its
   // pose is drawn (no reduced frames) until then.
   bool auto_refine_ = true, refine_started_ = false, showing_refined_ = false;
+  // The frame log (ViewerOptions::window_log): one entry per displayed frame.
+  struct FrameLog {
+    double start_s = 0.0, frame_ms = 0.0;  // glfwGetTime at the top of the loop; to the next frame's top
+    bool moved = false, stepped = false, refined_shown = false;
+    std::string event;        // "", "refine-start", "refine-shown", "refine-cancel"
+    double cancel_ms = -1.0;  // refine-cancel: time inside cancel_refine()
+    std::string worker_state;  // refine-cancel: the worker's state just before
+    int worker_rounds = -1;    // refine-cancel: its rounds so far (Running)
+  };
+  std::vector<FrameLog> log_;
+  FrameLog* frame_log_ = nullptr;  // this frame's entry (null when not logging)
+  void write_window_log() const;
   RestTimer rest_;
   std::vector<Eigen::Matrix4d> last_transforms_;
   qpreduce::deform::Vertices refined_;

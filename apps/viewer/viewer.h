@@ -26,8 +26,15 @@ struct ViewerOptions {
   std::string out_mesh;            // headless: the last pose is also written here
   std::string stats_json;          // headless: timings, path and GPU/CPU agreement
   std::string replay;              // a recorded handle motion (JSON) to play
-  int max_frames = 0;              // interactive: close after this many frames (0: never; for smoke tests)
+  int max_frames = 0;              // interactive: close after this many frames (0: never; for smoke tests);
+                                   // with a replay, counted from the end of the precompute
   std::string window_screenshot;   // interactive with max_frames: the whole window (panels too) at the last frame
+  // Interactive: a JSON log of every displayed frame, written when the window
+  // closes: its start and length, whether a handle moved, whether the
+  // deformer stepped or the refined pose was shown, and the refine's events
+  // (start, shown, cancel with the time cancel() took and the worker's state
+  // then). What the window test and docs/performance.md read.
+  std::string window_log;
   // Full-space refine (refine_worker.h). Headless, when set: refine the last
   // frame's pose, draw and write the refined pose, report it under "refine".
   // Interactive: the settings of the automatic refine (defaults when unset).
