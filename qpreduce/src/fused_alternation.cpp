@@ -741,6 +741,19 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
     set_explicit_plain(M, phase1, M.Gz, M.Gy);
   }
   correct_for_y(M, phase1);
+  // A stiff set takes second-order steps (run_second_order), which read the
+  // explicit double F_y: an Automatic set that came out factored but stiff
+  // is set again in the explicit form (once per set, O(q·k·μ)), up to
+  // kSecondOrderMaxBlocks blocks (a step factors a 3d × 3d matrix).
+  const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored();
+  if (M.factored && fast != nullptr && form == FusedForm::Automatic && M.q() == M.k() && M.k() % 9 == 0 &&
+      M.k() / 9 <= kSecondOrderMaxBlocks && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0) {
+    M.factored = false;
+    M.float_set = false;
+    const MatD GzT = form_gz_t(M, *fast, M.Gz, false);
+    set_explicit_fast(M, *fast, M.Gy, GzT);
+    correct_for_y(M, phase1);
+  }
   size_workspace(M, *workspace_);
   M.ready = true;
 }

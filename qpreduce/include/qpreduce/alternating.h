@@ -268,6 +268,11 @@ class FusedAlternation {
 
  public:
   static constexpr Index kExplicitMaxEntries = 256 * 256;
+  // Automatic sets beyond kExplicitMaxEntries are factored, but a stiff one
+  // (proximal weights > 0, blocks of 3 × 3) with at most this many blocks is
+  // set explicitly after all, so that it can take second-order steps; larger
+  // ones run the damped rounds (a step factors a 3d × 3d matrix).
+  static constexpr Index kSecondOrderMaxBlocks = 64;
 
   FusedAlternation();
   ~FusedAlternation();

@@ -22,6 +22,7 @@ struct Case {
   DeformableMesh model;
   Handles handles;
   HandleTargets targets;
+  ConstraintOptions constraints;  // for set_handles
 };
 
 inline Case bend_case(bool tet, double angle) {
