@@ -239,6 +239,16 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
             assert np.linalg.norm(Vp - V, axis=1).max() < 0.2 * diagonal  # the top moved 0.09 diagonals
             # soft: within 10⁻⁴ of the diagonal at δ = 10³ (measured 0.8·10⁻⁴); exact: to round-off
             assert deformer.handle_residual(Vp) < (1e-4 * diagonal if soften else 1e-6)
+    # Merely dependent rows (a group over two handled vertices) keep the exact
+    # form, soft or not: the subspace meets what the full space can.
+    deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS))
+    deformer.precompute()
+    few = list(base[::3])
+    summary = deformer.set_handles(few + [(np.array(few[:2]), np.array([0.5, 0.5])), handles[-1]])
+    assert summary.status == qpreduce.Status.ConstraintsLeastSquares
+    assert "least-squares sense" in summary.message and "soft" not in summary.message
+    Vp = deformer.frame(np.ascontiguousarray(np.vstack([V[few], V[few[:2]].mean(axis=0), targets[-1]])))
+    assert deformer.handle_residual(Vp) < 1e-6
 
 
 def test_save_and_load_give_the_same_frames(tmp_path):

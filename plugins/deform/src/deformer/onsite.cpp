@@ -7,7 +7,8 @@
 #include "handle_checks.h"
 #include "state.h"
 
-#include <Eigen/Eigenvalues>
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseQR>
 #include <fmt/format.h>
 
 #include <cmath>
@@ -117,23 +118,26 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
 }
 
 // Rank of the handle set's rows in the full space: of A (control rows ×
-// cols) through its Gram matrix AᵀA (cols × cols), eigenvalues above 10⁻¹⁰
-// of the largest (σ above 10⁻⁵ of σ_max). A row that is an exact combination
-// of others (a vertex held twice, a group over handled vertices) leaves an
-// eigenvalue of round-off size, ~10⁻¹⁶; rows of distinct vertices are
-// orthogonal. Only called for sets the subspace solved in the least-squares
-// sense, so its O(cols³) stays off the common path.
+// cols) by a sparse QR (COLAMD), pivots above 10⁻¹⁰ of the largest column
+// norm. A row that is an exact combination of others (a vertex held twice, a
+// group over handled vertices) leaves a pivot of round-off size; rows of
+// distinct vertices are orthogonal, so the factorization stays as sparse as
+// A even for thousands of handles. Only called for sets the subspace solved
+// in the least-squares sense.
 Index full_space_rank(const ConstraintLayout& layout) {
   if (layout.cols == 0) return 0;
   Index rows = 0;
   for (const auto& e : layout.a) rows = std::max<Index>(rows, e.row() + 1);
   SparseMatrix<double> A(rows, layout.cols);
   A.setFromTriplets(layout.a.begin(), layout.a.end());  // repeated entries add up, as in reduced_constraints
-  const Eigen::MatrixXd gram = Eigen::MatrixXd(A.transpose() * A);
-  const Eigen::VectorXd lambda =
-      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(gram, Eigen::EigenvaluesOnly).eigenvalues();
-  const double top = lambda.cwiseAbs().maxCoeff();
-  return top > 0 ? (lambda.array() > 1e-10 * top).count() : 0;
+  A.makeCompressed();
+  double top = 0.0;
+  for (Index j = 0; j < A.cols(); ++j) top = std::max(top, A.col(j).norm());
+  if (!(top > 0.0)) return 0;
+  Eigen::SparseQR<SparseMatrix<double>, Eigen::COLAMDOrdering<int>> qr;
+  qr.setPivotThreshold(1e-10 * top);
+  qr.compute(A);
+  return qr.info() == Eigen::Success ? qr.rank() : 0;
 }
 
 // Why a hard set's exact answer cannot be trusted (DeformerOptions::
@@ -209,6 +213,10 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
       ConstraintOptions soft = options;
       soft.soft = true;
+      // With more rows than the subspace has coordinates, the fast path's
+      // range-space form works on m × m matrices (O(m³)); the null-space form
+      // solves with H_r + 2δA_rᵀA_r (p × p) instead.
+      if (static_cast<Index>(Ar.rows()) > static_cast<Index>(Ar.cols())) soft.fast_path = false;
       ConstraintSummary ss =
           onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), soft);
       if (ss.ok()) {
@@ -227,7 +235,10 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   }
   make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
-  onsite.constraints_ok = cs.ok() || softened;
+  // A softened set gets Phase 1's energy terms (its rounds then step on E′)
+  // only with at most as many rows as the subspace has coordinates: the
+  // soft terms hold an m × m matrix (Λ_b), O(m²) memory and work per round.
+  onsite.constraints_ok = cs.ok() || (softened && Ar.rows() <= Ar.cols());
   // The energy terms first: the fused rounds read them for point handles,
   // whose rows involve the cluster rotations (alternating.h, "Constraints on y").
   detail_deformer::prepare_energy_terms(model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, &onsite);

@@ -94,7 +94,9 @@ struct DeformerOptions {
   // fitting targets along them blows the pose up (docs/robustness.md, "Soak",
   // hostile sets). true: set_handles solves such a set as soft constraints
   // (Eq. 18, ConstraintOptions::delta), bounded, and returns
-  // ConstraintsLeastSquares with the reason. Sets that are merely dependent
+  // ConstraintsLeastSquares with the reason; with at most as many rows as
+  // the subspace has coordinates its rounds step on E′ (energy terms), with
+  // more they run plain (the terms would be m × m). Sets that are merely dependent
   // (a vertex held twice, a group over handled vertices) have the same rank
   // in both spaces and stay exact; so do sets that tie a free Rigid patch.
   // false: the exact (least-squares) form always.
