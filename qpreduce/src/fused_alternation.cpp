@@ -609,7 +609,9 @@ void prepare_second_order(const FixedCoordinateSolver<double>& phase1, Index k, 
     W.QT.resize(k, t);
     W.H.resize(t, t);
     W.Hmu.resize(t, t);
-    W.ldlt = Eigen::LDLT<Matrix<double>>(t);
+    // (W.ldlt allocates on its first compute() and reuses that storage; it is
+    // not assigned a sized LDLT here: Eigen's LDLT(Index) leaves its info
+    // uninitialised, and the move would read it, which UBSan reports.)
     W.curvature.resize(static_cast<size_t>(d));
   }
   W.y_try.resize(k);
