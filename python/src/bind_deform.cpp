@@ -109,8 +109,8 @@ void bind_deformer_options(py::module_& m) {
       .rw("settle_iterations", &DeformerOptions::settle_iterations,
           "Least steps of the first frame after set_handles on a stiff set (0 off; default 16).")
       .rw("soften_unreachable_handles", &DeformerOptions::soften_unreachable_handles,
-          "Handle sets the subspace cannot meet reliably also run as soft constraints; a frame shows the soft pose "
-          "when the exact one strays (default True).")
+          "Handle sets the subspace cannot meet reliably (rank below the full space's, or condition above 1e5) "
+          "are met as soft constraints, with the reason in set_handles' message (default True).")
       .rw("global_rotation", &DeformerOptions::global_rotation, "Factor out a global rotation. Default True.")
       .rw("float_rounds", &DeformerOptions::float_rounds, "Phase 2 inputs from float products. Default True.")
       .rw("round_threads", &DeformerOptions::round_threads, "OpenMP threads of a frame's rounds. Default 1.")

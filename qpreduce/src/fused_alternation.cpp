@@ -256,6 +256,12 @@ void form_proximal_weights(FusedModel& M, Index k) {
   for (Index a = 0; a < blocks; ++a) M.proximal_entries.segment(s * a, s).setConstant(M.proximal(a));
 }
 
+// Damped rounds (some proximal weight > 0) on blocks of 3 × 3 with q = k:
+// the stiff sets that second-order steps are for (once the weights are formed).
+bool stiff_rotation_set(const FusedModel& M) {
+  return M.q() == M.k() && M.k() % 9 == 0 && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0;
+}
+
 // Constraints on y (alternating.h): F_b ← F_b − A_yᵀΛ_b, F_y ← F_y − A_yᵀΛ_y
 // + D when Phase 1 has its energy terms, A_y ≠ 0 and q = k.
 void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
@@ -290,7 +296,7 @@ void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
   form_proximal_weights(M, k);
   // Damped rounds (some w_j > 0) crawl on stiff sets: second-order steps
   // there, in the explicit double form, for blocks of 3 × 3.
-  M.second_order = !M.factored && !M.float_set && k % 9 == 0 && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0;
+  M.second_order = !M.factored && !M.float_set && stiff_rotation_set(M);
   if (M.factored) {
     if (M.proximal.maxCoeff() > 0.0) M.factored_rounds.shift = M.proximal_entries;
   } else {
@@ -748,8 +754,8 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   // is set again in the explicit form (once per set, O(q·k·μ)), up to
   // kSecondOrderMaxBlocks blocks (a step factors a 3d × 3d matrix).
   const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored();
-  if (M.factored && fast != nullptr && form == FusedForm::Automatic && M.q() == M.k() && M.k() % 9 == 0 &&
-      M.k() / 9 <= kSecondOrderMaxBlocks && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0) {
+  if (M.factored && fast != nullptr && form == FusedForm::Automatic && M.k() / 9 <= kSecondOrderMaxBlocks &&
+      stiff_rotation_set(M)) {
     M.factored = false;
     M.float_set = false;
     const MatD GzT = form_gz_t(M, *fast, M.Gz, false);

@@ -94,7 +94,9 @@ struct RangeSpaceOperators {
 
 // The fast path for the constraints A (m × p, unscaled, finite) under
 // `options` (soft, delta, rank_tolerance; the BLAS threads are the caller's):
-// range_space_rank, then the bordered operators. true: *out holds the operators and *summary its status (Success), message,
+// range_space_rank, then the bordered operators (not taken for soft
+// constraints with more rows than columns, m > p: the null-space method is
+// then cheaper). true: *out holds the operators and *summary its status (Success), message,
 // rank and condition (summary->m is set either way). false: not taken; the
 // caller runs the null-space method (and overwrites the summary).
 bool range_space_operators(const RangeSpace& rs, const Matrix<double>& A, const ConstraintOptions& options,

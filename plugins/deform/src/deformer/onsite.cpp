@@ -213,10 +213,6 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
       ConstraintOptions soft = options;
       soft.soft = true;
-      // With more rows than the subspace has coordinates, the fast path's
-      // range-space form works on m × m matrices (O(m³)); the null-space form
-      // solves with H_r + 2δA_rᵀA_r (p × p) instead.
-      if (static_cast<Index>(Ar.rows()) > static_cast<Index>(Ar.cols())) soft.fast_path = false;
       ConstraintSummary ss =
           onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), soft);
       if (ss.ok()) {
