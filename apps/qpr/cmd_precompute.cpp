@@ -1,7 +1,9 @@
 // `qpr precompute MESH … --backend mumps --cache OUT`, under `mpirun -np K`:
 // the deformer's precompute with its subspace built by MUMPS over the K ranks
-// (qpreduce::distributed), the model cache written by rank 0 in the format
-// `qpr deform --cache` loads (docs/scaling.md). Built with QPREDUCE_WITH_MPI.
+// (qpreduce::distributed, Deformer::precompute_part: each rank keeps its rows
+// of the basis), the model cache written by rank 0 with every rank's rows of
+// the float basis, in the format `qpr deform --cache` loads
+// (docs/scaling.md). Built with QPREDUCE_WITH_MPI.
 // No math here: the plugin assembles, qpreduce::distributed builds.
 #include "commands.h"
 #include "deform_run.h"
@@ -16,10 +18,12 @@
 #include <fmt/format.h>
 #include <mpi.h>
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <functional>
+#include <memory>
 #include <stdexcept>
 #include <vector>
 
@@ -32,8 +36,19 @@ using qpreduce::distributed::DistributedSummary;
 struct PrecomputeArgs : ScenarioArgs {
   std::string cache;
   std::string backend = "mumps";
-  int block = 16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
+  int block =
+      16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
+  bool trace_memory = false;
 };
+
+double current_rss_megabytes() {
+  std::FILE* f = std::fopen("/proc/self/statm", "r");
+  long pages = 0, resident = 0;
+  if (f == nullptr) return 0.0;
+  if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
+  std::fclose(f);
+  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
+}
 
 double peak_rss_megabytes() {
   rusage usage{};
@@ -42,24 +57,79 @@ double peak_rss_megabytes() {
 }
 
 // The deformer's subspace step on MUMPS: every rank hands over its rows of
-// H_u; N and UD are gathered to rank 0 column by column, the other ranks end
-// precompute after the collective build with Status::NotRun.
-qpreduce::deform::Deformer::SubspaceBuilder mumps_builder(const MpiSession& mpi, int block,
-                                                          DistributedSummary* record) {
-  return [&mpi, block, record](const qpreduce::SparseMatrix<double>& H, const qpreduce::SparseMatrix<double>& C,
-                               const qpreduce::SparseMatrix<double>& D, const qpreduce::SubspaceOptions& options,
-                               qpreduce::VariationalSubspace<double>* B, qpreduce::Matrix<double>* Hr,
-                               qpreduce::Matrix<double>* BtD) {
+// H_u and keeps its rows of N and UD (Deformer::precompute_part); nothing is
+// gathered.
+qpreduce::deform::Deformer::PartBuilder mumps_builder(int block, DistributedSummary* record) {
+  return [block, record](const qpreduce::SparseMatrix<double>& H, const qpreduce::SparseMatrix<double>& C,
+                         const qpreduce::SparseMatrix<double>& D, const qpreduce::SubspaceOptions& options,
+                         qpreduce::deform::Deformer::SubspacePart* part) {
     qpreduce::SubspaceOptions opts = options;
     opts.block_size = block;
-    *record = qpreduce::distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, H, C, D, opts, {}, 0, B, Hr, BtD);
-    qpreduce::SubspaceSummary summary = *record;
-    if (!summary.ok()) return summary;
-    if (mpi.rank != 0) {
-      summary.status = qpreduce::Status::NotRun;
-      summary.message = "the subspace was gathered on rank 0";
+    const auto rows = qpreduce::distributed::owned_rows(H.rows(), MPI_COMM_WORLD);
+    qpreduce::distributed::DistributedSubspace mine;
+    *record = qpreduce::distributed::build_subspace_mumps(MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D,
+                                                          opts, {}, &mine);
+    part->first_row = mine.rows.begin;
+    part->N_rows = std::move(mine.N_rows);
+    part->UD_rows = std::move(mine.UD_rows);
+    part->Hr = std::move(mine.Hr);
+    part->BtD = std::move(mine.BtD);
+    return qpreduce::SubspaceSummary(*record);
+  };
+}
+
+void sum_over_ranks(qpreduce::Matrix<double>* M) {
+  MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+}
+
+// The float basis travels to rank 0 in chunks of this many rows (p floats
+// each): rank 0 holds its own rows and one chunk, never the whole basis.
+constexpr qpreduce::Index kChunkRows = 4096;
+
+// Rank r > 0: its rows of the reconstruction basis to rank 0, a header
+// (first row, rows) and then the rows chunk by chunk.
+void send_basis_rows(const qpreduce::deform::Deformer& deformer) {
+  const auto rows = deformer.basis_rows();
+  const auto& basis = deformer.reconstruction_basis();
+  const long long header[2] = {static_cast<long long>(rows.first), static_cast<long long>(rows.count)};
+  MPI_Send(header, 2, MPI_LONG_LONG, 0, 0, MPI_COMM_WORLD);
+  for (qpreduce::Index i = 0; i < rows.count; i += kChunkRows) {
+    const qpreduce::Index c = std::min(kChunkRows, rows.count - i);
+    MPI_Send(basis.row(i).data(), static_cast<int>(c * basis.cols()), MPI_FLOAT, 0, 1, MPI_COMM_WORLD);
+  }
+}
+
+// Rank 0: the blocks for Deformer::save, its own rows first, then rank 1's,
+// …, each in chunks as they arrive.
+qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::deform::Deformer& deformer, int ranks) {
+  struct Source {
+    int rank = 0;
+    qpreduce::Index first = 0, count = 0, done = 0;
+  };
+  auto at = std::make_shared<Source>();
+  const auto own = deformer.basis_rows();
+  at->first = own.first;
+  at->count = own.count;
+  return [&deformer, ranks, at](qpreduce::Index* first, qpreduce::deform::Deformer::BasisRows* block) {
+    const qpreduce::Index p = deformer.reconstruction_basis().cols();
+    while (at->done == at->count) {  // the next rank's header
+      if (++at->rank >= ranks) return false;
+      long long header[2] = {0, 0};
+      MPI_Recv(header, 2, MPI_LONG_LONG, at->rank, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+      at->first = header[0];
+      at->count = header[1];
+      at->done = 0;
     }
-    return summary;
+    const qpreduce::Index c = std::min(kChunkRows, at->count - at->done);
+    block->resize(c, p);
+    if (at->rank == 0) {
+      *block = deformer.reconstruction_basis().middleRows(at->done, c);
+    } else {
+      MPI_Recv(block->data(), static_cast<int>(c * p), MPI_FLOAT, at->rank, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    }
+    *first = at->first + at->done;
+    at->done += c;
+    return true;
   };
 }
 
@@ -77,25 +147,38 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   qpreduce::deform::Deformer deformer;
   DistributedSummary dist;
   const qpreduce::Timer total;
-  const auto pre = a.backend == "mumps"
-                       ? deformer.precompute(ls.scenario.model, ls.options, {}, mumps_builder(mpi, a.block, &dist))
-                       : deformer.precompute(ls.scenario.model, ls.options);
+  // --trace-memory: every rank's peak and current RSS at each stage.
+  const qpreduce::deform::ProgressFn trace = [&](const std::string& stage, double) {
+    if (!a.trace_memory) return;
+    std::fprintf(stderr, "rank %d at %s: peak %.0f MB, now %.0f MB\n", mpi.rank, stage.c_str(), peak_rss_megabytes(),
+                 current_rss_megabytes());
+  };
+  const auto pre = a.backend == "mumps" ? deformer.precompute_part(ls.scenario.model, ls.options, trace,
+                                                                   mumps_builder(a.block, &dist), sum_over_ranks)
+                                        : deformer.precompute(ls.scenario.model, ls.options, trace);
+  if (a.backend == "mumps" && !dist.ok()) {  // the same status on every rank
+    if (mpi.rank == 0) std::fprintf(stderr, "qpr precompute: %s\n", dist.brief_report().c_str());
+    return 3;
+  }
+  if (!pre.ok()) {
+    if (mpi.rank == 0)
+      std::fprintf(stderr, "qpr precompute: %s: %s\n", qpreduce::to_string(pre.status), pre.message.c_str());
+    return 3;
+  }
+  trace("saving", 1.0);
+  // The cache, written by rank 0 with every rank's rows of the float basis.
+  if (mpi.rank == 0) {
+    deformer.save(a.cache, receive_basis_rows(deformer, mpi.size));
+  } else {
+    send_basis_rows(deformer);
+  }
   const double seconds = total.seconds();
   // Every rank's peak memory, printed by rank 0.
   const double mine = peak_rss_megabytes();
   std::vector<double> peaks(static_cast<size_t>(mpi.size));
   MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
-  if (a.backend == "mumps" && !dist.ok()) {
-    if (mpi.rank == 0) std::fprintf(stderr, "qpr precompute: %s\n", dist.brief_report().c_str());
-    return 3;
-  }
   if (mpi.rank != 0) return 0;
-  if (!pre.ok()) {
-    std::fprintf(stderr, "qpr precompute: %s: %s\n", qpreduce::to_string(pre.status), pre.message.c_str());
-    return 3;
-  }
-  deformer.save(a.cache);
-  std::printf("%s: precomputed with %s on %d rank(s) in %.2f s (subspace %.2f s)\n", ls.name.c_str(),
+  std::printf("%s: precomputed with %s on %d rank(s) in %.2f s (subspace %.2f s), cache written\n", ls.name.c_str(),
               a.backend.c_str(), mpi.size, seconds, pre.subspace_seconds);
   if (a.backend == "mumps") {
     std::printf("  MUMPS: ordering %s, factorization %.2f s, solves %.2f s, reduction %.2f s, factor entries %lld, "
@@ -113,7 +196,8 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
 struct GmrfArgs {
   long side = 300, candidates = 200;
   std::string backend = "mumps";
-  int block = 16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
+  int block =
+      16;  // the host holds one n × block right-hand side: 16 keeps it small at the same speed (docs/scaling.md)
 };
 
 // The engine alone on the seeded GMRF grid (qpreduce/problems, families.h):
@@ -160,10 +244,11 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
   std::vector<double> peaks(static_cast<size_t>(mpi.size));
   MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
   if (mpi.rank != 0) return summary.ok() ? 0 : 3;
-  std::printf("gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",
-              a.side, a.side, static_cast<long long>(family.n()), static_cast<long long>(family.d()),
-              static_cast<long long>(family.k()), a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
-              summary.brief_report().c_str(), detail.c_str());
+  std::printf(
+      "gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",
+      a.side, a.side, static_cast<long long>(family.n()), static_cast<long long>(family.d()),
+      static_cast<long long>(family.k()), a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
+      summary.brief_report().c_str(), detail.c_str());
   for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
   return summary.ok() ? 0 : 3;
 }
@@ -172,14 +257,18 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
 
 void register_precompute(CLI::App& app) {
   auto [cmd, a] = add_command<PrecomputeArgs>(
-      app, "precompute", "Precompute a deformation model into a cache, on MUMPS over MPI (mpirun -np K qpr precompute …)");
+      app, "precompute",
+      "Precompute a deformation model into a cache, on MUMPS over MPI (mpirun -np K qpr precompute …)");
   add_scenario_options(cmd, a.get());
   cmd->add_option("--cache", a->cache, "Model cache to write (qpr deform --cache loads it)")->required();
   cmd->add_option("--backend", a->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
   cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve")
       ->capture_default_str();
-  cmd->callback([a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
+  cmd->add_flag("--trace-memory", a->trace_memory,
+                "Print every rank's peak and current resident memory at each precompute stage (stderr)");
+  cmd->callback(
+      [a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
 
   auto [gmrf, g] = add_command<GmrfArgs>(
       app, "precompute-gmrf", "Subspace build of the seeded GMRF grid family, for scaling runs (mpirun -np K …)");
@@ -188,7 +277,8 @@ void register_precompute(CLI::App& app) {
   gmrf->add_option("--backend", g->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
   gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")->capture_default_str();
-  gmrf->callback([g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
+  gmrf->callback(
+      [g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
 }
 
 }  // namespace qpr

@@ -133,6 +133,11 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceS
   if (!solver.ready()) {
     throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
   }
+  if (!solver.has_basis()) {
+    throw std::invalid_argument(
+        "FixedCoordinateSolver::set_constraints: the subspace solver holds no basis B = [N UD] (restored without "
+        "it, or released); form A_z, A_y with your copy of B and call set_reduced_constraints");
+  }
   check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
   check_finite("FixedCoordinateSolver::set_constraints: A", A);
   const Timer timer;

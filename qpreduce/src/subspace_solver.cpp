@@ -97,6 +97,16 @@ void SubspaceSolver<Scalar>::require_constrained(const char* what) const {
 }
 
 template <typename Scalar>
+void SubspaceSolver<Scalar>::require_basis(const char* what) const {
+  require_ready(what);
+  if (!has_basis_) {
+    throw std::invalid_argument(std::string(what) +
+                                ": this solver holds no basis B = [N UD] (restored without it, or released); "
+                                "form A_r = AᵀB with your copy of B and use the reduced calls");
+  }
+}
+
+template <typename Scalar>
 SubspaceSummary SubspaceSolver<Scalar>::precompute(const SparseMatrix<Scalar>& H, const SparseMatrix<Scalar>& C,
                                                    const SparseMatrix<Scalar>& D, const SubspaceOptions& options) {
   ready_ = constrained_ = false;
@@ -104,14 +114,36 @@ SubspaceSummary SubspaceSolver<Scalar>::precompute(const SparseMatrix<Scalar>& H
   SubspaceSummary summary = detail::build_subspace_with_extras(H, C, D, options, &subspace_, &extras);
   if (!summary.ok()) return summary;
   n_ = H.rows();
+  d_ = subspace_.N.cols();
+  k_ = subspace_.UD.cols();
+  has_basis_ = true;
   // H_r = BᵀHB, from the build's blocked residual pass (subspace_internal.h).
   Hr_d_ = std::move(extras.Hr);
   BtD_d_ = std::move(extras.BtD);
   Hr_ = Hr_d_.template cast<Scalar>();
   BtD_ = BtD_d_.template cast<Scalar>();
+  compute_basis_norms();
   prepare_fast_path(options.reduced_lift_tolerance);
   ready_ = true;
   return summary;
+}
+
+template <typename Scalar>
+void SubspaceSolver<Scalar>::set_reduced(const char* what, Index p, Index k, Matrix<double> Hr, Matrix<double> BtD) {
+  check_size(fmt::format("{}: H_r rows", what).c_str(), p, Hr.rows());
+  check_size(fmt::format("{}: H_r cols", what).c_str(), p, Hr.cols());
+  check_size(fmt::format("{}: BᵀD rows", what).c_str(), p, BtD.rows());
+  check_size(fmt::format("{}: BᵀD cols", what).c_str(), k, BtD.cols());
+  check_finite(fmt::format("{}: H_r", what).c_str(), Hr);
+  check_finite(fmt::format("{}: BᵀD", what).c_str(), BtD);
+  const double asym = (Hr - Hr.transpose()).norm();
+  if (asym > 1e-12 * std::max(1.0, Hr.norm())) {
+    throw std::invalid_argument(fmt::format("{}: H_r is not symmetric (‖H_r − H_rᵀ‖ = {:.3e})", what, asym));
+  }
+  Hr_d_ = std::move(Hr);
+  BtD_d_ = std::move(BtD);
+  Hr_ = Hr_d_.template cast<Scalar>();
+  BtD_ = BtD_d_.template cast<Scalar>();
 }
 
 template <typename Scalar>
@@ -119,30 +151,58 @@ void SubspaceSolver<Scalar>::restore(VariationalSubspace<Scalar> subspace, Matri
                                      const SubspaceOptions& options) {
   ready_ = constrained_ = false;
   const Index n = subspace.N.rows(), d = subspace.N.cols(), k = subspace.UD.cols();
-  const Index p = d + k;
   check_size("SubspaceSolver::restore: UD rows", n, subspace.UD.rows());
-  check_size("SubspaceSolver::restore: H_r rows", p, Hr.rows());
-  check_size("SubspaceSolver::restore: H_r cols", p, Hr.cols());
-  check_size("SubspaceSolver::restore: BᵀD rows", p, BtD.rows());
-  check_size("SubspaceSolver::restore: BᵀD cols", k, BtD.cols());
   if (d == 0) throw std::invalid_argument("SubspaceSolver::restore: N has no columns");
   check_finite("SubspaceSolver::restore: N", subspace.N);
   check_finite("SubspaceSolver::restore: UD", subspace.UD);
-  check_finite("SubspaceSolver::restore: H_r", Hr);
-  check_finite("SubspaceSolver::restore: BᵀD", BtD);
-  const double asym = (Hr - Hr.transpose()).norm();
-  if (asym > 1e-12 * std::max(1.0, Hr.norm())) {
-    throw std::invalid_argument(fmt::format("SubspaceSolver::restore: H_r is not symmetric (‖H_r − H_rᵀ‖ = {:.3e})",
-                                            asym));
-  }
+  set_reduced("SubspaceSolver::restore", d + k, k, std::move(Hr), std::move(BtD));
   subspace_ = std::move(subspace);
   n_ = n;
-  Hr_d_ = std::move(Hr);
-  BtD_d_ = std::move(BtD);
-  Hr_ = Hr_d_.template cast<Scalar>();
-  BtD_ = BtD_d_.template cast<Scalar>();
+  d_ = d;
+  k_ = k;
+  has_basis_ = true;
+  compute_basis_norms();
   prepare_fast_path(options.reduced_lift_tolerance);
   ready_ = true;
+}
+
+template <typename Scalar>
+void SubspaceSolver<Scalar>::restore_without_basis(Index n, Index d, Vector<double> basis_norms, Matrix<double> Hr,
+                                                   Matrix<double> BtD, const SubspaceOptions& options) {
+  constexpr const char* what = "SubspaceSolver::restore_without_basis";
+  ready_ = constrained_ = false;
+  if (n < 1 || d < 1)
+    throw std::invalid_argument(fmt::format("{}: need n ≥ 1 and d ≥ 1, got n = {}, d = {}", what, n, d));
+  const Index p = Hr.rows();
+  if (p < d)
+    throw std::invalid_argument(fmt::format("{}: H_r is {} × {}, fewer than d = {} rows", what, p, Hr.cols(), d));
+  check_size(fmt::format("{}: basis norms", what).c_str(), p, basis_norms.size());
+  check_finite(fmt::format("{}: basis norms", what).c_str(), basis_norms);
+  if (basis_norms.size() > 0 && basis_norms.minCoeff() < 0.0) {
+    throw std::invalid_argument(fmt::format("{}: a negative basis column norm", what));
+  }
+  set_reduced(what, p, p - d, std::move(Hr), std::move(BtD));
+  subspace_ = VariationalSubspace<Scalar>{};
+  n_ = n;
+  d_ = d;
+  k_ = p - d;
+  has_basis_ = false;
+  basis_norms_ = std::move(basis_norms);
+  prepare_fast_path(options.reduced_lift_tolerance);
+  ready_ = true;
+}
+
+template <typename Scalar>
+void SubspaceSolver<Scalar>::release_basis() {
+  subspace_ = VariationalSubspace<Scalar>{};
+  has_basis_ = false;
+}
+
+template <typename Scalar>
+void SubspaceSolver<Scalar>::compute_basis_norms() {
+  basis_norms_.resize(d_ + k_);
+  for (Index j = 0; j < d_; ++j) basis_norms_(j) = subspace_.N.col(j).template cast<double>().norm();
+  for (Index j = 0; j < k_; ++j) basis_norms_(d_ + j) = subspace_.UD.col(j).template cast<double>().norm();
 }
 
 template <typename Scalar>
@@ -150,10 +210,6 @@ void SubspaceSolver<Scalar>::prepare_fast_path(double lift_tolerance) {
   static std::atomic<std::uint64_t> generations{0};
   generation_ = ++generations;
   lift_tolerance_ = lift_tolerance;
-  const Index d = this->d(), k = this->k();
-  basis_norms_.resize(d + k);
-  for (Index j = 0; j < d; ++j) basis_norms_(j) = subspace_.N.col(j).template cast<double>().norm();
-  for (Index j = 0; j < k; ++j) basis_norms_(d + j) = subspace_.UD.col(j).template cast<double>().norm();
   // T₂, T₃ for the factored fast path, which only the double solver takes.
   constexpr bool factored_terms = std::is_same_v<Scalar, double>;
   auto range =
@@ -185,7 +241,7 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Sca
                                                           const ConstraintOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
-  require_ready("SubspaceSolver::set_constraints");
+  require_basis("SubspaceSolver::set_constraints");
   check_size("SubspaceSolver::set_constraints: A rows", n_, A.rows());
   check_finite("SubspaceSolver::set_constraints: A", A);
   const Timer timer;
@@ -268,7 +324,8 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
       if (detail::range_space_rank(*range_, Ar, options, &summary)) {
         const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
         // Copies of the solver share the operators: write into a fresh set when shared.
-        if (!factored_ops_ || factored_ops_.use_count() > 1) factored_ops_ = std::make_shared<detail::FactoredOperators>();
+        if (!factored_ops_ || factored_ops_.use_count() > 1)
+          factored_ops_ = std::make_shared<detail::FactoredOperators>();
         factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
                                                options.rank_tolerance,
                                                (Ar * range_->scale.asDiagonal()).squaredNorm(),  // ‖Ā‖_F²
@@ -314,7 +371,7 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
 
 template <typename Scalar>
 void SubspaceSolver<Scalar>::reduce_linear_term(const ConstRef& q, Ref q_r) const {
-  require_ready("SubspaceSolver::reduce_linear_term");
+  require_basis("SubspaceSolver::reduce_linear_term");
   check_size("SubspaceSolver::reduce_linear_term: q size", n_, q.size());
   check_size("SubspaceSolver::reduce_linear_term: q_r size", p(), q_r.size());
   // Column dot products, OpenMP over column blocks of the basis.
@@ -388,7 +445,7 @@ void SubspaceSolver<Scalar>::solve_in_D(const ConstRef& b, const ConstRef& Y, Re
 
 template <typename Scalar>
 void SubspaceSolver<Scalar>::reconstruct(const ConstRef& w, Ref X) const {
-  require_ready("SubspaceSolver::reconstruct");
+  require_basis("SubspaceSolver::reconstruct");
   check_size("SubspaceSolver::reconstruct: w size", p(), w.size());
   check_size("SubspaceSolver::reconstruct: X size", n_, X.size());
   // Row blocks, OpenMP: X_r = N_r·z + UD_r·y.

@@ -1,6 +1,7 @@
 // On the Botsch–Sorkine cactus: the deformer's own (H_u, C, D_u) built by
 // MUMPS over the ranks matches the single-process build (N, UD, H_r, BᵀD)
-// to 1e-8 relative, and precompute goes on to the same reduced operators.
+// to 1e-8 relative on each rank's rows, and Deformer::precompute_part goes on
+// to the same float basis rows, which tile the mesh's rows over the ranks.
 // Skipped with a message when ../shared is absent.
 #include <catch2/catch.hpp>
 
@@ -12,6 +13,7 @@
 #include <mpi.h>
 
 #include <filesystem>
+#include <vector>
 #include <string>
 
 namespace {
@@ -32,50 +34,75 @@ TEST_CASE("MUMPS subspace of the cactus matches CHOLMOD's", "[distributed][data]
     return;
   }
   const deform::TriangleMesh mesh = deform::read_off(dir + "/cactus.off");
-  deform::Scenario scenario =
-      deform::scenario_from_sel_def(mesh.V, deform::read_sel(dir + "/cactus.sel"), deform::read_def(dir + "/cactus.def"));
+  deform::Scenario scenario = deform::scenario_from_sel_def(mesh.V, deform::read_sel(dir + "/cactus.sel"),
+                                                            deform::read_def(dir + "/cactus.def"));
   scenario.model.F = mesh.F;
   int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
 
-  // The builder runs both builds on the deformer's own system.
+  // The builder runs both builds on the deformer's own system; each rank
+  // keeps its rows (Deformer::precompute_part).
   bool compared = false;
-  const deform::Deformer::SubspaceBuilder both = [&](const SparseMatrix<double>& H, const SparseMatrix<double>& C,
-                                                     const SparseMatrix<double>& D, const SubspaceOptions& options,
-                                                     VariationalSubspace<double>* B, MatD* Hr, MatD* BtD) {
+  const deform::Deformer::PartBuilder both = [&](const SparseMatrix<double>& H, const SparseMatrix<double>& C,
+                                                 const SparseMatrix<double>& D, const SubspaceOptions& options,
+                                                 deform::Deformer::SubspacePart* part) {
     SubspaceSolver<double> reference;
     const SubspaceSummary ref = reference.precompute(H, C, D, options);
     REQUIRE(ref.ok());
-    const auto dist = distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, H, C, D, options, {}, 0, B, Hr, BtD);
+    const auto rows = distributed::owned_rows(H.rows(), MPI_COMM_WORLD);
+    distributed::DistributedSubspace mine;
+    const auto dist = distributed::build_subspace_mumps(MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D,
+                                                        options, {}, &mine);
     INFO(dist.brief_report());
     REQUIRE(dist.ok());
-    CHECK(relative_difference(*Hr, reference.reduced_hessian()) < 1e-8);
-    CHECK(relative_difference(*BtD, reference.reduced_linear_map()) < 1e-8);
-    if (rank == 0) {
-      CHECK(relative_difference(B->N, reference.subspace().N) < 1e-8);
-      CHECK(relative_difference(B->UD, reference.subspace().UD) < 1e-8);
-      compared = true;
-      return SubspaceSummary(dist);
-    }
-    SubspaceSummary not_here = dist;
-    not_here.status = Status::NotRun;  // the subspace lives on rank 0
-    return not_here;
+    CHECK(relative_difference(mine.Hr, reference.reduced_hessian()) < 1e-8);
+    CHECK(relative_difference(mine.BtD, reference.reduced_linear_map()) < 1e-8);
+    CHECK(relative_difference(mine.N_rows, reference.subspace().N.middleRows(rows.begin, rows.size())) < 1e-8);
+    CHECK(relative_difference(mine.UD_rows, reference.subspace().UD.middleRows(rows.begin, rows.size())) < 1e-8);
+    compared = true;
+    part->first_row = rows.begin;
+    part->N_rows = std::move(mine.N_rows);
+    part->UD_rows = std::move(mine.UD_rows);
+    part->Hr = std::move(mine.Hr);
+    part->BtD = std::move(mine.BtD);
+    return SubspaceSummary(dist);
   };
-  deform::Deformer distributed_deformer;
-  const auto pre = distributed_deformer.precompute(scenario.model, {}, {}, both);
-  if (rank != 0) {
-    CHECK(pre.status == Status::NotRun);
-    return;
-  }
+  const deform::Deformer::SumOverProcesses sum = [](MatD* M) {
+    MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  };
+  deform::Deformer part;
+  const auto pre = part.precompute_part(scenario.model, {}, {}, both, sum);
   REQUIRE(pre.ok());
   CHECK(compared);
 
-  // The rest of precompute (M_N, M_U, the float basis) agrees too.
+  // The rest of precompute agrees too: this rank's rows of the float basis,
+  // and the reduced operators every rank holds.
   deform::Deformer single;
   REQUIRE(single.precompute(scenario.model).ok());
-  const auto& a = distributed_deformer.reconstruction_basis();
+  const auto rows = part.basis_rows();
+  const auto& a = part.reconstruction_basis();
   const auto& b = single.reconstruction_basis();
-  REQUIRE(a.rows() == b.rows());
+  int ranks = 1;
+  MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+  if (ranks == 1) {
+    CHECK((rows.first == 0 && rows.count == b.rows()));  // one part is the whole: usable as it is
+    CHECK(part.set_handles(scenario.handles).ok());
+  } else {
+    CHECK_THROWS_WITH(part.set_handles(scenario.handles), Catch::Contains("part of a distributed precompute"));
+  }
+  REQUIRE(a.rows() == rows.count);
   REQUIRE(a.cols() == b.cols());
-  CHECK((a - b).norm() / b.norm() < 1e-6);  // float basis: rounding of two doubles that agree to 1e-8
+  CHECK((a - b.middleRows(rows.first, rows.count)).norm() / b.middleRows(rows.first, rows.count).norm() <
+        1e-6);  // float basis: rounding of two doubles that agree to 1e-8
+  // The parts tile the 3n rows in rank order.
+  long long mine[2] = {static_cast<long long>(rows.first), static_cast<long long>(rows.count)};
+  std::vector<long long> all(2 * static_cast<size_t>(ranks));
+  MPI_Allgather(mine, 2, MPI_LONG_LONG, all.data(), 2, MPI_LONG_LONG, MPI_COMM_WORLD);
+  long long covered = 0;
+  for (int r = 0; r < ranks; ++r) {
+    if (all[2 * r + 1] == 0) continue;
+    CHECK(all[2 * r] == covered);
+    covered += all[2 * r + 1];
+  }
+  CHECK(covered == b.rows());
 }

@@ -12,8 +12,8 @@ docs/scaling.md, "What is bit-identical").
 
 Bit for bit, where it holds by construction (the OBJ writer prints each
 coordinate's shortest round-trip form, so equal files are equal doubles):
-  * the 2-rank cache loaded twice gives the same frames: the frames, and the
-    float basis remade on load, are a function of the cache's bytes;
+  * the 2-rank cache loaded twice gives the same frames: the frames are a
+    function of the cache's bytes (the float basis is stored as it is);
   * two caches from `mpirun -np 1 … --backend mumps` are the same file, with
     SCOTCH_PTHREAD_NUMBER=1 (Scotch 7's threaded ordering is not
     reproducible); two 2-rank caches are not compared: MUMPS on more than one

@@ -128,6 +128,69 @@ TEMPLATE_TEST_CASE("solve matches a dense solve of the reduced KKT system for an
   }
 }
 
+TEST_CASE("a solver without its basis solves reduced demands like the original and refuses the others",
+          "[solver][restore]") {
+  const Problem p = in_span_problem(14, 13, 0.0, 22);
+  SubspaceSolver<double> original;
+  REQUIRE(original.precompute(p.H, p.C, p.D).ok());
+  REQUIRE(original.has_basis());
+  const Matrix<double> Ac = gen::gaussian_matrix(original.d(), 3, 5);
+  const Vector<double> b = gen::gaussian_vector(3, 6);
+
+  SubspaceSolver<double> restored;
+  restored.restore_without_basis(original.n(), original.d(), original.basis_norms(),
+                                 Matrix<double>(original.reduced_hessian()),
+                                 Matrix<double>(original.reduced_linear_map()));
+  SubspaceSolver<double> released = original;
+  released.release_basis();
+  for (SubspaceSolver<double>* s : {&restored, &released}) {
+    REQUIRE(s->ready());
+    CHECK_FALSE(s->has_basis());
+    CHECK(s->subspace().N.size() == 0);
+    CHECK(s->n() == original.n());
+    CHECK(s->d() == original.d());
+    CHECK(s->k() == original.k());
+    CHECK(s->basis_norms() == original.basis_norms());
+  }
+  Vector<double> w0(original.p()), w(original.p()), X(original.n()), qr(original.p());
+  REQUIRE(original.set_constraints_in_design(Ac).ok());
+  original.solve_in_D(b, p.Y, w0);
+  for (SubspaceSolver<double>* s : {&restored, &released}) {
+    REQUIRE(s->set_constraints_in_design(Ac).ok());
+    s->solve_in_D(b, p.Y, w);
+    CHECK((w - w0).norm() <= 1e-14 * w0.norm());
+    CHECK_THROWS_WITH(s->set_constraints(p.A), Catch::Contains("holds no basis"));
+    CHECK_THROWS_WITH(s->reconstruct(w, X), Catch::Contains("holds no basis"));
+    CHECK_THROWS_WITH(s->reduce_linear_term(Vector<double>::Ones(original.n()), qr), Catch::Contains("holds no basis"));
+  }
+  // The copy released its basis, the original keeps its own.
+  CHECK(original.has_basis());
+  original.reconstruct(w0, X);
+
+  SECTION("inconsistent parts are refused") {
+    SubspaceSolver<double> bad;
+    const Matrix<double> Hr = original.reduced_hessian();
+    const Matrix<double> BtD = original.reduced_linear_map();
+    const Vector<double> norms = original.basis_norms();
+    CHECK_THROWS_WITH(bad.restore_without_basis(original.n(), original.d(), norms.head(2), Hr, BtD),
+                      Catch::Contains("basis norms"));
+    CHECK_THROWS_WITH(bad.restore_without_basis(original.n(), original.p() + 1, norms, Hr, BtD),
+                      Catch::Contains("fewer than d"));
+    CHECK_THROWS_WITH(bad.restore_without_basis(0, original.d(), norms, Hr, BtD), Catch::Contains("n ≥ 1"));
+    CHECK_THROWS_WITH(bad.restore_without_basis(original.n(), original.d() - 1, norms, Hr, BtD),
+                      Catch::Contains("BᵀD cols"));
+    Vector<double> negative = norms;
+    negative(0) = -1.0;
+    CHECK_THROWS_WITH(bad.restore_without_basis(original.n(), original.d(), negative, Hr, BtD),
+                      Catch::Contains("negative"));
+    Matrix<double> asym = Hr;
+    asym(0, 1) += 1.0;
+    CHECK_THROWS_WITH(bad.restore_without_basis(original.n(), original.d(), norms, asym, BtD),
+                      Catch::Contains("not symmetric"));
+    CHECK_FALSE(bad.ready());
+  }
+}
+
 TEST_CASE("a solver restored from its parts solves like the original", "[solver][restore]") {
   const Problem p = in_span_problem(14, 13, 0.0, 21);
   SubspaceSolver<double> original;

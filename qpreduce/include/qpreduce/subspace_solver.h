@@ -115,6 +115,22 @@ class SubspaceSolver {
   // asymmetric H_r.
   void restore(VariationalSubspace<Scalar> subspace, Matrix<double> Hr, Matrix<double> BtD,
                const SubspaceOptions& options = {});
+  // Restores the reduced solver without the basis: n (rows of B), d (N's
+  // columns), the column norms ‖B_j‖₂ (p; ConstraintOptions::drop_tolerance
+  // uses them), H_r (p×p, symmetric) and BᵀD (p×k, k = p − d). For callers
+  // that keep their own (e.g. float) copy of the basis and form A_r = AᵀB
+  // themselves: solve, solve_in_D, reduce_linear_term_in_D,
+  // set_constraints_in_design and the reduced accessors work; set_constraints,
+  // reduce_linear_term and reconstruct need B and throw std::invalid_argument
+  // saying so. Throws on inconsistent sizes, NaN/Inf, a negative norm or an
+  // asymmetric H_r. has_basis() is false afterwards.
+  void restore_without_basis(Index n, Index d, Vector<double> basis_norms, Matrix<double> Hr, Matrix<double> BtD,
+                             const SubspaceOptions& options = {});
+  // Frees B = [N UD] (n×p) and keeps everything else (the reduced operators,
+  // the constraint set, ‖B_j‖): afterwards as after restore_without_basis.
+  // For a caller that has taken from B what it needs (the deformer's float
+  // reconstruction basis): n·p·sizeof(Scalar) bytes less resident.
+  void release_basis();
 
   // The on-site step for a new constraint set A (n×m, sparse). m may be 0.
   // Throws std::invalid_argument on a wrong row count, NaN, or when called
@@ -144,13 +160,17 @@ class SubspaceSolver {
   void reconstruct(const ConstRef& w, Ref X) const;
 
   bool ready() const { return ready_; }
+  // B = [N UD] is held (false after restore_without_basis or release_basis).
+  bool has_basis() const { return ready_ && has_basis_; }
   bool constrained() const { return constrained_; }
   Index n() const { return n_; }
-  Index d() const { return subspace_.N.cols(); }
-  Index k() const { return subspace_.UD.cols(); }
+  Index d() const { return d_; }
+  Index k() const { return k_; }
   Index p() const { return d() + k(); }
   Index m() const { return m_; }
+  // B = [N UD]; empty (0 × 0 blocks) when !has_basis().
   const VariationalSubspace<Scalar>& subspace() const { return subspace_; }
+  const Vector<double>& basis_norms() const { return basis_norms_; }  // ‖B_j‖₂, p
   const MatrixS& reduced_hessian() const { return Hr_; }  // H_r = BᵀHB, p×p
   const MatrixS& reduced_constraints() const { return Ar_; }  // A_r = AᵀB, m×p
   const MatrixS& reduced_linear_map() const { return BtD_; }   // BᵀD, p×k (q_r = BᵀD·Y)
@@ -165,7 +185,12 @@ class SubspaceSolver {
   using MatD = Matrix<double>;
   void require_ready(const char* what) const;
   void require_constrained(const char* what) const;
-  // The fast path's p×p preparation, ‖B_j‖ and a new generation (precompute, restore).
+  void require_basis(const char* what) const;
+  // Checks and stores H_r and BᵀD (sizes p × p, p × k; finite; H_r symmetric).
+  void set_reduced(const char* what, Index p, Index k, Matrix<double> Hr, Matrix<double> BtD);
+  // ‖B_j‖ from the held basis (precompute, restore).
+  void compute_basis_norms();
+  // The fast path's p×p preparation and a new generation (precompute, restore).
   void prepare_fast_path(double lift_tolerance);
   // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
@@ -194,8 +219,8 @@ class SubspaceSolver {
   // The factored operators of the current constraint set (when factored_);
   // copies of the solver share them until one of them sets new constraints.
   std::shared_ptr<detail::FactoredOperators> factored_ops_;
-  Index n_ = 0, m_ = 0;
-  bool ready_ = false, constrained_ = false, factored_ = false;
+  Index n_ = 0, m_ = 0, d_ = 0, k_ = 0;
+  bool ready_ = false, constrained_ = false, factored_ = false, has_basis_ = false;
 };
 
 }  // namespace qpreduce

@@ -10,11 +10,18 @@
 
 #include <Eigen/Geometry>
 
+#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
+#include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
+#include <utility>
+#include <vector>
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
@@ -113,7 +120,10 @@ TEST_CASE("cache: a loaded model gives the frames of the saved one", "[cache]") 
   const Vertices got = run(loaded, c);
   const double moved = (expected - c.model.V).cwiseAbs().maxCoeff();
   CHECK(moved > 0.1);  // the scenario does deform the mesh
-  CHECK((got - expected).cwiseAbs().maxCoeff() <= 1e-12 * moved);
+  // The file holds the float basis and the reduced operators as they were:
+  // the frames are the same, bit for bit.
+  CHECK(loaded.reconstruction_basis() == original.reconstruction_basis());
+  CHECK(got == expected);
 
   // Runtime options come from the caller, not the file.
   DeformerOptions more = o;
@@ -216,4 +226,176 @@ TEST_CASE("cache: a refused load leaves the session as it was", "[cache][errors]
 
   Deformer empty;
   CHECK_THROWS_AS(empty.save(temp_path("never.qpr")), std::invalid_argument);
+}
+
+namespace {
+
+// K "processes" as threads of this test: the sum of Deformer::precompute_part
+// as a reusable barrier that adds everyone's matrix (an all-reduce).
+class ThreadSum {
+ public:
+  explicit ThreadSum(int parts) : parts_(parts) {}
+  void operator()(Matrix<double>* M) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    const std::uint64_t round = round_;
+    if (arrived_ == 0) {
+      sum_ = *M;
+    } else {
+      sum_ += *M;
+    }
+    if (++arrived_ == parts_) {
+      result_ = sum_;
+      arrived_ = 0;
+      ++round_;
+      done_.notify_all();
+    } else {
+      done_.wait(lock, [&] { return round_ != round; });
+    }
+    *M = result_;
+  }
+
+ private:
+  const int parts_;
+  std::mutex mutex_;
+  std::condition_variable done_;
+  int arrived_ = 0;
+  std::uint64_t round_ = 0;
+  Matrix<double> sum_, result_;
+};
+
+// One single-process build shared by every part: made by the first part
+// that asks (the parts assemble the same H_u, C, D_u). Each part building
+// its own would test CHOLMOD's reproducibility across threads, which does
+// not hold bit for bit (docs/scaling.md, "What is bit-identical").
+struct SharedBuild {
+  std::once_flag once;
+  SubspaceSolver<double> solver;
+  SubspaceSummary summary;
+};
+
+// Part t of K: rows [⌊t·n/K⌋, ⌊(t+1)·n/K⌋) of the shared build.
+Deformer::PartBuilder rows_of_shared_build(SharedBuild* shared, int t, int K) {
+  return [shared, t, K](const SparseMatrix<double>& H, const SparseMatrix<double>& C, const SparseMatrix<double>& D,
+                        const SubspaceOptions& options, Deformer::SubspacePart* part) {
+    std::call_once(shared->once, [&] { shared->summary = shared->solver.precompute(H, C, D, options); });
+    if (!shared->summary.ok()) return shared->summary;
+    const SubspaceSolver<double>& solver = shared->solver;
+    const Index n = H.rows(), begin = t * n / K, end = (t + 1) * n / K;
+    part->first_row = begin;
+    part->N_rows = solver.subspace().N.middleRows(begin, end - begin);
+    part->UD_rows = solver.subspace().UD.middleRows(begin, end - begin);
+    part->Hr = solver.reduced_hessian();
+    part->BtD = solver.reduced_linear_map();
+    return shared->summary;
+  };
+}
+
+}  // namespace
+
+TEST_CASE("cache: a precompute in parts, saved block by block, gives the frames of the whole one",
+          "[cache][parts]") {
+  const Case c = bent_cylinder();  // two patches: their rows of B come from the last part
+  const DeformerOptions o = small_options();
+  Deformer whole;
+  REQUIRE(whole.precompute(c.model, o).ok());
+  SharedBuild shared;
+  Deformer one_part;  // K = 1: the whole basis, from the build the parts share
+  REQUIRE(one_part.precompute_part(c.model, o, {}, rows_of_shared_build(&shared, 0, 1), [](Matrix<double>*) {}).ok());
+  const auto& full = one_part.reconstruction_basis();
+  REQUIRE(full.rows() == whole.reconstruction_basis().rows());
+  CHECK(one_part.basis_rows().first == 0);
+
+  constexpr int K = 3;
+  std::vector<Deformer> parts(K);
+  std::vector<PrecomputeSummary> summaries(K);
+  ThreadSum sum(K);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < K; ++t) {
+    threads.emplace_back([&, t] {
+      summaries[t] = parts[t].precompute_part(c.model, o, {}, rows_of_shared_build(&shared, t, K),
+                                              [&sum](Matrix<double>* M) { sum(M); });
+    });
+  }
+  for (auto& th : threads) th.join();
+  Index covered = 0;
+  for (int t = 0; t < K; ++t) {
+    INFO("part " << t << ": " << summaries[t].message);
+    REQUIRE(summaries[t].ok());
+    const auto rows = parts[t].basis_rows();
+    if (rows.count == 0) continue;
+    CHECK(rows.first == covered);
+    // The rows of the one-part basis, bit for bit (the same doubles, the same products).
+    CHECK(parts[t].reconstruction_basis() == full.middleRows(rows.first, rows.count));
+    covered += rows.count;
+  }
+  CHECK(covered == full.rows());
+  CHECK_THROWS_WITH(parts[0].set_handles(c.scenario.handles), Catch::Contains("part of a distributed precompute"));
+  CHECK_THROWS_WITH(parts[0].save(temp_path("part.qpr")), Catch::Contains("save(path, blocks)"));
+
+  // Saved by part 0 with every part's rows in blocks of 7 rows.
+  int source = 0;
+  Index done = 0;
+  const Deformer::BasisBlocks blocks = [&](Index* first, Deformer::BasisRows* rows) {
+    for (; source < K; ++source, done = 0) {
+      const auto mine = parts[source].basis_rows();
+      if (done == mine.count) continue;
+      const Index c7 = std::min<Index>(7, mine.count - done);
+      *rows = parts[source].reconstruction_basis().middleRows(done, c7);
+      *first = mine.first + done;
+      done += c7;
+      return true;
+    }
+    return false;
+  };
+  const std::string path = temp_path("parts.qpr");
+  parts[0].save(path, blocks);
+  Deformer loaded;
+  REQUIRE(loaded.load(path, c.model, o).ok());
+  CHECK(loaded.reconstruction_basis() == full);
+  const Vertices expected = run(whole, c);
+  const double moved = (expected - c.model.V).cwiseAbs().maxCoeff();
+  // Against the ordinary precompute (its own build) and with M_N, M_U summed
+  // part by part: the doubles agree to round-off, which can move the float
+  // reconstruction of the frame (V′ = B·w in float) by an ulp: 6e-8 of
+  // coordinates up to ~3 here.
+  CHECK((run(loaded, c) - expected).cwiseAbs().maxCoeff() <= 1e-6 * moved);
+  fs::remove(path);
+}
+
+TEST_CASE("cache: basis blocks that do not tile the rows are refused, no file left", "[cache][parts][errors]") {
+  const Case c = bent_cylinder();
+  const DeformerOptions o = small_options();
+  Deformer d;
+  REQUIRE(d.precompute(c.model, o).ok());
+  const auto& B = d.reconstruction_basis();
+  const Index half = B.rows() / 2;
+  const std::string path = temp_path("blocks.qpr");
+  d.save(path);
+  const std::string before = read_all(path);
+  // Blocks given as (first, rows) pairs.
+  auto given = [&](std::vector<std::pair<Index, Deformer::BasisRows>> list) {
+    auto at = std::make_shared<size_t>(0);
+    return Deformer::BasisBlocks([list, at](Index* first, Deformer::BasisRows* rows) {
+      if (*at == list.size()) return false;
+      *first = list[*at].first;
+      *rows = list[*at].second;
+      ++*at;
+      return true;
+    });
+  };
+  const Deformer::BasisRows top = B.topRows(half), bottom = B.bottomRows(B.rows() - half);
+  Deformer::BasisRows nan = bottom;
+  nan(0, 0) = std::numeric_limits<float>::quiet_NaN();
+  CHECK_THROWS_WITH(d.save(path, given({{0, top}})), Catch::Contains("end at row"));
+  CHECK_THROWS_WITH(d.save(path, given({{0, top}, {half + 1, bottom}})), Catch::Contains("was due"));
+  CHECK_THROWS_WITH(d.save(path, given({{0, top}, {0, top}})), Catch::Contains("was due"));
+  CHECK_THROWS_WITH(d.save(path, given({{0, top}, {half, bottom.leftCols(3)}})), Catch::Contains("columns"));
+  CHECK_THROWS_WITH(d.save(path, given({{0, top}, {half, nan}})), Catch::Contains("NaN"));
+  CHECK(read_all(path) == before);  // the earlier cache is untouched
+  CHECK_FALSE(fs::exists(path + ".tmp"));
+  d.save(path, given({{0, top}, {half, bottom}}));
+  Deformer loaded;
+  REQUIRE(loaded.load(path, c.model, o).ok());
+  CHECK(loaded.reconstruction_basis() == B);
+  fs::remove(path);
 }

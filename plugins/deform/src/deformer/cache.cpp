@@ -1,6 +1,6 @@
 // Deformer::save / Deformer::load — the precomputed model on disk.
 //
-// Layout (little-endian, version 3; docs/formats.md):
+// Layout (little-endian, version 4; docs/formats.md):
 //   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
 //   payload  records in a fixed order (below): integers as i64, labels as i32,
 //            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
@@ -8,9 +8,13 @@
 //
 // The payload keeps what precompute was given (rest positions, elements,
 // patches, given clusters and groups, the options that change the result)
-// and what it made (cluster labels, m, the subspace B = [N UD], H_r, BᵀD,
-// M_N, M_U). The float reconstruction basis P·B is recomputed on load
-// (O(n·p)), not stored. load() first checks size and CRC over the whole file,
+// and what it made (cluster labels, m, the float reconstruction basis P·B in
+// row blocks, the patch unknowns' rows of B = [N UD], ‖B_j‖, H_r, BᵀD, M_N,
+// M_U). The double basis B is not stored (nothing after precompute reads it):
+// a process of a distributed precompute writes its rows of P·B as they come
+// (Deformer::save with blocks), and no process holds B whole. A block is
+// i64 first row, i64 rows, rows × p row-major f32; the blocks follow each
+// other in row order and tile the 3n rows. load() first checks size and CRC over the whole file,
 // then parses with every count bounded by the bytes left, then compares the
 // stored inputs with the given ones, and only then replaces the session.
 #include "qpreduce/deform/deformer/deformer.h"
@@ -37,8 +41,9 @@ namespace {
 using detail_deformer::Model;
 
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
-// 2: the model's name and parameters, Q kept or not; 3: the rotation step
-constexpr std::uint32_t kVersion = 3;
+// 2: the model's name and parameters, Q kept or not; 3: the rotation step;
+// 4: the float basis in row blocks instead of the double N, UD
+constexpr std::uint32_t kVersion = 4;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
 constexpr std::streamoff kTrailerBytes = 8 + 4;
@@ -74,6 +79,10 @@ class Writer {
     put<std::int64_t>(M.cols());
     const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> col_major = M;
     bytes(reinterpret_cast<const char*>(col_major.data()), sizeof(T) * static_cast<std::size_t>(M.size()));
+  }
+  // Row-major rows as they are in memory (a block of the float basis).
+  void put_rows(const Deformer::BasisRows& rows) {
+    bytes(reinterpret_cast<const char*>(rows.data()), sizeof(float) * static_cast<std::size_t>(rows.size()));
   }
   template <typename T>
   void put_vector(const std::vector<T>& v) {
@@ -183,6 +192,25 @@ class Reader {
       if (!col_major.allFinite()) throw IoError(path_, 0, fmt::format("{}: NaN or infinite entries", what));
     }
     *M = col_major;
+  }
+  // The float basis, rows × cols, from its row blocks (see the layout).
+  void get_row_blocks(const char* what, Index rows, Index cols, Deformer::BasisRows* out) {
+    out->resize(rows, cols);
+    for (Index covered = 0; covered < rows;) {
+      const auto first = get<std::int64_t>(what);
+      const auto count = get<std::int64_t>(what);
+      if (first != covered || count < 1 || count > rows - covered) {
+        throw IoError(path_, 0, fmt::format("{}: a block of rows [{}, {}) where row {} of {} was due", what, first,
+                                            first + count, covered, rows));
+      }
+      if (cols > 0 && static_cast<std::uint64_t>(count) > left_ / sizeof(float) / static_cast<std::uint64_t>(cols)) {
+        throw IoError(path_, 0, fmt::format("{}: {} × {} entries do not fit in the file", what, count, cols));
+      }
+      auto block = out->middleRows(covered, count);
+      bytes(reinterpret_cast<char*>(block.data()), sizeof(float) * static_cast<std::size_t>(count * cols), what);
+      if (!block.allFinite()) throw IoError(path_, 0, fmt::format("{}: NaN or infinite entries", what));
+      covered += count;
+    }
   }
   template <typename T>
   std::vector<T> get_vector(const char* what) {
@@ -330,27 +358,36 @@ void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh
   }
   model.m = m;
   model.nx = 3 * model.m + 12 * model.s;
-  VariationalSubspace<double> B;
-  Matrix<double> Hr, BtD;
-  r.get_matrix("N", &B.N);
-  r.get_matrix("UD", &B.UD);
+  const Index p = model.nx + 9 * model.d;
+  const Index nine_d = 9 * model.d;
+  const auto rows = r.get<std::int64_t>("basis rows");
+  const auto cols = r.get<std::int64_t>("basis columns");
+  if (rows != 3 * model.n || cols != p) {
+    throw IoError(path, 0, fmt::format("inconsistent sizes: basis {}×{} for n = {}, p = {}", rows, cols, model.n, p));
+  }
+  r.get_row_blocks("reconstruction basis", 3 * model.n, p, &model.basis);
+  model.basis_first = 0;
+  Matrix<double> patch_rows, norms, Hr, BtD;
+  r.get_matrix("patch rows", &patch_rows);
+  r.get_matrix("basis norms", &norms);
   r.get_matrix("H_r", &Hr);
   r.get_matrix("BᵀD", &BtD);
   r.get_matrix("M_N", &model.MN);
   r.get_matrix("M_U", &model.MU);
   r.expect_end();
-  const Index p = model.nx + 9 * model.d;
-  const Index nine_d = 9 * model.d;
-  if (B.N.rows() != model.nu || B.N.cols() != model.nx || B.UD.rows() != model.nu || B.UD.cols() != nine_d ||
+  if (patch_rows.rows() != 12 * model.s || patch_rows.cols() != p || norms.rows() != p || norms.cols() != 1 ||
       model.MN.rows() != nine_d || model.MN.cols() != model.nx || model.MU.rows() != nine_d ||
       model.MU.cols() != nine_d) {
     throw IoError(path, 0,
-                  fmt::format("inconsistent sizes: N {}×{}, UD {}×{}, M_N {}×{}, M_U {}×{} for n_u = {}, p = {}",
-                              B.N.rows(), B.N.cols(), B.UD.rows(), B.UD.cols(), model.MN.rows(), model.MN.cols(),
-                              model.MU.rows(), model.MU.cols(), model.nu, p));
+                  fmt::format("inconsistent sizes: patch rows {}×{}, basis norms {}×{}, M_N {}×{}, M_U {}×{} for "
+                              "s = {}, p = {}",
+                              patch_rows.rows(), patch_rows.cols(), norms.rows(), norms.cols(), model.MN.rows(),
+                              model.MN.cols(), model.MU.rows(), model.MU.cols(), model.s, p));
   }
+  model.patch_rows = patch_rows;
   try {
-    model.solver.restore(std::move(B), std::move(Hr), std::move(BtD), options.subspace);
+    model.solver.restore_without_basis(model.nu, model.nx, norms.col(0), std::move(Hr), std::move(BtD),
+                                       options.subspace);
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }
@@ -359,9 +396,30 @@ void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh
 }  // namespace
 
 void Deformer::save(const std::string& path) const {
+  if (!state_->ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  const detail_deformer::Model& model = state_->model;
+  if (!model.whole_basis()) {
+    throw std::invalid_argument(fmt::format(
+        "Deformer::save: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (precompute_part); "
+        "save(path, blocks) with every part's rows",
+        model.basis_first, model.basis_first + model.basis.rows(), 3 * model.n));
+  }
+  bool given = false;
+  save(path, [&](Index* first, BasisRows* rows) {
+    if (given) return false;
+    given = true;
+    *first = 0;
+    *rows = model.basis;
+    return true;
+  });
+}
+
+void Deformer::save(const std::string& path, const BasisBlocks& next) const {
   const State& st = *state_;
   if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  if (!next) throw std::invalid_argument("Deformer::save: no basis blocks given");
   const Model& model = st.model;
+  const Index rows = 3 * model.n, p = model.nx + 9 * model.d;
   try {
     Writer w(path);
     // Inputs.
@@ -381,8 +439,32 @@ void Deformer::save(const std::string& path) const {
     w.put_vector(model.clusters);
     w.put<std::int64_t>(model.d);
     w.put<std::int64_t>(model.m);
-    w.put_matrix(model.solver.subspace().N);
-    w.put_matrix(model.solver.subspace().UD);
+    w.put<std::int64_t>(rows);
+    w.put<std::int64_t>(p);
+    BasisRows block;
+    Index covered = 0, first = 0;
+    while (covered < rows && next(&first, &block)) {
+      if (block.rows() == 0) continue;
+      if (first != covered || block.rows() > rows - covered || block.cols() != p) {
+        throw std::invalid_argument(
+            fmt::format("Deformer::save: a basis block of rows [{}, {}) × {} columns where row {} of {} (× {}) was due",
+                        first, first + block.rows(), block.cols(), covered, rows, p));
+      }
+      if (!block.allFinite()) {
+        throw std::invalid_argument(fmt::format("Deformer::save: the basis block at row {} holds NaN or Inf", first));
+      }
+      w.put<std::int64_t>(first);
+      w.put<std::int64_t>(block.rows());
+      w.put_rows(block);
+      covered += block.rows();
+    }
+    if (covered != rows) {
+      throw std::invalid_argument(
+          fmt::format("Deformer::save: the basis blocks end at row {} of {}", covered, rows));
+    }
+    Matrix<double> norms = model.solver.basis_norms();
+    w.put_matrix(Matrix<double>(model.patch_rows));
+    w.put_matrix(norms);
     w.put_matrix(model.solver.reduced_hessian());
     w.put_matrix(model.solver.reduced_linear_map());
     w.put_matrix(model.MN);
@@ -405,7 +487,6 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& 
   st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
   read_inputs(r, path, mesh, options, model);
   read_results(r, path, mesh, options, model);
-  model.make_basis(model.control_matrix());
   st->finish(options);
   state_ = std::move(st);
   reset_pose();

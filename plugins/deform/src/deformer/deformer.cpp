@@ -96,6 +96,9 @@ const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->pose.r
 const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis() const {
   return state_->model.basis;
 }
+Deformer::RowBlock Deformer::basis_rows() const {
+  return {state_->model.basis_first, state_->model.basis.rows()};
+}
 const Eigen::VectorXf& Deformer::reduced_coordinates() const { return state_->pose.wf; }
 
 SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableMesh* model) {

@@ -50,8 +50,9 @@ bool make_rotation_clusters(Model& model, const DeformableMesh& mesh, const Defo
   } else {
     const bool tet = mesh.is_tet();
     Clustering clustering;
-    const ClusterSummary cs = compute_rotation_clusters(pm.V, pm.E, tet ? ClusterElement::Element : ClusterElement::Vertex,
-                                                        options.rotational_proxies, options.clustering, &clustering);
+    const ClusterSummary cs =
+        compute_rotation_clusters(pm.V, pm.E, tet ? ClusterElement::Element : ClusterElement::Vertex,
+                                  options.rotational_proxies, options.clustering, &clustering);
     if (!cs.ok()) {
       summary->status = cs.status;
       summary->message = "rotational clusters: " + cs.message;
@@ -248,45 +249,79 @@ SubspaceOptions subspace_options(const Model& model, const DeformerOptions& opti
   return sub;
 }
 
-// The reconstruction basis P·[N UD] and the Phase 2 matrices, G = M_N·X + M_U·S
-// (9d × nx, 9d × 9d), for the rotation step `fit` (arap_energy.h):
+// The Phase 2 matrices' left factor, G = M_N·X + M_U·S (9d × nx, 9d × 9d),
+// for the rotation step `fit` (arap_energy.h):
 //   Exact        the S-coefficient of E′ at (V′, Q*): G = D_uᵀ·u + K·S, so
 //                M_N = D_uᵀ·N, M_U = D_uᵀ·UD + K (D_uᵀ·u = D_sᵀ·V′ with Q
 //                eliminated, D_Vᵀ·V′ + D_Qᵀ·Q with Q kept in u; K = 0 then);
 //   PaperPhase2  Eq. 19: G = D_Vᵀ·V′, so M_N, M_U = (D_Vᵀ·P)·[N UD].
-// The sparse 9d × n_u factor goes first; the float basis is made block by
-// block: no 3n × p double copy of P·[N UD].
+// The sparse 9d × n_u factor `left`; M_N = left·N, M_U = left·UD (+ K).
+SparseMatrix<double> phase2_left(const ControlSystem& system, ClusterRotationFit fit) {
+  return fit == ClusterRotationFit::Exact ? SparseMatrix<double>(system.Du.transpose())
+                                          : SparseMatrix<double>(SparseMatrix<double>(system.DV.transpose()) * system.P);
+}
+
+// The reconstruction basis P·[N UD] (float, block by block: no 3n × p double
+// copy), the Phase 2 matrices and the patch unknowns' rows; then the solver
+// lets go of the double basis, which nothing after precompute reads.
 void reduce_operators(Model& model, const ControlSystem& system, ClusterRotationFit fit) {
   const auto& B = model.solver.subspace();
-  const SparseMatrix<double> left = fit == ClusterRotationFit::Exact
-                                        ? SparseMatrix<double>(system.Du.transpose())
-                                        : SparseMatrix<double>(SparseMatrix<double>(system.DV.transpose()) * system.P);
+  const SparseMatrix<double> left = phase2_left(system, fit);
   model.MN = left * B.N;
   model.MU = left * B.UD;
   if (fit == ClusterRotationFit::Exact && system.K.nonZeros() > 0) model.MU += system.K;
-  model.make_basis(system.P);
+  model.take_patch_rows();
+  model.make_basis(0, B.N, B.UD);
+  model.solver.release_basis();
 }
 
-}  // namespace
-
-PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
-                                       const ProgressFn& progress) {
-  return precompute(mesh, options, progress, {});
+// The same from this process's rows of B (Deformer::precompute_part): every
+// reduced operator is a sum over rows of B, formed on the owned rows and
+// summed over the processes; the float basis only for the owned rows.
+void reduce_operators_part(Model& model, const ControlSystem& system, ClusterRotationFit fit,
+                           Deformer::SubspacePart&& part, const Deformer::SumOverProcesses& sum,
+                           const SubspaceOptions& sub) {
+  const Index b = part.first_row, rows = part.N_rows.rows(), p = model.nx + 9 * model.d;
+  const SparseMatrix<double> left = phase2_left(system, fit).middleCols(b, rows);
+  model.MN = left * part.N_rows;
+  model.MU = left * part.UD_rows;
+  sum(&model.MN);
+  sum(&model.MU);
+  if (fit == ClusterRotationFit::Exact && system.K.nonZeros() > 0) model.MU += system.K;
+  Matrix<double> patch = Matrix<double>::Zero(12 * model.s, p);
+  for (Index i = 0; i < 12 * model.s; ++i) {
+    const Index r = model.patch_base + i - b;
+    if (r >= 0 && r < rows) patch.row(i) << part.N_rows.row(r), part.UD_rows.row(r);
+  }
+  sum(&patch);
+  model.patch_rows = patch;
+  Matrix<double> norms(p, 1);
+  norms.topRows(model.nx) = part.N_rows.colwise().squaredNorm().transpose();
+  norms.bottomRows(9 * model.d) = part.UD_rows.colwise().squaredNorm().transpose();
+  sum(&norms);
+  model.make_basis(b, part.N_rows, part.UD_rows);
+  part.N_rows = Matrix<double>();
+  part.UD_rows = Matrix<double>();
+  model.solver.restore_without_basis(model.nu, model.nx, norms.col(0).cwiseSqrt(), std::move(part.Hr),
+                                     std::move(part.BtD), sub);
 }
 
-PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
-                                       const ProgressFn& progress, const SubspaceBuilder& build_subspace) {
-  std::string why;
-  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+// What precompute assembles before the subspace step.
+struct Assembled {
+  ControlSystem system;
+  SparseMatrix<double> C;
+  SubspaceOptions sub;
+};
+
+// Clusters, linear proxies, the energy in the control layer (Sections 4–5).
+// Returns false with *summary set when the clustering fails.
+bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const ProgressFn& progress, Model& model,
+              detail_deformer::Inputs* inputs, PrecomputeSummary* summary, Assembled* out) {
   auto report = [&](const char* stage, double f) {
     if (progress) progress(stage, f);
   };
-  const Timer total;
-  auto st = std::make_unique<State>();
-  Model& model = st->model;
-  PrecomputeSummary summary;
   model.set_topology(mesh);
-  st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
+  *inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
   model.energy_model = options.resolve_model();
 
   // The automatic proxies are placed on the referenced part of the mesh: a
@@ -301,8 +336,8 @@ PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const Deforme
 
   report("clusters", 0.0);
   Timer t;
-  if (!make_rotation_clusters(model, mesh, options, pm, &summary)) return summary;
-  summary.clustering_seconds = t.seconds();
+  if (!make_rotation_clusters(model, mesh, options, pm, summary)) return false;
+  summary->clustering_seconds = t.seconds();
 
   report("linear proxies", 0.1);
   const Groups groups = make_linear_proxies(model, mesh, options, pm);
@@ -310,34 +345,80 @@ PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const Deforme
 
   report("energy", 0.15);
   t.reset();
-  const ControlSystem system = assemble_control_system(model, mesh);
-  const SparseMatrix<double> C = proxy_selection(model, groups);
-  summary.assembly_seconds = t.seconds();
-  const SubspaceOptions sub = subspace_options(model, options, groups, system.Hu);
+  out->system = assemble_control_system(model, mesh);
+  out->C = proxy_selection(model, groups);
+  summary->assembly_seconds = t.seconds();
+  out->sub = subspace_options(model, options, groups, out->system.Hu);
+  return true;
+}
+
+// A failed subspace step ends precompute with its status.
+bool subspace_failed(PrecomputeSummary* summary) {
+  if (summary->subspace.ok()) return false;
+  summary->status = summary->subspace.status;
+  summary->message = "variational subspace: " + summary->subspace.message;
+  return true;
+}
+
+}  // namespace
+
+PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
+                                       const ProgressFn& progress) {
+  return run_precompute(mesh, options, progress, {}, {});
+}
+
+PrecomputeSummary Deformer::precompute_part(const DeformableMesh& mesh, const DeformerOptions& options,
+                                            const ProgressFn& progress, const PartBuilder& build,
+                                            const SumOverProcesses& sum) {
+  if (!build || !sum) throw std::invalid_argument("Deformer::precompute_part: the builder and the sum are required");
+  return run_precompute(mesh, options, progress, build, sum);
+}
+
+PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const DeformerOptions& options,
+                                           const ProgressFn& progress, const PartBuilder& build,
+                                           const SumOverProcesses& sum) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
+  auto report = [&](const char* stage, double f) {
+    if (progress) progress(stage, f);
+  };
+  const Timer total;
+  auto st = std::make_unique<State>();
+  Model& model = st->model;
+  PrecomputeSummary summary;
+  Assembled as;
+  if (!assemble(mesh, options, progress, model, &st->inputs, &summary, &as)) return summary;
 
   report("subspace", 0.2);
   // The assembly's freed temporaries (about 300 MB on the Bumpy Plane) would
   // otherwise stay resident under the build's peak (factor plus solution).
   release_free_heap();
-  t.reset();
-  if (build_subspace) {
-    VariationalSubspace<double> B;
-    Matrix<double> Hr, BtD;
-    summary.subspace = build_subspace(system.Hu, C, system.Du, sub, &B, &Hr, &BtD);
-    if (summary.subspace.ok()) model.solver.restore(std::move(B), std::move(Hr), std::move(BtD), sub);
+  Timer t;
+  SubspacePart part;
+  if (build) {
+    summary.subspace = build(as.system.Hu, as.C, as.system.Du, as.sub, &part);
+    if (summary.subspace.ok()) {
+      check_size("Deformer::precompute_part: N_rows columns (nx)", model.nx, part.N_rows.cols());
+      check_size("Deformer::precompute_part: UD_rows columns (9d)", 9 * model.d, part.UD_rows.cols());
+      check_size("Deformer::precompute_part: UD_rows rows", part.N_rows.rows(), part.UD_rows.rows());
+      if (part.first_row < 0 || part.first_row + part.N_rows.rows() > model.nu) {
+        throw std::invalid_argument(fmt::format("Deformer::precompute_part: rows [{}, {}) outside the {} control rows",
+                                                part.first_row, part.first_row + part.N_rows.rows(), model.nu));
+      }
+    }
   } else {
-    summary.subspace = model.solver.precompute(system.Hu, C, system.Du, sub);
+    summary.subspace = model.solver.precompute(as.system.Hu, as.C, as.system.Du, as.sub);
   }
   summary.subspace_seconds = t.seconds();
-  if (!summary.subspace.ok()) {
-    summary.status = summary.subspace.status;
-    summary.message = "variational subspace: " + summary.subspace.message;
-    return summary;
-  }
+  if (subspace_failed(&summary)) return summary;
 
   report("reduction", 0.9);
   t.reset();
-  reduce_operators(model, system, options.rotation_fit);
+  if (build) {
+    reduce_operators_part(model, as.system, options.rotation_fit, std::move(part), sum, as.sub);
+  } else {
+    reduce_operators(model, as.system, options.rotation_fit);
+  }
   summary.reduction_seconds = t.seconds();
 
   st->finish(options);

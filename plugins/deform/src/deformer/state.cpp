@@ -184,17 +184,64 @@ SparseMatrix<double> Model::control_matrix() const {
   return P;
 }
 
-void Model::make_basis(const SparseMatrix<double>& P) {
+void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows) {
+  const Index rows = N_rows.rows(), p = nx + 9 * d;
+  check_size("Model::make_basis: UD rows", rows, UD_rows.rows());
+  check_size("Model::make_basis: patch rows", 12 * s, patch_rows.rows());
+  // The vertex rows this block of control rows gives: row 3v + a goes with
+  // its control unknown (free v) or with the last free row before it (a
+  // patch vertex; the first block when there is none). control_of_free
+  // ascends with v, so these rows are contiguous.
+  const auto mine = [&](Index key) { return key < 0 ? first_row == 0 : key >= first_row && key < first_row + rows; };
+  Index first = -1, last = -1, key = -1;
+  for (Index v = 0; v < n; ++v)
+    for (int a = 0; a < 3; ++a) {
+      if (control_of_free[v] >= 0) key = control_of_free[v] + a;
+      if (mine(key)) {
+        if (first < 0) first = 3 * v + a;
+        last = 3 * v + a;
+      }
+    }
+  const Index count = first < 0 ? 0 : last - first + 1;
+  // P's rows [first, first + count) split by its columns: PB on this block's
+  // rows of [N UD], PP on the patch unknowns' rows (patch_rows).
+  Triplets tb, tp, row;
+  for (Index i = first; i < first + count; ++i) {
+    row.clear();
+    control_row(i / 3, static_cast<int>(i % 3), 1.0, 0, &row);
+    for (const auto& e : row) {
+      const Index c = e.row();
+      if (c >= patch_base) {
+        tp.emplace_back(i - first, c - patch_base, e.value());
+      } else if (c >= first_row && c < first_row + rows) {
+        tb.emplace_back(i - first, c - first_row, e.value());
+      } else {
+        throw std::logic_error(fmt::format("Model::make_basis: vertex row {} needs control row {} outside [{}, {})", i,
+                                           c, first_row, first_row + rows));
+      }
+    }
+  }
+  SparseMatrix<double> PB(count, rows), PP(count, 12 * s);
+  PB.setFromTriplets(tb.begin(), tb.end());
+  PP.setFromTriplets(tp.begin(), tp.end());
+  basis_first = first < 0 ? 0 : first;
+  basis.resize(count, p);
+  constexpr Index kBlock = 32;  // columns per double temporary (count × 32)
+  for (Index j = 0; j < p; j += kBlock) {
+    const Index w = std::min(kBlock, p - j);
+    Matrix<double> block(rows, w);
+    for (Index c = 0; c < w; ++c) block.col(c) = j + c < nx ? N_rows.col(j + c) : UD_rows.col(j + c - nx);
+    Matrix<double> product = PB * block;
+    if (s > 0) product += PP * patch_rows.middleCols(j, w);
+    basis.middleCols(j, w) = product.cast<float>();
+  }
+}
+
+void Model::take_patch_rows() {
   const Matrix<double>& N = solver.subspace().N;
   const Matrix<double>& U = solver.subspace().UD;
-  basis.resize(3 * n, nx + 9 * d);
-  constexpr Index kBlock = 32;  // columns per double temporary (3n × 32)
-  for (Index j = 0; j < nx + 9 * d; j += kBlock) {
-    const Index w = std::min(kBlock, nx + 9 * d - j);
-    Matrix<double> block(nu, w);
-    for (Index c = 0; c < w; ++c) block.col(c) = j + c < nx ? N.col(j + c) : U.col(j + c - nx);
-    basis.middleCols(j, w) = (P * block).cast<float>();
-  }
+  patch_rows.resize(12 * s, nx + 9 * d);
+  for (Index i = 0; i < 12 * s; ++i) patch_rows.row(i) << N.row(patch_base + i), U.row(patch_base + i);
 }
 
 void Model::finish_reduction() {
@@ -202,10 +249,6 @@ void Model::finish_reduction() {
   for (Index c : rigid_cluster_of_patch)
     if (c >= 0) rigid[static_cast<size_t>(c)] = 1;
   projection = energy_model->projection(cluster_geometry(rest, elements, clusters, d, std::move(rigid)));
-  const Matrix<double>& N = solver.subspace().N;
-  const Matrix<double>& U = solver.subspace().UD;
-  patch_rows.resize(12 * s, nx + 9 * d);
-  for (Index i = 0; i < 12 * s; ++i) patch_rows.row(i) << N.row(patch_base + i), U.row(patch_base + i);
   free_vertices.assign(static_cast<size_t>(patch_base / 3), -1);
   for (Index v = 0; v < n; ++v)
     if (control_of_free[v] >= 0) free_vertices[static_cast<size_t>(control_of_free[v] / 3)] = v;

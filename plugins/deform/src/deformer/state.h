@@ -86,6 +86,7 @@ struct Model {
   std::unique_ptr<ClusterProjection> projection;  // the energy model's Phase 2
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
+  Index basis_first = 0;  // basis holds rows [basis_first, + basis.rows()): all 3n, except after precompute_part
   // For the on-site step's A_r = AᵀB from contiguous rows: the control rows
   // of the patch unknowns, [N UD](patch_base + i, :) (12s × (nx + 9d)), and
   // the vertex of each free control triple (control row 3i + a is basis row
@@ -118,11 +119,16 @@ struct Model {
   void control_row(Index v, int a, double scale, Index col, Triplets* t) const;
   // P (3n × n_u): V′ = P·u.
   SparseMatrix<double> control_matrix() const;
-  // basis = P·[N UD] in float (3n × (nx + 9d)), once the solver holds the
-  // subspace; through 3n × 32 double blocks, never the whole double product.
-  void make_basis(const SparseMatrix<double>& P);
-  // The energy model's projection, patch_rows and free_vertices, once the
-  // solver, MN and MU are set.
+  // basis = P·[N UD] in float, the vertex rows that control rows
+  // [first_row, first_row + N_rows.rows()) give (all 3n for the whole N, UD;
+  // make_basis sets basis_first), once patch_rows is set; through
+  // rows × 32 double blocks, never the whole double product.
+  void make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows);
+  // patch_rows from the solver's double basis (which it then still holds).
+  void take_patch_rows();
+  bool whole_basis() const { return basis_first == 0 && basis.rows() == 3 * n; }
+  // The energy model's projection and free_vertices, once the solver, MN,
+  // MU and patch_rows are set.
   void finish_reduction();
 };
 

@@ -166,22 +166,62 @@ class Deformer {
   PrecomputeSummary precompute(const DeformableMesh& model, const DeformerOptions& options = {},
                                const ProgressFn& progress = {});
 
-  // The subspace step of precompute, replaced (e.g. by the MUMPS build over
-  // MPI of qpreduce::distributed, `qpr precompute`): from H_u (n_u × n_u),
-  // C (n_u × nx), D_u (n_u × 9d) and the engine's options, fill B = [N UD],
-  // H_r = BᵀH_uB (p × p) and BᵀD_u (p × 9d) as SubspaceSolver::precompute
-  // would. A summary that is not ok() ends precompute with its status.
-  using SubspaceBuilder = std::function<SubspaceSummary(
-      const SparseMatrix<double>& H, const SparseMatrix<double>& C, const SparseMatrix<double>& D,
-      const SubspaceOptions& options, VariationalSubspace<double>* B, Matrix<double>* Hr, Matrix<double>* BtD)>;
-  PrecomputeSummary precompute(const DeformableMesh& model, const DeformerOptions& options,
-                               const ProgressFn& progress, const SubspaceBuilder& build_subspace);
+  // A precompute whose subspace is built across processes (`qpr precompute`
+  // under mpirun: qpreduce::distributed's MUMPS build), no process holding
+  // the whole n_u × p double basis B = [N UD]. Every process calls it
+  // together with the same model and options, and assembles the same
+  // H_u (n_u × n_u), C (n_u × nx), D_u (n_u × 9d). Then:
+  //   `build` fills this process's SubspacePart: a contiguous block of rows
+  //     of N and UD (first_row; the blocks ascend with the process rank and
+  //     tile the n_u rows), and the whole H_r = BᵀH_uB (p × p) and BᵀD_u
+  //     (p × 9d), as SubspaceSolver::precompute would make them; a summary
+  //     that is not ok() ends precompute with its status (it must be the
+  //     same on every process);
+  //   `sum` replaces a matrix by its sum over the processes, on every
+  //     process (an all-reduce; the same shape everywhere).
+  // The reduced operators are sums over the rows of B (M_N = D_uᵀ·N etc.,
+  // the rows of the patch unknowns, ‖B_j‖), so every process ends with all
+  // of them, and with the rows basis_rows() of the float reconstruction
+  // basis P·B: the vertex rows whose control unknowns it owns (contiguous;
+  // rows of patch vertices go with the free row before them). Such a
+  // deformer can only be saved, with the other processes' rows, by
+  // save(path, blocks) on one process; set_handles refuses it.
+  struct SubspacePart {
+    Index first_row = 0;             // N_rows, UD_rows are rows [first_row, first_row + rows) of N, UD
+    Matrix<double> N_rows, UD_rows;  // rows × nx, rows × 9d
+    Matrix<double> Hr, BtD;          // p × p, p × 9d: whole, the same on every process
+  };
+  using PartBuilder = std::function<SubspaceSummary(const SparseMatrix<double>& H, const SparseMatrix<double>& C,
+                                                    const SparseMatrix<double>& D, const SubspaceOptions& options,
+                                                    SubspacePart* part)>;
+  using SumOverProcesses = std::function<void(Matrix<double>* M)>;
+  PrecomputeSummary precompute_part(const DeformableMesh& model, const DeformerOptions& options,
+                                    const ProgressFn& progress, const PartBuilder& build, const SumOverProcesses& sum);
+  // Rows [first, first + count) of the reconstruction basis (3n rows in all)
+  // that reconstruction_basis() holds: all of them, except after
+  // precompute_part.
+  struct RowBlock {
+    Index first = 0, count = 0;
+  };
+  RowBlock basis_rows() const;
 
   // Writes the precomputed model to `path` (binary, versioned, CRC-32
-  // checked; layout in docs/formats.md), through a temporary file renamed at
-  // the end so an existing cache is never left half-written. Throws IoError
-  // when the file cannot be written, std::invalid_argument before precompute.
+  // checked; layout in docs/formats.md: the float reconstruction basis in row
+  // blocks and the reduced operators, not the double basis), through a
+  // temporary file renamed at the end so an existing cache is never left
+  // half-written. Throws IoError when the file cannot be written,
+  // std::invalid_argument before precompute or when this deformer holds only
+  // part of the basis (after precompute_part: use the form below).
   void save(const std::string& path) const;
+  // The same with the reconstruction basis supplied in row blocks: `next` is
+  // called until it returns false, each time filling the next block's first
+  // row and its rows (p columns; each block starts where the last ended and
+  // together they cover the 3n rows). Throws std::invalid_argument (and
+  // leaves no file) when the blocks do not tile the 3n rows, have another
+  // width, or hold NaN/Inf.
+  using BasisRows = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  using BasisBlocks = std::function<bool(Index* first_row, BasisRows* rows)>;
+  void save(const std::string& path, const BasisBlocks& next) const;
 
   // Reads a model written by save() instead of precomputing it. `model` and
   // `options` must be what precompute was given: the file keeps them and
@@ -247,7 +287,8 @@ class Deformer {
   const Eigen::Matrix3d& global_rotation() const;
   // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
   // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
-  // Empty before precompute.
+  // Empty before precompute; after precompute_part only the rows
+  // basis_rows() (row i here is row basis_rows().first + i).
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
   // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
   // and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
@@ -256,6 +297,9 @@ class Deformer {
 
  private:
   struct State;
+  // precompute (build empty: the engine's single-process build) and precompute_part.
+  PrecomputeSummary run_precompute(const DeformableMesh& model, const DeformerOptions& options,
+                                   const ProgressFn& progress, const PartBuilder& build, const SumOverProcesses& sum);
   std::unique_ptr<State> state_;
 };
 
