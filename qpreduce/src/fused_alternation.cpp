@@ -474,7 +474,7 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
 AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                     const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
                                     const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
-  const Index k = M.k(), d = k / 9, t = 3 * d;
+  const Index k = M.k(), d = k / 9;
   const MatD& F = M.explicit_rounds.F;  // F_y − A_yᵀΛ_y + D
   const Vector<double>& D = M.proximal_entries;
   detail::gemv(E.Lb, b.data(), W.lambda_b.data(), false);
