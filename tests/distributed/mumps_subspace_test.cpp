@@ -11,7 +11,9 @@
 #include <mpi.h>
 
 #include <cmath>
+#include <filesystem>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 namespace {
@@ -57,13 +59,14 @@ SpD owned_rows_of(const SpD& H) {
 
 // The single-process build (CHOLMOD, or SparseLU on the KKT route) and the
 // distributed one agree on N, UD, H_r and BᵀD.
-void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, const SubspaceOptions& options) {
+void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, const SubspaceOptions& options,
+                                  const MumpsOptions& mumps = {}) {
   SubspaceSolver<double> reference;
   const SubspaceSummary ref = reference.precompute(H, C, D, options);
   REQUIRE(ref.ok());
 
   DistributedSubspace out;
-  const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(H), C, D, options, {}, &out);
+  const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(H), C, D, options, mumps, &out);
   INFO(summary.brief_report() << " ordering: " << summary.ordering);
   REQUIRE(summary.ok());
   CHECK(same_status_everywhere(summary.status));
@@ -101,6 +104,29 @@ TEST_CASE("MUMPS subspace matches the single-process build on each QP family", "
   INFO("family " << families::to_string(family));
   const auto f = families::make_family(family, 900, 7);
   check_against_single_process(f.H, f.C, f.D, families::recommended_options(f));
+}
+
+TEST_CASE("MUMPS subspace with the factor out of core matches the single-process build", "[distributed]") {
+  // One directory per rank count (both ctest entries may run at once);
+  // MUMPS deletes its files when the build ends.
+  int size = 1, rank = 0;
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("qpreduce_ooc_test_np" + std::to_string(size));
+  std::filesystem::create_directories(dir);
+  MPI_Barrier(MPI_COMM_WORLD);
+  MumpsOptions mumps;
+  mumps.out_of_core_directory = dir.string();
+  for (const auto family : {families::Family::Gmrf, families::Family::Trajectory}) {
+    INFO("family " << families::to_string(family));
+    const auto f = families::make_family(family, 900, 11);
+    check_against_single_process(f.H, f.C, f.D, families::recommended_options(f), mumps);
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  CHECK(std::filesystem::is_empty(dir));  // no factor files left behind
+  MPI_Barrier(MPI_COMM_WORLD);
+  if (rank == 0) std::filesystem::remove_all(dir);
 }
 
 TEST_CASE("MUMPS subspace on the KKT route matches SparseLU", "[distributed]") {
@@ -156,4 +182,8 @@ TEST_CASE("Bad input throws on every rank, naming the problem", "[distributed]")
   bad.workspace_percent = -1;
   CHECK_THROWS_WITH(build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(f.H), f.C, f.D, {}, bad, &out),
                     Catch::Contains("workspace_percent"));
+  MumpsOptions nowhere;  // the last rank alone cannot see the directory: every rank must throw
+  nowhere.out_of_core_directory = rank == size - 1 ? "/nonexistent/qpreduce_ooc" : std::string(".");
+  CHECK_THROWS_WITH(build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(f.H), f.C, f.D, {}, nowhere, &out),
+                    Catch::Contains("out_of_core_directory"));
 }

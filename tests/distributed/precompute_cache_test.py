@@ -19,8 +19,12 @@ coordinate's shortest round-trip form, so equal files are equal doubles):
     reproducible); two 2-rank caches are not compared: MUMPS on more than one
     process assembles in message-arrival order and is not reproducible.
 
-Then a failure: an unwritable cache path makes the MPI job end with a
-message and a non-zero exit, within the CTest timeout. Exits 77 (skipped)
+The same with `--out-of-core DIR` (MUMPS's factor on disk): the pose agrees
+with the CHOLMOD cache's to 1e-6 too, and DIR is empty afterwards.
+
+Then failures: an unwritable cache path, and an --out-of-core directory that
+does not exist, make the MPI job end with a message and a non-zero exit,
+within the CTest timeout. Exits 77 (skipped)
 when the shared data is absent.
 """
 import os
@@ -78,24 +82,34 @@ def main():
     os.makedirs(work, exist_ok=True)
     scenario = [mesh, "--sel", os.path.join(data, "cactus.sel"), "--def", os.path.join(data, "cactus.def")]
     caches = {"mumps": os.path.join(work, "cactus_mumps_np2.cache"),
+              "mumps_ooc": os.path.join(work, "cactus_mumps_np2_ooc.cache"),
               "cholmod": os.path.join(work, "cactus_cholmod.cache")}
     for c in caches.values():
         if os.path.exists(c):
             os.remove(c)
+    ooc = os.path.join(work, "ooc")
+    os.makedirs(ooc, exist_ok=True)
     run([mpirun, "--oversubscribe", "-np", "2", qpr, "precompute", *scenario, "--backend", "mumps",
          "--cache", caches["mumps"]])
+    # The factor out of core (--out-of-core): the same subspace, no files left.
+    p = run([mpirun, "--oversubscribe", "-np", "2", qpr, "precompute", *scenario, "--backend", "mumps",
+             "--out-of-core", ooc, "--cache", caches["mumps_ooc"]])
+    if "factor out of core" not in p.stdout or os.listdir(ooc):
+        sys.exit(f"FAILED: --out-of-core not reported, or files left in {ooc}: {os.listdir(ooc)}\n{p.stdout}")
     run([qpr, "precompute", *scenario, "--backend", "cholmod", "--cache", caches["cholmod"]])
     poses = {}
     for name, cache in caches.items():
         poses[name] = vertices(deform(qpr, scenario, cache, os.path.join(work, f"cactus_{name}.obj")))
-    a, b = poses["mumps"], poses["cholmod"]
-    if len(a) != len(b) or not a:
-        sys.exit(f"FAILED: {len(a)} and {len(b)} vertices")
+    b = poses["cholmod"]
     size = max(max(v[i] for v in b) - min(v[i] for v in b) for i in range(3))
-    worst = max(abs(x - y) for u, v in zip(a, b) for x, y in zip(u, v))
-    print(f"max vertex difference MUMPS (np 2) vs CHOLMOD caches: {worst:.3e} (mesh size {size:.3g})")
-    if not worst <= 1e-6 * size:
-        sys.exit("FAILED: the poses differ by more than 1e-6 of the mesh size")
+    for name in ("mumps", "mumps_ooc"):
+        a = poses[name]
+        if len(a) != len(b) or not a:
+            sys.exit(f"FAILED: {len(a)} and {len(b)} vertices")
+        worst = max(abs(x - y) for u, v in zip(a, b) for x, y in zip(u, v))
+        print(f"max vertex difference {name} (np 2) vs CHOLMOD caches: {worst:.3e} (mesh size {size:.3g})")
+        if not worst <= 1e-6 * size:
+            sys.exit(f"FAILED: the {name} and CHOLMOD poses differ by more than 1e-6 of the mesh size")
     bit_identical(qpr, mpirun, scenario, work, caches["mumps"])
 
     # A rank-0 failure (no such directory) ends the job with a message.
@@ -103,6 +117,13 @@ def main():
              "--cache", os.path.join(work, "no-such-dir", "x.cache")], expect_ok=False)
     if p.returncode == 0 or "qpr precompute: error" not in p.stderr:
         sys.exit(f"FAILED: expected a failed job with a message, got {p.returncode}:\n{p.stderr}")
+    # An out-of-core directory that does not exist: refused with its name.
+    p = run([mpirun, "--oversubscribe", "-np", "2", qpr, "precompute", *scenario, "--backend", "mumps",
+             "--out-of-core", os.path.join(work, "no-such-dir"), "--cache", os.path.join(work, "y.cache")],
+            expect_ok=False)
+    if p.returncode == 0 or "is not a directory" not in p.stderr:
+        sys.exit(f"FAILED: expected --out-of-core to a missing directory to fail with a message, got "
+                 f"{p.returncode}:\n{p.stderr}")
     print("ok")
     return 0
 

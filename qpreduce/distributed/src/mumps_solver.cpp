@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <cstdio>
 #include <limits>
 #include <stdexcept>
 #include <vector>
@@ -21,6 +22,8 @@ const char* infog1_meaning(int code) {
       return "MUMPS's working space is too small (raise MumpsOptions::workspace_percent)";
     case -10: return "the matrix is numerically singular";
     case -16: return "the matrix order is out of range";
+    case -79: case -89: case -90:
+      return "MUMPS's out-of-core files failed (MumpsOptions::out_of_core_directory: missing, full or not writable)";
     default: return "MUMPS error (see the MUMPS manual, INFOG(1))";
   }
 }
@@ -43,6 +46,11 @@ MumpsSolver::MumpsSolver(MPI_Comm comm, Symmetry symmetry, const MumpsOptions& o
   id_.icntl[icntl(20)] = 0;  // dense centralized right-hand side
   id_.icntl[icntl(21)] = 0;  // centralized solution (scattered by the caller)
   id_.icntl[icntl(14)] = options.workspace_percent;
+  if (!options.out_of_core_directory.empty()) {  // is_valid: at most 255 characters
+    id_.icntl[icntl(22)] = 1;
+    std::snprintf(id_.ooc_tmpdir, sizeof id_.ooc_tmpdir, "%s", options.out_of_core_directory.c_str());
+    std::snprintf(id_.ooc_prefix, sizeof id_.ooc_prefix, "%s", "qpreduce_factor");
+  }
 #ifdef QPREDUCE_MUMPS_HAS_PTSCOTCH
   parallel_ordering_ = options.parallel_ordering && size_ > 1;
 #endif

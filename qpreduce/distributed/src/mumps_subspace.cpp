@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <functional>
 #include <limits>
 #include <optional>
@@ -47,6 +48,11 @@ bool MumpsOptions::is_valid(std::string* why) const {
   }
   if (gather_columns < 1) {
     if (why) *why = fmt::format("gather_columns must be at least 1, got {}", gather_columns);
+    return false;
+  }
+  if (out_of_core_directory.size() > 255 || out_of_core_directory.find('\0') != std::string::npos) {
+    if (why) *why = fmt::format("out_of_core_directory must be a path of at most 255 characters, got {} characters",
+                                out_of_core_directory.size());
     return false;
   }
   return true;
@@ -509,6 +515,10 @@ void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, 
   try {
     if (!options.is_valid(&why)) throw std::invalid_argument("SubspaceOptions: " + why);
     if (!mumps.is_valid(&why)) throw std::invalid_argument("MumpsOptions: " + why);
+    if (!mumps.out_of_core_directory.empty() && !std::filesystem::is_directory(mumps.out_of_core_directory)) {
+      throw std::invalid_argument(fmt::format("MumpsOptions::out_of_core_directory: \"{}\" is not a directory here",
+                                              mumps.out_of_core_directory));
+    }
     if (out == nullptr) throw std::invalid_argument("build_subspace_mumps: output pointer is null");
     const Index n = C.rows();
     if (n == 0) throw std::invalid_argument("build_subspace_mumps: C has no rows (n = 0)");
