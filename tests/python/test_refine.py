@@ -67,7 +67,12 @@ def test_cancel_from_another_thread_leaves_a_valid_pose():
     V0, F, sel = small_cylinder(around=60, rings=80)
     scenario = deform.sel_def_scenario(V0, F, sel, bend(math.pi / 3), frames=2)
     refiner = deform.Refiner(scenario.model, deform.RefineOptions(tolerance=0.0, anderson_window=0,
-                                                                   max_iterations=1000000))
+                                                                   max_iterations=1))
+    # One round first: it factors the global step of this handle set, so the
+    # cancelled call below starts its rounds at once.
+    _, first = refiner.refine(scenario.handles, scenario.frames[-1])
+    assert first.refactored and first.rounds == 1
+    refiner.set_options(deform.RefineOptions(tolerance=0.0, anderson_window=0, max_iterations=1000000))
     result = {}
 
     def run():
@@ -83,13 +88,18 @@ def test_cancel_from_another_thread_leaves_a_valid_pose():
     assert not worker.is_alive(), "cancel() did not stop the refine"
     summary, V = result["summary"], result["V"]
     assert summary.cancelled and not summary.converged and summary.ok()
+    assert not summary.refactored
     assert np.isfinite(V).all()
     assert summary.arap_energy == pytest.approx(deform.arap_energy(scenario.model, V), rel=1e-12)
-    # The rest pose misses the targets (energy 0); the rounds hold them and
-    # then only go down.
-    assert summary.handle_residual < 1e-9
     assert len(summary.round_energy) == summary.rounds
-    assert np.all(np.diff(summary.round_energy) <= 1e-12 * summary.round_energy[0])
+    if summary.rounds == 0:
+        # Cancelled before its first round ended (a starved worker): the input, untouched.
+        assert np.array_equal(V, scenario.model.V)
+    else:
+        # The rest pose misses the targets (energy 0); the rounds hold them and
+        # then only go down.
+        assert summary.handle_residual < 1e-9
+        assert np.all(np.diff(summary.round_energy) <= 1e-12 * summary.round_energy[0])
     # A later refine is not affected by the earlier cancel.
     refiner.set_options(deform.RefineOptions(tolerance=1e-8))
     _, again = refiner.refine(scenario.handles, scenario.frames[-1], V)

@@ -132,9 +132,18 @@ TEST_CASE("eliminating Q gives the minimum of E′ over Q", "[arap][energy]") {
   const double s_only = -0.5 * DQS.dot(L.bottomRightCorner(4 * r, 4 * r).ldlt().solve(DQS));
   const double reduced = 0.5 * V.dot(e.H * V) - S.dot(e.Ds.transpose() * V) + s_only;
   CHECK(reduced == Approx(full).epsilon(1e-10));
-  // H is symmetric PSD with the translations as null space.
+  // H is exactly symmetric (assembled element by element, every (i, j) and
+  // (j, i) from the same terms), PSD with the translations as null space,
+  // and the dense L_VV − L_VQ·L_QQ⁻¹·L_QV to round-off.
   const Matrix<double> H(e.H);
-  CHECK((H - H.transpose()).norm() <= 1e-12 * H.norm());
+  CHECK(H == H.transpose());
+  const Matrix<double> H_dense = L.topLeftCorner(nv, nv) - L.topRightCorner(nv, 4 * r) *
+                                                               L.bottomRightCorner(4 * r, 4 * r).inverse() *
+                                                               L.bottomLeftCorner(4 * r, nv);
+  CHECK((H - H_dense).norm() <= 1e-13 * H_dense.norm());
+  const Matrix<double> Ds_dense = D.topRows(nv) - L.topRightCorner(nv, 4 * r) *
+                                                      L.bottomRightCorner(4 * r, 4 * r).inverse() * D.bottomRows(4 * r);
+  CHECK((Matrix<double>(e.Ds) - Ds_dense).norm() <= 1e-13 * Ds_dense.norm());
   Eigen::VectorXd tx = Eigen::VectorXd::Zero(nv);
   for (Index i = 0; i < n; ++i) tx(3 * i) = 1.0;
   CHECK((e.H * tx).norm() <= 1e-10 * H.norm());

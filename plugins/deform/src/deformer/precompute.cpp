@@ -129,16 +129,28 @@ struct ControlSystem {
 };
 
 // Q eliminated (the model's L_QQ is block diagonal): H_u = PᵀHP, D_u = PᵀD_s.
-ControlSystem eliminated_control_system(const Model& model, const ModifiedArapSystem& full) {
+// The full system and each product's input go as soon as they are used:
+// these products are the assembly's peak (on a 160k-vertex surface each
+// 3n × 3n matrix is a few hundred MB).
+// (Eigen 3.4's SparseMatrix has no move operations and keeps its storage on
+// assignment from an empty matrix: swap with an empty one frees it.)
+void free_sparse(SparseMatrix<double>* A) { SparseMatrix<double>().swap(*A); }
+
+ControlSystem eliminated_control_system(const Model& model, ModifiedArapSystem* full) {
   ControlSystem cs;
-  EliminatedArapSystem elim = eliminate_rotation_corrections(full);
+  EliminatedArapSystem elim = eliminate_rotation_corrections(*full);
+  free_sparse(&full->L);
+  free_sparse(&full->D);
   cs.P = model.control_matrix();
   if (detail_deformer::is_identity(cs.P)) {  // every vertex free, no patch: u = V′
     cs.Hu = std::move(elim.H);
     cs.Du = std::move(elim.Ds);
   } else {
     const SparseMatrix<double> Pt = cs.P.transpose();
-    cs.Hu = detail_deformer::parallel_product(Pt, detail_deformer::parallel_product(elim.H, cs.P));
+    SparseMatrix<double> HP = detail_deformer::parallel_product(elim.H, cs.P);
+    free_sparse(&elim.H);
+    cs.Hu = detail_deformer::parallel_product(Pt, HP);
+    free_sparse(&HP);
     cs.Du = detail_deformer::parallel_product(Pt, elim.Ds);
   }
   cs.DV = std::move(elim.DV);
@@ -173,10 +185,11 @@ ControlSystem kept_q_control_system(Model& model, const ModifiedArapSystem& full
 // The model's energy (Q eliminated when L_QQ is block diagonal), then the
 // control layer. The full system is freed before the factorization.
 ControlSystem assemble_control_system(Model& model, const DeformableMesh& mesh) {
-  const ModifiedArapSystem full = model.energy_model->assemble(mesh.V, model.elements, model.clusters, model.d);
+  ModifiedArapSystem full = model.energy_model->assemble(mesh.V, model.elements, model.clusters, model.d);
   check_size("DeformationModel::assemble: L rows", 3 * model.n + 4 * model.elements.size(), full.L.rows());
   check_size("DeformationModel::assemble: D columns", 9 * model.d, full.D.cols());
-  return full.q_separable ? eliminated_control_system(model, full) : kept_q_control_system(model, full);
+  if (full.q_separable) return eliminated_control_system(model, &full);
+  return kept_q_control_system(model, full);
 }
 
 // C (n_u × nx): the linear proxies (group means of free vertices, Ŵ ⊗ I₃)

@@ -415,20 +415,14 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
   return sys;
 }
 
-EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sys) {
-  if (!sys.q_separable) {
-    throw std::invalid_argument(
-        "eliminate_rotation_corrections: L_QQ couples neighbouring elements (gamma > 0), so Q cannot be "
-        "eliminated element by element; keep Q in the factored system");
-  }
-  const Index nv = 3 * sys.n, nq = 4 * sys.r;
-  const SparseMatrix<double> LVV = sys.L.topLeftCorner(nv, nv);
-  const SparseMatrix<double> LVQ = sys.L.block(0, nv, nv, nq);
-  const SparseMatrix<double> LQQ = sys.L.bottomRightCorner(nq, nq);
-  // Invert the 4×4 diagonal blocks of L_QQ.
+namespace {
+
+// The inverses of L_QQ's 4×4 diagonal blocks (r of them) as a sparse nq × nq;
+// throws when one is not positive definite.
+SparseMatrix<double> inverse_element_blocks(const SparseMatrix<double>& LQQ, Index r) {
   Triplets tb;
-  tb.reserve(static_cast<size_t>(nq) * 4);
-  for (Index k = 0; k < sys.r; ++k) {
+  tb.reserve(static_cast<size_t>(r) * 16);
+  for (Index k = 0; k < r; ++k) {
     Eigen::Matrix4d B = Eigen::Matrix4d::Zero();
     for (int b = 0; b < 4; ++b)
       for (SparseMatrix<double>::InnerIterator it(LQQ, 4 * k + b); it; ++it) B(it.row() - 4 * k, b) = it.value();
@@ -446,16 +440,127 @@ EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sy
     for (int a = 0; a < 4; ++a)
       for (int b = 0; b < 4; ++b) tb.emplace_back(4 * k + a, 4 * k + b, Binv(a, b));
   }
-  SparseMatrix<double> Binv(nq, nq);
+  SparseMatrix<double> Binv(4 * r, 4 * r);
   Binv.setFromTriplets(tb.begin(), tb.end());
+  return Binv;
+}
+
+// H = L_VV − Σ_k L_Vk·B_k⁻¹·L_kV, element by element into H's final pattern
+// (the union of the elements' coordinate cliques and L_VV's): one nv × nv
+// matrix in memory, where a general sparse product L_VQ·B⁻¹·L_QV (and its
+// symmetrisation) held four to six of them — on a 160k-vertex surface each
+// is about 350 MB, and that product was the precompute's assembly peak.
+// LVQ_Binv = L_VQ·B⁻¹ (nv × nq); its column 4k + b holds element k's rows.
+// Each element's block W·L_kVᵀ is symmetrised before it is added, and every
+// entry (i, j) and (j, i) sums the same terms in the same order, so H is
+// exactly symmetric.
+SparseMatrix<double> eliminated_hessian(const SparseMatrix<double>& LVV, const SparseMatrix<double>& LVQ,
+                                        const SparseMatrix<double>& LVQ_Binv, Index r) {
+  const Index nv = LVV.rows();
+  // The rows (coordinates) of each element, sorted: the union of its 4 columns of L_VQ.
+  std::vector<Index> start(static_cast<size_t>(r) + 1, 0), rows;
+  std::vector<Index> mark(static_cast<size_t>(nv), -1);
+  for (Index k = 0; k < r; ++k) {
+    for (int b = 0; b < 4; ++b)
+      for (SparseMatrix<double>::InnerIterator it(LVQ, 4 * k + b); it; ++it)
+        if (mark[static_cast<size_t>(it.row())] != k) {
+          mark[static_cast<size_t>(it.row())] = k;
+          rows.push_back(it.row());
+        }
+    std::sort(rows.begin() + start[static_cast<size_t>(k)], rows.end());
+    start[static_cast<size_t>(k) + 1] = static_cast<Index>(rows.size());
+  }
+  // The elements of each coordinate (CSR), then each column's pattern.
+  std::vector<Index> cstart(static_cast<size_t>(nv) + 1, 0), elems(rows.size());
+  for (Index i : rows) ++cstart[static_cast<size_t>(i) + 1];
+  for (Index j = 0; j < nv; ++j) cstart[static_cast<size_t>(j) + 1] += cstart[static_cast<size_t>(j)];
+  {
+    std::vector<Index> next(cstart.begin(), cstart.end() - 1);
+    for (Index k = 0; k < r; ++k)
+      for (Index t = start[static_cast<size_t>(k)]; t < start[static_cast<size_t>(k) + 1]; ++t)
+        elems[static_cast<size_t>(next[static_cast<size_t>(rows[static_cast<size_t>(t)])]++)] = k;
+  }
+  std::fill(mark.begin(), mark.end(), -1);
+  std::vector<int> outer(static_cast<size_t>(nv) + 1, 0);
+  std::vector<int> inner;
+  std::vector<Index> column;
+  for (Index j = 0; j < nv; ++j) {
+    column.clear();
+    auto add = [&](Index i) {
+      if (mark[static_cast<size_t>(i)] != j) {
+        mark[static_cast<size_t>(i)] = j;
+        column.push_back(i);
+      }
+    };
+    for (SparseMatrix<double>::InnerIterator it(LVV, j); it; ++it) add(it.row());
+    for (Index e = cstart[static_cast<size_t>(j)]; e < cstart[static_cast<size_t>(j) + 1]; ++e) {
+      const Index k = elems[static_cast<size_t>(e)];
+      for (Index t = start[static_cast<size_t>(k)]; t < start[static_cast<size_t>(k) + 1]; ++t)
+        add(rows[static_cast<size_t>(t)]);
+    }
+    std::sort(column.begin(), column.end());
+    for (Index i : column) inner.push_back(static_cast<int>(i));
+    outer[static_cast<size_t>(j) + 1] = static_cast<int>(inner.size());
+  }
+  std::vector<Index>().swap(elems);
+  std::vector<Index>().swap(cstart);
+  SparseMatrix<double> H(nv, nv);
+  H.resizeNonZeros(static_cast<Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), H.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), H.innerIndexPtr());
+  std::vector<int>().swap(inner);
+  std::fill(H.valuePtr(), H.valuePtr() + H.nonZeros(), 0.0);
+  // (i, j) in H: column j's rows are sorted.
+  auto slot = [&](Index i, Index j) -> double& {
+    const int* begin = H.innerIndexPtr() + H.outerIndexPtr()[j];
+    const int* end = H.innerIndexPtr() + H.outerIndexPtr()[j + 1];
+    return H.valuePtr()[std::lower_bound(begin, end, static_cast<int>(i)) - H.innerIndexPtr()];
+  };
+  for (Index j = 0; j < nv; ++j)
+    for (SparseMatrix<double>::InnerIterator it(LVV, j); it; ++it) slot(it.row(), j) = it.value();
+  // Element by element: W = rows of L_VQ·B⁻¹ (m × 4), V = rows of L_VQ, block = W·Vᵀ.
+  Eigen::MatrixXd W, V, block;
+  for (Index k = 0; k < r; ++k) {
+    const Index s0 = start[static_cast<size_t>(k)], m = start[static_cast<size_t>(k) + 1] - s0;
+    if (m == 0) continue;
+    W.setZero(m, 4);
+    V.setZero(m, 4);
+    auto local = [&](Index i) {
+      return std::lower_bound(rows.begin() + s0, rows.begin() + s0 + m, i) - (rows.begin() + s0);
+    };
+    for (int b = 0; b < 4; ++b) {
+      for (SparseMatrix<double>::InnerIterator it(LVQ_Binv, 4 * k + b); it; ++it) W(local(it.row()), b) = it.value();
+      for (SparseMatrix<double>::InnerIterator it(LVQ, 4 * k + b); it; ++it) V(local(it.row()), b) = it.value();
+    }
+    block.noalias() = W * V.transpose();
+    for (Index c = 0; c < m; ++c)
+      for (Index a = 0; a <= c; ++a) {
+        const double x = 0.5 * (block(a, c) + block(c, a));
+        const Index i = rows[static_cast<size_t>(s0 + a)], j = rows[static_cast<size_t>(s0 + c)];
+        slot(i, j) -= x;
+        if (i != j) slot(j, i) -= x;
+      }
+  }
+  H.prune(1e-300);
+  return H;
+}
+
+}  // namespace
+
+EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sys) {
+  if (!sys.q_separable) {
+    throw std::invalid_argument(
+        "eliminate_rotation_corrections: L_QQ couples neighbouring elements (gamma > 0), so Q cannot be "
+        "eliminated element by element; keep Q in the factored system");
+  }
+  const Index nv = 3 * sys.n, nq = 4 * sys.r;
+  const SparseMatrix<double> LVQ = sys.L.block(0, nv, nv, nq);
+  const SparseMatrix<double> Binv = inverse_element_blocks(sys.L.bottomRightCorner(nq, nq), sys.r);
   const SparseMatrix<double> DV = sys.D.topRows(nv);
   const SparseMatrix<double> DQ = sys.D.bottomRows(nq);
   const SparseMatrix<double> LVQ_Binv = detail_deformer::parallel_product(LVQ, Binv);
   EliminatedArapSystem out;
-  SparseMatrix<double> H = LVV - detail_deformer::parallel_product(LVQ_Binv, SparseMatrix<double>(LVQ.transpose()));
-  // Symmetrise exactly (the product is symmetric up to round-off).
-  const SparseMatrix<double> Ht = H.transpose();
-  out.H = (0.5 * (H + Ht)).pruned(1e-300);
+  out.H = eliminated_hessian(SparseMatrix<double>(sys.L.topLeftCorner(nv, nv)), LVQ, LVQ_Binv, sys.r);
   out.Ds = (DV - detail_deformer::parallel_product(LVQ_Binv, DQ)).pruned(1e-300);
   out.DV = DV;
   out.K = detail_deformer::parallel_product(SparseMatrix<double>(DQ.transpose()),
