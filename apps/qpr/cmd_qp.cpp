@@ -78,7 +78,7 @@ struct Options {
   bool baseline = false;
   bool no_augment = false;  // H PD: factor H itself (SubspaceOptions::augment = false)
   bool strict = false;      // warnings (least-squares constraints) are failures
-  std::string backend = "auto";  // "mumps": the subspace built over MPI (mpirun -np K), solved on rank 0
+  std::string backend = "auto";  // "mumps": the subspace built over MPI (mpirun -np K), each rank keeping its rows
   Index theorem_max_n = 3000;  // the bound is a dense analysis (n×n eigendecomposition)
 };
 
@@ -292,7 +292,20 @@ struct Solvers {
   qpreduce::CachedCholeskySchur baseline;
   std::string baseline_note;
   double baseline_precompute = 0.0;
+#ifdef QPREDUCE_HAVE_MPI
+  // --backend mumps: this rank's rows of B = [N UD] (the solver on every
+  // rank is restored without the basis); A_r, q_r are summed over the ranks
+  // and X is gathered to rank 0, which reports.
+  std::optional<qpreduce::distributed::DistributedSubspace> part;
+#endif
+  int rank = 0;
 };
+
+#ifdef QPREDUCE_HAVE_MPI
+void sum_over_ranks(qpreduce::Matrix<double>& M) {
+  if (M.size() > 0) MPI_Allreduce(MPI_IN_PLACE, M.data(), static_cast<int>(M.size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+}
+#endif
 
 // Sets up the Theorem 4.10 checker when --check-full asks for it and it applies.
 void setup_theorem(const Options& opt, const Problem& p, Solvers& s) {
@@ -389,21 +402,37 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
   json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
   const qpreduce::Timer t0;
   // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
-  const qpreduce::ConstraintSummary cs =
-      d.A_c.size() > 0 ? s.solver.set_constraints_in_design(d.A_c, s.copt) : s.solver.set_constraints(d.A, s.copt);
+  qpreduce::ConstraintSummary cs;
+  if (d.A_c.size() > 0) {
+    cs = s.solver.set_constraints_in_design(d.A_c, s.copt);
+#ifdef QPREDUCE_HAVE_MPI
+  } else if (s.part) {  // A_r = Σ over the ranks of (rows of A)ᵀ·(rows of B)
+    const auto& b = *s.part;
+    const qpreduce::SparseMatrix<double> At = d.A.middleRows(b.rows.begin, b.rows.size()).transpose();
+    qpreduce::Matrix<double> Ar(d.A.cols(), s.solver.p());
+    Ar.leftCols(b.d) = At * b.N_rows;
+    Ar.rightCols(b.k) = At * b.UD_rows;
+    sum_over_ranks(Ar);
+    cs = s.solver.set_constraints_reduced(d.A, std::move(Ar), s.copt);
+#endif
+  } else {
+    cs = s.solver.set_constraints(d.A, s.copt);
+  }
   const double t_op = t0.seconds();
   r["status"] = qpreduce::to_string(cs.status);
   r["message"] = cs.message;
   if (!cs.usable()) {
     ++tally.failures;
-    fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
+    if (s.rank == 0) fmt::print(stderr, "qpr qp: demand '{}': {}\n", d.name, cs.message);
     return r;
   }
   if (cs.status != qpreduce::Status::Success) {
     // A fallback that changes what the answer means: said on stderr, not only in the report.
     ++tally.warnings;
-    fmt::print(stderr, "qpr qp: {}: demand '{}': {} ({})\n", opt.strict ? "error" : "warning", d.name,
-               qpreduce::to_string(cs.status), cs.message);
+    if (s.rank == 0) {
+      fmt::print(stderr, "qpr qp: {}: demand '{}': {} ({})\n", opt.strict ? "error" : "warning", d.name,
+                 qpreduce::to_string(cs.status), cs.message);
+    }
     if (opt.strict) {
       ++tally.failures;
       return r;
@@ -412,14 +441,44 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
   const qpreduce::Timer t1;
   if (d.in_D) {
     s.solver.solve_in_D(d.b, d.Y, ws.w);
+#ifdef QPREDUCE_HAVE_MPI
+  } else if (s.part) {  // q_r = Σ over the ranks of (rows of B)ᵀ·(rows of q)
+    const auto& b = *s.part;
+    qpreduce::Matrix<double> qr(s.solver.p(), 1);
+    qr.topRows(b.d) = b.N_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
+    qr.bottomRows(b.k) = b.UD_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
+    sum_over_ranks(qr);
+    ws.qr = qr.col(0);
+    s.solver.solve(d.b, ws.qr, ws.w);
+#endif
   } else {
     s.solver.reduce_linear_term(d.q, ws.qr);
     s.solver.solve(d.b, ws.qr, ws.w);
   }
   const double t_solve = t1.seconds();
   const qpreduce::Timer t2;
+#ifdef QPREDUCE_HAVE_MPI
+  if (s.part) {  // each rank its rows of X = N·z + UD·y, gathered to rank 0
+    const auto& b = *s.part;
+    const Vec mine = b.N_rows * ws.w.head(b.d) + b.UD_rows * ws.w.tail(b.k);
+    int ranks = 1;
+    MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+    std::vector<int> counts(static_cast<size_t>(ranks)), offsets(static_cast<size_t>(ranks));
+    for (int q = 0; q < ranks; ++q) {
+      const auto rows = qpreduce::distributed::owned_rows(p.n(), q, ranks);
+      counts[static_cast<size_t>(q)] = static_cast<int>(rows.size());
+      offsets[static_cast<size_t>(q)] = static_cast<int>(rows.begin);
+    }
+    MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, ws.X.data(), counts.data(), offsets.data(),
+                MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  } else {
+    s.solver.reconstruct(ws.w, ws.X);
+  }
+#else
   s.solver.reconstruct(ws.w, ws.X);
+#endif
   const double t_recon = t2.seconds();
+  if (s.rank != 0) return r;  // rank 0 checks, writes and prints
   Row row;
   row.reduced = t_op + t_solve + t_recon;
   r["reduced_seconds"] = row.reduced;
@@ -478,21 +537,28 @@ int run_qp(const Options& opt) {
   qpreduce::SubspaceSummary pre;
   if (opt.backend == "mumps") {
 #ifdef QPREDUCE_HAVE_MPI
-    // Every rank reads the files and hands MUMPS its rows (docs/scaling.md);
-    // rank 0 receives the subspace and solves the demands.
-    qpreduce::VariationalSubspace<double> B;
-    qpreduce::Matrix<double> Hr, BtD;
-    pre = qpreduce::distributed::build_subspace_mumps_on_root(MPI_COMM_WORLD, p.H, p.C, p.D, s.sopt, {}, 0, &B, &Hr,
-                                                              &BtD);
-    int rank = 0;
-    MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-    if (rank != 0) return pre.ok() ? 0 : 3;
-    if (pre.ok()) s.solver.restore(std::move(B), std::move(Hr), std::move(BtD), s.sopt);
+    // Every rank reads the files, hands MUMPS its rows of H and keeps its
+    // rows of B (docs/scaling.md): no rank holds the n × p basis. The ranks
+    // solve every demand together (A_r and q_r summed, X gathered to rank 0);
+    // rank 0 checks and reports.
+    MPI_Comm_rank(MPI_COMM_WORLD, &s.rank);
+    const auto rows = qpreduce::distributed::owned_rows(p.n(), MPI_COMM_WORLD);
+    s.part.emplace();
+    pre = qpreduce::distributed::build_subspace_mumps(MPI_COMM_WORLD, p.H.middleRows(rows.begin, rows.size()), p.C,
+                                                      p.D, s.sopt, {}, &*s.part);
+    if (pre.ok()) {  // ‖B_j‖ for ConstraintOptions::drop_tolerance
+      qpreduce::Matrix<double> norms(s.part->d + s.part->k, 1);
+      norms.topRows(s.part->d) = s.part->N_rows.colwise().squaredNorm().transpose();
+      norms.bottomRows(s.part->k) = s.part->UD_rows.colwise().squaredNorm().transpose();
+      sum_over_ranks(norms);
+      s.solver.restore_without_basis(p.n(), s.part->d, norms.col(0).cwiseSqrt(), s.part->Hr, s.part->BtD, s.sopt);
+    }
+    if (s.rank != 0 && !pre.ok()) return 3;
 #endif
   } else {
     pre = s.solver.precompute(p.H, p.C, p.D, s.sopt);
   }
-  fmt::print("precompute: {}\n", pre.brief_report());
+  if (s.rank == 0) fmt::print("precompute: {}\n", pre.brief_report());
   if (!pre.ok()) {
     fmt::print(stderr, "qpr qp: precompute failed: {}\n", pre.message);
     return 3;
@@ -501,12 +567,16 @@ int run_qp(const Options& opt) {
     s.copt.soft = true;
     s.copt.delta = opt.soft;
   }
-  setup_theorem(opt, p, s);
-  if (opt.baseline && !setup_baseline(p, s)) return 3;
-
   json records = json::array();
   Tally tally;
   Workspace ws{Vec(s.solver.p()), Vec(s.solver.p()), Vec(p.n()), Vec(), Vec()};
+  if (s.rank != 0) {  // the other ranks of --backend mumps: their share of every demand, nothing else
+    for (const Demand& d : p.demands) run_demand(d, opt, p, s, ws, tally);
+    return 0;
+  }
+  setup_theorem(opt, p, s);
+  if (opt.baseline && !setup_baseline(p, s)) return 3;
+
   fmt::print("{:<12} {:>5} {:>12} {:>12} {:>12} {:>12} {:>12}\n", "demand", "m", "reduced ms", "full ms",
              "baseline ms", "d_H error", "bound");
   for (const Demand& d : p.demands) records.push_back(run_demand(d, opt, p, s, ws, tally));

@@ -239,19 +239,37 @@ void SubspaceSolver<Scalar>::reference_operators(const MatD& Abar, const Constra
 template <typename Scalar>
 ConstraintSummary SubspaceSolver<Scalar>::set_constraints(const SparseMatrix<Scalar>& A,
                                                           const ConstraintOptions& options) {
-  std::string why;
-  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
   require_basis("SubspaceSolver::set_constraints");
   check_size("SubspaceSolver::set_constraints: A rows", n_, A.rows());
   check_finite("SubspaceSolver::set_constraints: A", A);
   const Timer timer;
-  const detail::ScopedOmpThreads threads(options.threads);
-  constrained_ = false;
   const Index d = this->d(), k = this->k(), p = d + k, m = A.cols();
   // A_r = AᵀB: nnz(A)·p work for sparse A.
   MatD Ar(m, p);
-  Ar.leftCols(d) = (A.transpose() * subspace_.N).template cast<double>();
-  Ar.rightCols(k) = (A.transpose() * subspace_.UD).template cast<double>();
+  {
+    const detail::ScopedOmpThreads threads(options.threads);
+    Ar.leftCols(d) = (A.transpose() * subspace_.N).template cast<double>();
+    Ar.rightCols(k) = (A.transpose() * subspace_.UD).template cast<double>();
+  }
+  ConstraintSummary summary = set_constraints_reduced(A, std::move(Ar), options);
+  summary.seconds = timer.seconds();
+  return summary;
+}
+
+template <typename Scalar>
+ConstraintSummary SubspaceSolver<Scalar>::set_constraints_reduced(const SparseMatrix<Scalar>& A, MatD Ar,
+                                                                  const ConstraintOptions& options) {
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("ConstraintOptions: " + why);
+  require_ready("SubspaceSolver::set_constraints_reduced");
+  check_size("SubspaceSolver::set_constraints_reduced: A rows", n_, A.rows());
+  check_size("SubspaceSolver::set_constraints_reduced: A_r rows (A's columns)", A.cols(), Ar.rows());
+  check_size("SubspaceSolver::set_constraints_reduced: A_r columns (p)", p(), Ar.cols());
+  check_finite("SubspaceSolver::set_constraints_reduced: A", A);
+  check_finite("SubspaceSolver::set_constraints_reduced: A_r", Ar);
+  const Timer timer;
+  const detail::ScopedOmpThreads threads(options.threads);
+  constrained_ = false;
   // Round-off entries (CᵀN = I, CᵀUD = 0 hold only to round-off) to exact zeros.
   Index dropped = 0, emptied = 0;
   if (options.drop_tolerance > 0.0) dropped = drop_roundoff(A, basis_norms_, options.drop_tolerance, &Ar, &emptied);

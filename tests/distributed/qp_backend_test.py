@@ -5,10 +5,13 @@
 
 Writes a small QP as Matrix Market files (a 1-D smoothing chain, PD:
 H = tridiag(−1, 2 + 10⁻², −1), C selects 6 stations, D = [1, t]; three
-demands pinning some stations), solves it with the single-process backend and
-with MUMPS on 2 ranks (`--out` writes X_<name>.mtx), and checks that every
-solution agrees to 1e-8 relative. Then `--backend nonsense` is refused with a message naming the option.
+demands pinning some stations with q = D·Y, one with a general q), solves it
+with the single-process backend and with MUMPS on 2 ranks — each rank
+keeping its rows of the basis, A_r and q_r summed over the ranks, X gathered
+to rank 0 (`--out` writes X_<name>.mtx; `--check-full` and the report on
+rank 0) — and checks that every solution agrees to 1e-8 relative. Then `--backend nonsense` is refused with a message naming the option.
 """
+import json
 import os
 import subprocess
 import sys
@@ -60,11 +63,21 @@ def main():
                   [(STATIONS[s], j, 1.0) for j, s in enumerate(pinned)])
         write_dense(os.path.join(demands, f"b_{name}.mtx"), [0.5 + 0.25 * s for s in pinned])
         write_dense(os.path.join(demands, f"Y_{name}.mtx"), [0.01, -0.02 * len(pinned)])
+    # A demand with a general linear term q (n entries): q_r = Bᵀq summed over the ranks.
+    write_coo(os.path.join(demands, "A_d.mtx"), N, 2, [(STATIONS[0], 0, 1.0), (STATIONS[5], 1, 1.0)])
+    write_dense(os.path.join(demands, "b_d.mtx"), [0.3, -0.2])
+    write_dense(os.path.join(demands, "q_d.mtx"), [0.01 * ((i * 37) % 11 - 5) for i in range(N)])
     common = ["qp", "--H", os.path.join(work, "H.mtx"), "--C", os.path.join(work, "C.mtx"),
               "--D", os.path.join(work, "D.mtx"), "--demands", demands]
     run([qpr, *common, "--out", os.path.join(work, "auto")])
-    run([mpirun, "--oversubscribe", "-np", "2", qpr, *common, "--backend", "mumps", "--out", os.path.join(work, "mumps")])
-    for name in ["a", "b", "c"]:
+    report = os.path.join(work, "mumps_report.json")
+    run([mpirun, "--oversubscribe", "-np", "2", qpr, *common, "--backend", "mumps", "--out", os.path.join(work, "mumps"),
+         "--check-full", "--report", report])
+    with open(report) as f:
+        doc = json.load(f)
+    if doc["failures"] or len(doc["demands"]) != 4 or any(r["status"] != "success" for r in doc["demands"]):
+        sys.exit(f"FAILED: the 2-rank report: {json.dumps(doc)[:2000]}")
+    for name in ["a", "b", "c", "d"]:
         x = read_dense(os.path.join(work, "auto", f"X_{name}.mtx"))
         y = read_dense(os.path.join(work, "mumps", f"X_{name}.mtx"))
         diff = sum((u - v) ** 2 for u, v in zip(x, y)) ** 0.5

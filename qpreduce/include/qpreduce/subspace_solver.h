@@ -136,6 +136,13 @@ class SubspaceSolver {
   // Throws std::invalid_argument on a wrong row count, NaN, or when called
   // before a successful precompute.
   ConstraintSummary set_constraints(const SparseMatrix<Scalar>& A, const ConstraintOptions& options = {});
+  // The same with A_r = AᵀB (m × p) formed by the caller — e.g. summed over
+  // the processes that each hold rows of B (qpreduce::distributed), for a
+  // solver restored without its basis. A (n × m) gives the checks and the
+  // rows' norms of ConstraintOptions::drop_tolerance. Throws
+  // std::invalid_argument on wrong sizes or NaN.
+  ConstraintSummary set_constraints_reduced(const SparseMatrix<Scalar>& A, Matrix<double> Ar,
+                                            const ConstraintOptions& options = {});
   // The same for constraints given in the design space, A = C·A_c (A_c d×m,
   // dense): A_r = A_cᵀ·Cᵀ[N UD] = [A_cᵀ 0], because CᵀN = I and CᵀUD = 0
   // (Eq. 4, second row) — exact up to the precompute's kkt_residual. Costs
