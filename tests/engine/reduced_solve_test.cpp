@@ -163,6 +163,19 @@ TEST_CASE("a solver without its basis solves reduced demands like the original a
     CHECK_THROWS_WITH(s->reconstruct(w, X), Catch::Contains("holds no basis"));
     CHECK_THROWS_WITH(s->reduce_linear_term(Vector<double>::Ones(original.n()), qr), Catch::Contains("holds no basis"));
   }
+  // General constraints with A_r = AᵀB formed by the caller (as the ranks of
+  // qpreduce::distributed sum it): the solution of set_constraints(A).
+  const Matrix<double> Ar = Matrix<double>(p.A.transpose()) *
+                            (Matrix<double>(original.n(), original.p()) << original.subspace().N,
+                             original.subspace().UD)
+                                .finished();
+  REQUIRE(original.set_constraints(p.A).ok());
+  original.solve_in_D(p.b, p.Y, w0);
+  REQUIRE(restored.set_constraints_reduced(p.A, Ar).ok());
+  restored.solve_in_D(p.b, p.Y, w);
+  CHECK((w - w0).norm() <= 1e-12 * w0.norm());
+  CHECK_THROWS_WITH(restored.set_constraints_reduced(p.A, Ar.leftCols(2)), Catch::Contains("A_r columns"));
+  CHECK_THROWS_WITH(restored.set_constraints_reduced(p.A, Ar.topRows(1)), Catch::Contains("A_r rows"));
   // The copy released its basis, the original keeps its own.
   CHECK(original.has_basis());
   original.reconstruct(w0, X);
