@@ -28,6 +28,7 @@
 #include <fmt/format.h>
 #include <zlib.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstring>
@@ -404,12 +405,15 @@ void Deformer::save(const std::string& path) const {
         "save(path, blocks) with every part's rows",
         model.basis_first, model.basis_first + model.basis.rows(), 3 * model.n));
   }
-  bool given = false;
+  // Blocks of 4,096 rows: a copy of one block at a time, not of the basis.
+  constexpr Index kBlockRows = 4096;
+  Index next_row = 0;
   save(path, [&](Index* first, BasisRows* rows) {
-    if (given) return false;
-    given = true;
-    *first = 0;
-    *rows = model.basis;
+    if (next_row >= model.basis.rows()) return false;
+    const Index count = std::min(kBlockRows, model.basis.rows() - next_row);
+    *first = next_row;
+    *rows = model.basis.middleRows(next_row, count);
+    next_row += count;
     return true;
   });
 }
