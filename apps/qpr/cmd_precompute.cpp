@@ -82,10 +82,6 @@ qpreduce::deform::Deformer::PartBuilder mumps_builder(int block, const qpreduce:
   };
 }
 
-void sum_over_ranks(qpreduce::Matrix<double>* M) {
-  MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
-}
-
 // The float basis travels to rank 0 in chunks of this many rows (p floats
 // each): rank 0 holds its own rows and one chunk, never the whole basis.
 constexpr qpreduce::Index kChunkRows = 4096;

@@ -301,11 +301,6 @@ struct Solvers {
   int rank = 0;
 };
 
-#ifdef QPREDUCE_HAVE_MPI
-void sum_over_ranks(qpreduce::Matrix<double>& M) {
-  if (M.size() > 0) MPI_Allreduce(MPI_IN_PLACE, M.data(), static_cast<int>(M.size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
-}
-#endif
 
 // Sets up the Theorem 4.10 checker when --check-full asks for it and it applies.
 void setup_theorem(const Options& opt, const Problem& p, Solvers& s) {
@@ -412,7 +407,7 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
     qpreduce::Matrix<double> Ar(d.A.cols(), s.solver.p());
     Ar.leftCols(b.d) = At * b.N_rows;
     Ar.rightCols(b.k) = At * b.UD_rows;
-    sum_over_ranks(Ar);
+    sum_over_ranks(&Ar);
     cs = s.solver.set_constraints_reduced(d.A, std::move(Ar), s.copt);
 #endif
   } else {
@@ -447,7 +442,7 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
     qpreduce::Matrix<double> qr(s.solver.p(), 1);
     qr.topRows(b.d) = b.N_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
     qr.bottomRows(b.k) = b.UD_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
-    sum_over_ranks(qr);
+    sum_over_ranks(&qr);
     ws.qr = qr.col(0);
     s.solver.solve(d.b, ws.qr, ws.w);
 #endif
@@ -550,7 +545,7 @@ int run_qp(const Options& opt) {
       qpreduce::Matrix<double> norms(s.part->d + s.part->k, 1);
       norms.topRows(s.part->d) = s.part->N_rows.colwise().squaredNorm().transpose();
       norms.bottomRows(s.part->k) = s.part->UD_rows.colwise().squaredNorm().transpose();
-      sum_over_ranks(norms);
+      sum_over_ranks(&norms);
       s.solver.restore_without_basis(p.n(), s.part->d, norms.col(0).cwiseSqrt(), s.part->Hr, s.part->BtD, s.sopt);
     }
     if (s.rank != 0 && !pre.ok()) return 3;

@@ -4,6 +4,8 @@
 
 #include "guard.h"
 
+#include <qpreduce/common.h>
+
 #include <mpi.h>
 
 #include <functional>
@@ -21,6 +23,14 @@ struct MpiSession {
   }
   int rank = 0, size = 1;
 };
+
+// In place: M's entries summed over the ranks of MPI_COMM_WORLD, on every
+// rank (the same shape everywhere).
+inline void sum_over_ranks(qpreduce::Matrix<double>* M) {
+  if (M->size() > 0) {
+    MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  }
+}
 
 // run_guarded with MPI up. A rank that failed alone would leave the others
 // waiting in a collective, so a failure with more than one rank ends the
