@@ -43,7 +43,10 @@ void bind_refine_options(py::module_& m) {
       .rw("max_iterations", &RefineOptions::max_iterations, "Round limit. Default 20000.")
       .rw("energy", &RefineOptions::energy, "ReferenceEnergy.ClassicArap (default) or ModifiedArap (E′).")
       .rw("parameters", &RefineOptions::parameters, "EnergyParameters of E′ (ModifiedArap only).")
-      .rw("backend", &RefineOptions::backend, "Factorization of the global step. Default Backend.Cholmod.")
+      .rw("backend", &RefineOptions::backend,
+          "Factorization of the global step. Default Backend.Auto: SimplicialLDLT when it separates by axis "
+          "(classic ARAP, whole vertices and patches held), CHOLMOD otherwise.")
+      .rw("threads", &RefineOptions::threads, "Threads for the rounds; 0 (default): all. The pose does not depend on it.")
       .repr()
       .keyword_init<RefineOptions>();
   def_validate<decltype(options), RefineOptions>(options);

@@ -207,6 +207,45 @@ TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[a
   }
 }
 
+TEST_CASE("fit_rotation_planar equals the SVD fit for covariances of planar elements", "[arap][phase2]") {
+  // G = Σ c e′eᵀ with every rest edge e ⟂ n (rank 2, G n = 0), e′ = R·S·e
+  // plus noise, some with negative weights (cot) or reflected: the SVD
+  // maximiser U·diag(1, 1, det UVᵀ)·Vᵀ is unique there and must be matched
+  // to round-off; nearly collinear edges take the fallback.
+  double worst = 0.0;
+  int compared = 0;
+  for (unsigned seed = 0; seed < 300; ++seed) {
+    const Eigen::VectorXd a = random_vector(40, 9000 + seed);
+    const Eigen::Vector3d n = a.segment<3>(0).normalized();
+    const Eigen::Matrix3d R = rotation(3.0 * a(3), a.segment<3>(4));
+    Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 6; ++k) {
+      Eigen::Vector3d e = a.segment<3>(8 + 3 * k);
+      e -= n.dot(e) * n;
+      if (seed % 7 == 0) e = (1.0 + 1e-5 * k) * (a.segment<3>(8) - n.dot(a.segment<3>(8)) * n);  // collinear
+      const Eigen::Vector3d ep = R * (e + 0.3 * a.segment<3>(26 + (k % 4) * 3).cwiseProduct(e));
+      G += (k == 5 && seed % 3 == 0 ? -0.2 : 1.0) * ep * e.transpose();
+    }
+    if (seed % 5 == 1) G.row(0) *= -1.0;  // reflected (still G n = 0)
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd(G, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d U = svd.matrixU();
+    if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1.0;
+    const Eigen::Matrix3d expected = U * svd.matrixV().transpose();
+    const Eigen::Matrix3d F = fit_rotation_planar(G, n);
+    CHECK(F.determinant() == Approx(1.0).epsilon(1e-12));
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-12);
+    if (svd.singularValues()(1) > 1e-8 * svd.singularValues()(0)) {  // unique maximiser
+      // Both fits are exact to round-off times σ₁/σ₂ (the sensitivity of
+      // the maximiser), which is what is compared.
+      worst = std::max(worst, (F - expected).norm() * svd.singularValues()(1) / svd.singularValues()(0));
+      ++compared;
+    }
+    CHECK(F.cwiseProduct(G).sum() >= expected.cwiseProduct(G).sum() - 1e-12 * G.norm());
+  }
+  CHECK(compared > 200);
+  CHECK(worst < 1e-14);
+}
+
 TEST_CASE("classic ARAP energy is zero at rest and invariant under rigid motion", "[arap][energy]") {
   const bool tet = GENERATE(false, true);
   const EnergyCase c = energy_case(tet);

@@ -683,6 +683,29 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   return fit_rotation_svd(G);  // did not settle (never seen): exact fallback
 }
 
+Eigen::Matrix3d fit_rotation_planar(const Eigen::Matrix3d& G, const Eigen::Vector3d& n) {
+  // t₁ ⟂ n from the axis n is least aligned with, t₂ = n × t₁.
+  Eigen::Index axis = 0;
+  n.cwiseAbs().minCoeff(&axis);
+  const Eigen::Vector3d t1 = n.cross(Eigen::Vector3d::Unit(axis)).normalized();
+  const Eigen::Vector3d t2 = n.cross(t1);
+  Eigen::Matrix<double, 3, 2> A;
+  A.col(0) = G * t1;
+  A.col(1) = G * t2;
+  const Eigen::Matrix2d M = A.transpose() * A;
+  const double det = M.determinant(), trace = M.trace();
+  if (!(det > 1e-6 * trace * trace)) return fit_rotation(G);  // σ₁σ₂ ≤ 1e-3·(σ₁² + σ₂²)
+  // √M = (M + √det·I)/√(tr M + 2√det) for a 2 × 2 SPD M.
+  const double s = std::sqrt(det);
+  Eigen::Matrix2d root = M;
+  root.diagonal().array() += s;
+  root /= std::sqrt(trace + 2.0 * s);
+  const Eigen::Matrix<double, 3, 2> W = A * root.inverse();
+  Eigen::Matrix3d R = W.col(0) * t1.transpose() + W.col(1) * t2.transpose();
+  R.noalias() += W.col(0).cross(W.col(1)) * n.transpose();
+  return R;
+}
+
 double arap_energy(const Vertices& V, const RotationElements& el, const Vertices& Vp) {
   check_size("arap_energy: deformed vertex count", V.rows(), Vp.rows());
   double energy = 0.0;

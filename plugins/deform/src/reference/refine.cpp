@@ -6,7 +6,9 @@
 #include <qpreduce/support.h>
 
 #include <fmt/format.h>
+#include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -22,6 +24,7 @@ ReferenceOptions reference_options(const RefineOptions& o) {
   ro.tolerance = o.tolerance;
   ro.anderson_window = o.anderson_window;
   ro.max_iterations = o.max_iterations;
+  ro.threads = o.threads > 0 ? o.threads : std::max(1, omp_get_max_threads());
   return ro;
 }
 
@@ -41,7 +44,13 @@ bool same_handles(const Handles& a, const Handles& b) {
 
 // The same checks as the local-global options the refine runs with (one
 // place for the messages).
-bool RefineOptions::is_valid(std::string* why) const { return reference_options(*this).is_valid(why); }
+bool RefineOptions::is_valid(std::string* why) const {
+  if (threads < 0) {
+    if (why) *why = fmt::format("threads must be ≥ 0 (0: all), got {}", threads);
+    return false;
+  }
+  return reference_options(*this).is_valid(why);
+}
 
 struct Refiner::State {
   RefineOptions options;
@@ -74,6 +83,7 @@ void Refiner::set_options(const RefineOptions& options) {
   st.options.tolerance = options.tolerance;
   st.options.anderson_window = options.anderson_window;
   st.options.max_iterations = options.max_iterations;
+  st.options.threads = options.threads;
   st.lg.set_iteration_options(reference_options(st.options));
 }
 

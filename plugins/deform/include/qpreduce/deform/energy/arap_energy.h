@@ -134,4 +134,15 @@ double arap_energy(const Vertices& V, const RotationElements& elements, const Ve
 // reflected (paper Phase 2, Eq. 19).
 Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G);
 
+// The same rotation when G·n = 0 for a unit vector n, as for the covariance
+// G = Σ c e′eᵀ of an element whose rest edges e all lie in the plane n⊥
+// (flat parts of a surface), where fit_rotation has to take the SVD path.
+// With T = [t₁ t₂] an orthonormal basis of n⊥, G = A·Tᵀ for A = G·T (3 × 2),
+// and tr(RᵀG) = Σ (R t_i)·a_i is largest for [R t₁, R t₂] = W = A·(AᵀA)^(−1/2)
+// (2 × 2 square root in closed form), so R = [W₁ W₂ W₁×W₂]·[t₁ t₂ n]ᵀ.
+// Precondition: ‖G n‖ ≤ 1e-12·‖G‖ (not checked; the result is then exact to
+// that order). A (nearly) rank-one A, σ₁σ₂ ≤ 1e-3·(σ₁² + σ₂²), goes to
+// fit_rotation.
+Eigen::Matrix3d fit_rotation_planar(const Eigen::Matrix3d& G, const Eigen::Vector3d& n);
+
 }  // namespace qpreduce::deform

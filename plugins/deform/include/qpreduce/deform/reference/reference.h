@@ -92,9 +92,13 @@ struct ReferenceOptions {
   int anderson_window = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
-  // Factorization of the global step (local-global).
+  // Factorization of the global step (local-global). Auto: CHOLMOD, or
+  // Eigen's SimplicialLDLT for a per-axis factor (HandleSetSummary::
+  // axis_separable), whose three-column solves it does faster on meshes.
   Backend backend = Backend::Cholmod;
-  // Threads for Ceres' Jacobian evaluation and linear algebra.
+  // Threads for Ceres' Jacobian evaluation and linear algebra, and for the
+  // local step and linear term of classic local-global (elements and
+  // vertices in parallel; the result does not depend on the count).
   int threads = 1;
 
   bool is_valid(std::string* why) const;
@@ -132,6 +136,9 @@ struct ReferenceSolution {
 struct HandleSetSummary : Outcome {
   Index free_coordinates = 0, pinned_coordinates = 0;
   Index point_rows = 0;  // weighted-point constraint rows
+  // Classic ARAP with whole vertices and patches pinned: K = K_s ⊗ I₃, and
+  // K_s (a third of the size) was factored instead of K.
+  bool axis_separable = false;
   double seconds = 0.0;
 };
 
@@ -203,7 +210,7 @@ class LocalGlobalArap {
                          const std::function<bool()>& cancel = {});
 
   // Replaces the iteration settings (max_iterations, step_tolerance,
-  // energy_tolerance, tolerance, anderson_window) and keeps the
+  // energy_tolerance, tolerance, anderson_window, threads) and keeps the
   // factorization. Throws std::invalid_argument on invalid options or
   // before precompute.
   void set_iteration_options(const ReferenceOptions& options);

@@ -46,7 +46,13 @@ struct RefineOptions {
   // model then needs its rotational clusters).
   ReferenceEnergy energy = ReferenceEnergy::ClassicArap;
   EnergyParameters parameters;
-  Backend backend = Backend::Cholmod;
+  // The global step's factorization. Auto: Eigen's SimplicialLDLT when the
+  // step separates into one factor for the three axes (classic ARAP with
+  // whole vertices and patches held, reference.h), CHOLMOD otherwise.
+  Backend backend = Backend::Auto;
+  // Threads for the rounds (ReferenceOptions::threads); 0: all
+  // (omp_get_max_threads()). The refined pose does not depend on it.
+  int threads = 0;
 
   // False with a reason, e.g. "tolerance must be finite and ≥ 0, got -1".
   bool is_valid(std::string* why) const;
@@ -85,7 +91,7 @@ class Refiner {
   // (as LocalGlobalArap::precompute).
   void precompute(const DeformableMesh& model, const RefineOptions& options = {});
 
-  // Replaces tolerance, anderson_window and max_iterations (the energy,
+  // Replaces tolerance, anderson_window, max_iterations and threads (the energy,
   // parameters and backend stay those of precompute). Throws
   // std::invalid_argument on invalid options or before precompute.
   void set_options(const RefineOptions& options);
