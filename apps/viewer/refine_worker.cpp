@@ -1,5 +1,6 @@
 #include "refine_worker.h"
 
+#include <algorithm>
 #include <chrono>
 #include <exception>
 #include <stdexcept>
@@ -39,6 +40,9 @@ bool RestTimer::update(bool moved, double now) {
 
 RefineWorker::RefineWorker(DeformableMesh model, const RefineOptions& options, RoundHook hook)
     : model_(std::move(model)), options_(options), hook_(std::move(hook)) {
+  // The worker runs beside the render loop: by default it leaves that loop
+  // a core (RefineOptions::threads 0 would take them all).
+  if (options_.threads == 0) options_.threads = std::max(1, static_cast<int>(std::thread::hardware_concurrency()) - 1);
   std::string why;
   if (!options_.is_valid(&why)) throw std::invalid_argument("refine options: " + why);
   thread_ = std::thread([this] { loop(); });
