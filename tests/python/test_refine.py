@@ -112,6 +112,8 @@ def test_bad_options_and_arguments_name_the_problem(posed):
         deform.Refiner(scenario.model, deform.RefineOptions(tolerance=-1.0))
     with pytest.raises(ValueError, match="anderson_window"):
         deform.RefineOptions(anderson_window=17).validate()
+    with pytest.raises(ValueError, match=r"threads must be ≥ 0 \(0: all\), got -1"):
+        deform.RefineOptions(threads=-1).validate()
     refiner = deform.Refiner(scenario.model)
     with pytest.raises(ValueError, match="tolerance"):
         refiner.set_options(deform.RefineOptions(tolerance=float("nan")))

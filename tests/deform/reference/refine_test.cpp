@@ -233,6 +233,9 @@ TEST_CASE("refine: bad settings give clear errors", "[reference][refine]") {
   CHECK_THROWS_WITH(refiner.precompute(c.model, options), Catch::Contains("anderson_window must be in [0, 16]"));
   options.anderson_window = -1;
   CHECK_THROWS_WITH(refiner.precompute(c.model, options), Catch::Contains("got -1"));
+  options = RefineOptions{};
+  options.threads = -2;
+  CHECK_THROWS_WITH(refiner.precompute(c.model, options), Catch::Contains("threads must be ≥ 0 (0: all), got -2"));
   Vertices out;
   CHECK_THROWS_WITH(refiner.refine(c.handles, c.targets, {}, &out), Catch::Contains("call precompute first"));
   refiner.precompute(c.model);
