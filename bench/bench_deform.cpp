@@ -37,6 +37,16 @@
 //                       the plain read and reconstruct_points one call after
 //                       the other, outside any frame (the team kept busy)
 //   Frame/<M>           a whole frame (8 rounds + reconstruction)
+//   RefineRound/<M>     one round of the full-space finish (refine.h) from
+//                       a frame's reduced pose, under the session's handles
+//                       (single vertices: the per-axis factor), default
+//                       options (Backend::Auto, all threads); manual time =
+//                       the mean of rounds 2–5 of a 5-round refine, from
+//                       RefineSummary::round_seconds (counters rounds,
+//                       setup_ms, axis_separable)
+//   RefineRoundSerial/<M>, RefineRoundCholmod/<M>
+//                       the same on one thread, and with the per-axis
+//                       factor by CHOLMOD (the A/B behind Backend::Auto)
 // Every per-iteration benchmark also reports the median of its samples as
 // the counter `median` (µs for Iteration, ms otherwise).
 // With QPREDUCE_BENCH_CACHE_DIR set, the untimed sessions (all but
@@ -55,6 +65,7 @@
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/proxies/proxies.h>
 #include <qpreduce/deform/io/tet_io.h>
+#include <qpreduce/deform/reference/refine.h>
 #include <qpreduce/point_reconstruction.h>
 
 #include <qpreduce/support.h>
@@ -157,11 +168,20 @@ Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   const std::string cache = cache_dir ? std::string(cache_dir) + "/" + spec.name + ".qpr" : "";
   if (timed) {
     for (auto _ : *timed) s->pre = s->deformer.precompute(s->model, s->options);
-  } else if (!cache.empty() && std::filesystem::exists(cache)) {
-    s->pre = s->deformer.load(cache, s->model, s->options);
   } else {
-    s->pre = s->deformer.precompute(s->model, s->options);
-    if (!cache.empty() && s->pre.ok()) s->deformer.save(cache);
+    bool loaded = false;
+    if (!cache.empty() && std::filesystem::exists(cache)) {
+      try {
+        s->pre = s->deformer.load(cache, s->model, s->options);
+        loaded = true;
+      } catch (const std::exception& e) {  // e.g. a cache of an older format version: made again
+        fmt::print(stderr, "bench_deform: cache not loaded: {}\n", e.what());
+      }
+    }
+    if (!loaded) {
+      s->pre = s->deformer.precompute(s->model, s->options);
+      if (!cache.empty() && s->pre.ok()) s->deformer.save(cache);
+    }
   }
   s->peak_mib = mem.peak_mb();
   s->extra_mib = s->peak_mib - mem.baseline_mb();
@@ -386,6 +406,41 @@ void BM_ReconstructionVsRead(benchmark::State& state, const ModelSpec* spec) {
   set_sizes(state, s);
 }
 
+void BM_RefineRound(benchmark::State& state, const ModelSpec* spec, Backend backend, int threads) {
+  Session& s = session(*spec);
+  const HandleTargets targets = next_targets(s);
+  Vertices reduced;
+  s.deformer.frame(targets, &reduced);
+  RefineOptions options;
+  options.backend = backend;
+  options.threads = threads;
+  options.tolerance = 0.0;     // no early stop: every call runs its rounds
+  options.max_iterations = 5;  // timed: rounds 2–5 (the first includes the call's set-up)
+  Refiner refiner;
+  refiner.precompute(s.model, options);
+  Vertices out;
+  const RefineSummary first = refiner.refine(s.handles, targets, reduced, &out);  // factors
+  if (!first.ok()) {
+    state.SkipWithError(first.message.c_str());
+    return;
+  }
+  int rounds = 0;
+  for (auto _ : state) {
+    const RefineSummary r = refiner.refine(s.handles, targets, reduced, &out);
+    if (r.round_seconds.size() < 2) {
+      state.SkipWithError("the refine stopped after one round");
+      return;
+    }
+    state.SetIterationTime((r.round_seconds.back() - r.round_seconds.front()) /
+                           static_cast<double>(r.round_seconds.size() - 1));
+    rounds += static_cast<int>(r.round_seconds.size()) - 1;
+  }
+  state.counters["rounds"] = rounds;
+  state.counters["setup_ms"] = 1e3 * first.setup_seconds;
+  state.counters["axis_separable"] = first.axis_separable ? 1 : 0;
+  set_sizes(state, s);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -436,6 +491,15 @@ int main(int argc, char** argv) {
         ->UseManualTime();
     benchmark::RegisterBenchmark(("IterationPlain/" + n).c_str(), BM_FramePart, &spec, Part::Iteration, 1, 0)
         ->Unit(benchmark::kMicrosecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("RefineRound/" + n).c_str(), BM_RefineRound, &spec, Backend::Auto, 0)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("RefineRoundSerial/" + n).c_str(), BM_RefineRound, &spec, Backend::Auto, 1)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("RefineRoundCholmod/" + n).c_str(), BM_RefineRound, &spec, Backend::Cholmod, 0)
+        ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
   }
   if (found == 0) fmt::print(stderr, "bench_deform: no model found under {} (set QPREDUCE_SHARED_DATA)\n", dir);

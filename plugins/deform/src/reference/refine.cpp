@@ -59,6 +59,7 @@ struct Refiner::State {
   double diagonal = 0.0;
   Handles handles;
   bool has_handles = false;
+  bool axis_separable = false;  // of the current handle set's factor
 };
 
 Refiner::Refiner() : state_(std::make_unique<State>()) {}
@@ -115,7 +116,9 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
     }
     st.handles = handles;
     st.has_handles = true;
+    st.axis_separable = hs.axis_separable;
   }
+  summary.axis_separable = st.axis_separable;
   ReferenceSolution solution;
   const ReferenceSummary rs = st.lg.solve(targets, &solution, pose, cancel);
   summary.status = rs.status;

@@ -63,6 +63,7 @@ struct RefineSummary : Outcome {
   bool converged = false;             // the tolerance test held (not the round limit)
   bool cancelled = false;             // the cancel hook stopped it; the pose is the last accepted one
   bool refactored = false;            // this call factored the global step (new handle set)
+  bool axis_separable = false;        // one factor serves x, y and z (HandleSetSummary::axis_separable)
   int rejected_steps = 0;             // Anderson steps refused by the energy safeguard
   double seconds = 0.0;               // the rounds (the time to converge from the input pose)
   double setup_seconds = 0.0;         // the factorization of this call (0 when reused)
