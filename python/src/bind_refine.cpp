@@ -59,6 +59,8 @@ void bind_refine_options(py::module_& m) {
       .ro("converged", &RefineSummary::converged, "The tolerance test held (not the round limit).")
       .ro("cancelled", &RefineSummary::cancelled, "cancel() stopped it; the pose is the last accepted one.")
       .ro("refactored", &RefineSummary::refactored, "This call factored the global step (new handle set).")
+      .ro("axis_separable", &RefineSummary::axis_separable,
+          "One factor serves x, y and z (classic ARAP with whole vertices and patches held).")
       .ro("rejected_steps", &RefineSummary::rejected_steps, "Anderson steps the energy safeguard refused.")
       .ro("seconds", &RefineSummary::seconds, "The rounds' wall time.")
       .ro("setup_seconds", &RefineSummary::setup_seconds, "This call's factorization (0 when reused).")
