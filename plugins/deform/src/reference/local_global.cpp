@@ -453,12 +453,13 @@ void classic_local_data(LocalGlobalState* st) {
   st->plane_normal = Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, r);
   if (!el.is_surface || el.normal.rows() != r) return;
   for (Index k = 0; k < r; ++k) {
-    const Eigen::Vector3d n = el.normal.row(k).transpose();
-    if (!(n.norm() > 0.5) || el.offsets[k] == el.offsets[k + 1]) continue;
+    const Eigen::Vector3d normal = el.normal.row(k).transpose();
+    if (!(normal.norm() > 0.5) || el.offsets[k] == el.offsets[k + 1]) continue;
+    const Eigen::Vector3d n = normal.normalized();
     bool planar = true;
     for (Index e = el.offsets[k]; e < el.offsets[k + 1] && planar; ++e)
-      planar = std::abs(n.normalized().dot(st->rest_edge.col(e))) <= 1e-12 * st->rest_edge.col(e).norm();
-    if (planar) st->plane_normal.col(k) = n.normalized();
+      planar = std::abs(n.dot(st->rest_edge.col(e))) <= 1e-12 * st->rest_edge.col(e).norm();
+    if (planar) st->plane_normal.col(k) = n;
   }
 }
 
