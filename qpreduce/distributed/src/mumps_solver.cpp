@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <stdexcept>
 #include <vector>
@@ -57,10 +58,23 @@ MumpsSolver::MumpsSolver(MPI_Comm comm, Symmetry symmetry, const MumpsOptions& o
   if (parallel_ordering_) {
     id_.icntl[icntl(28)] = 2;  // parallel analysis
     id_.icntl[icntl(29)] = 1;  // PT-Scotch
+    one_scotch_thread_unless_mpi_allows();
   } else {
     id_.icntl[icntl(28)] = 1;  // sequential analysis on the host
     id_.icntl[icntl(7)] = 7;   // automatic choice among the orderings built in
   }
+}
+
+// PT-Scotch 7 (Debian's) folds its distributed graphs on threads that call
+// MPI concurrently, which needs MPI_THREAD_MULTIPLE: under a lower thread
+// level (MPI_Init) OpenMPI's shared-memory transport crashed in
+// hdgraphFold2 with 4 ranks on one node. Unless the caller set it, the
+// ordering then runs on one thread per rank (SCOTCH_PTHREAD_NUMBER, read by
+// Scotch when it orders).
+void MumpsSolver::one_scotch_thread_unless_mpi_allows() {
+  int level = MPI_THREAD_SINGLE;
+  MPI_Query_thread(&level);
+  if (level < MPI_THREAD_MULTIPLE) setenv("SCOTCH_PTHREAD_NUMBER", "1", /*overwrite=*/0);
 }
 
 MumpsSolver::~MumpsSolver() { run(-2); }

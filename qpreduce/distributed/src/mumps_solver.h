@@ -45,6 +45,7 @@ class MumpsSolver {
 
  private:
   void run(int job);
+  static void one_scotch_thread_unless_mpi_allows();
   DMUMPS_STRUC_C id_{};
   int rank_ = 0, size_ = 1;
   bool parallel_ordering_ = false;
