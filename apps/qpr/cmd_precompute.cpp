@@ -69,10 +69,8 @@ qpreduce::deform::Deformer::PartBuilder mumps_builder(int block, const qpreduce:
                          qpreduce::deform::Deformer::SubspacePart* part) {
     qpreduce::SubspaceOptions opts = options;
     opts.block_size = block;
-    const auto rows = qpreduce::distributed::owned_rows(H.rows(), MPI_COMM_WORLD);
     qpreduce::distributed::DistributedSubspace mine;
-    *record = qpreduce::distributed::build_subspace_mumps(MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D,
-                                                          opts, mumps, &mine);
+    *record = qpreduce::distributed::build_subspace_mumps_rows(MPI_COMM_WORLD, H, C, D, opts, mumps, &mine);
     part->first_row = mine.rows.begin;
     part->N_rows = std::move(mine.N_rows);
     part->UD_rows = std::move(mine.UD_rows);
@@ -179,7 +177,7 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
     std::fprintf(stderr, "rank %d at %s: peak %.0f MB, now %.0f MB\n", mpi.rank, stage.c_str(), peak_rss_megabytes(),
                  current_rss_megabytes());
   };
-  const auto pre = a.backend == "mumps" ? deformer.precompute_part(ls.scenario.model, ls.options, trace,
+  const auto pre = a.backend == "mumps" ? deformer.precompute_part(ls.scenario.model, ls.options, trace, {mpi.rank, mpi.size},
                                                                    mumps_builder(a.block, mumps, &dist), sum_over_ranks)
                                         : deformer.precompute(ls.scenario.model, ls.options, trace);
   if (a.backend == "mumps" && !dist.ok()) {  // the same status on every rank
@@ -200,9 +198,9 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   }
   const double seconds = total.seconds();
   // Every rank's peak memory, printed by rank 0.
-  const double mine = peak_rss_megabytes();
-  std::vector<double> peaks(static_cast<size_t>(mpi.size));
-  MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  const double mine[2] = {peak_rss_megabytes(), static_cast<double>(pre.assembled_elements)};
+  std::vector<double> peaks(2 * static_cast<size_t>(mpi.size));
+  MPI_Gather(mine, 2, MPI_DOUBLE, peaks.data(), 2, MPI_DOUBLE, 0, MPI_COMM_WORLD);
   if (mpi.rank != 0) return 0;
   std::printf("%s: precomputed with %s on %d rank(s) in %.2f s (subspace %.2f s), cache written\n", ls.name.c_str(),
               a.backend.c_str(), mpi.size, seconds, pre.subspace_seconds);
@@ -214,7 +212,11 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   }
   std::printf("  n_u = %lld, p = %lld, KKT residual %.2e\n", static_cast<long long>(pre.subspace.n),
               static_cast<long long>(pre.subspace.d + pre.subspace.k), pre.subspace.kkt_residual);
-  for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
+  for (int r = 0; r < mpi.size; ++r) {
+    std::printf("  rank %d peak RSS %.0f MB, assembled %.0f of the %lld rotation elements\n", r,
+                peaks[2 * static_cast<size_t>(r)], peaks[2 * static_cast<size_t>(r) + 1],
+                static_cast<long long>(pre.elements));
+  }
   std::printf("  cache written: %s\n", a.cache.c_str());
   return 0;
 }
@@ -245,22 +247,28 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
   std::string why;
   if (!g.is_valid(&why)) throw std::invalid_argument("GMRF grid: " + why);
   const qpreduce::Timer total;
-  const auto family = qpreduce::families::make_gmrf(g);
-  qpreduce::SubspaceOptions options = qpreduce::families::recommended_options(family);
+  qpreduce::SubspaceOptions options;
+  options.augment = !(g.ridge > 0.0);  // as recommended_options: augmented while ker H = constants
   options.block_size = a.block;
   qpreduce::SubspaceSummary summary;
   std::string detail;
+  const qpreduce::Index n = g.nx * g.ny, k = g.trend;
   if (a.backend == "mumps") {
-    const auto rows = qpreduce::distributed::owned_rows(family.n(), MPI_COMM_WORLD);
+    // Each rank makes only its rows of H and D (make_gmrf_rows); C whole.
+    const auto rows = qpreduce::distributed::owned_rows(n, MPI_COMM_WORLD);
+    const auto mine = qpreduce::families::make_gmrf_rows(g, rows.begin, rows.end);
     qpreduce::distributed::DistributedSubspace part;
-    const auto dist = qpreduce::distributed::build_subspace_mumps(
-        MPI_COMM_WORLD, family.H.middleRows(rows.begin, rows.size()), family.C, family.D, options, {}, &part);
+    const auto dist = qpreduce::distributed::build_subspace_mumps_rows(
+        MPI_COMM_WORLD, mine.H, qpreduce::families::make_gmrf_design(g), mine.D, options, {}, &part);
     summary = dist;
     detail = fmt::format("ordering {}, factorization {:.2f} s, solves {:.2f} s, reduction {:.2f} s, MUMPS memory "
                          "max/total {:.0f}/{:.0f} MB",
                          dist.ordering, dist.factorize_seconds, dist.solve_seconds, dist.reduce_seconds,
                          dist.factor_megabytes_max, dist.factor_megabytes_total);
   } else {
+    const auto family = qpreduce::families::make_gmrf(g);
+    options = qpreduce::families::recommended_options(family);
+    options.block_size = a.block;
     qpreduce::SubspaceSolver<double> solver;
     summary = solver.precompute(family.H, family.C, family.D, options);
     detail = fmt::format("factorization {:.2f} s, solves {:.2f} s", summary.factorize_seconds, summary.solve_seconds);
@@ -272,8 +280,8 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
   if (mpi.rank != 0) return summary.ok() ? 0 : 3;
   std::printf(
       "gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",
-      a.side, a.side, static_cast<long long>(family.n()), static_cast<long long>(family.d()),
-      static_cast<long long>(family.k()), a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
+      a.side, a.side, static_cast<long long>(n), static_cast<long long>(g.candidates), static_cast<long long>(k),
+      a.backend.c_str(), mpi.size, seconds, summary.total_seconds,
       summary.brief_report().c_str(), detail.c_str());
   for (int r = 0; r < mpi.size; ++r) std::printf("  rank %d peak RSS %.0f MB\n", r, peaks[static_cast<size_t>(r)]);
   return summary.ok() ? 0 : 3;

@@ -1,6 +1,8 @@
-// On the Botsch–Sorkine cactus: the deformer's own (H_u, C, D_u) built by
-// MUMPS over the ranks matches the single-process build (N, UD, H_r, BᵀD)
-// to 1e-8 relative on each rank's rows, and Deformer::precompute_part goes on
+// On the Botsch–Sorkine cactus: each rank's rows of the deformer's own H_u
+// and D_u, assembled on part of the elements (Deformer::precompute_part),
+// are those of the whole assembly; built by MUMPS over the ranks they match
+// the single-process build (N, UD, H_r, BᵀD) to 1e-8 relative on each
+// rank's rows, and Deformer::precompute_part goes on
 // to the same float basis rows, which tile the mesh's rows over the ranks.
 // Skipped with a message when ../shared is absent.
 #include <catch2/catch.hpp>
@@ -40,19 +42,49 @@ TEST_CASE("MUMPS subspace of the cactus matches CHOLMOD's", "[distributed][data]
   int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
 
-  // The builder runs both builds on the deformer's own system; each rank
-  // keeps its rows (Deformer::precompute_part).
+  int ranks = 1;
+  MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+
+  // The whole system, from a one-process part on this rank alone: the
+  // reference build and the rows to compare the distributed assembly with.
+  SparseMatrix<double> H_whole, C_whole, D_whole;
+  SubspaceOptions options_whole;
+  const deform::Deformer::PartBuilder record = [&](const SparseMatrix<double>& H, const SparseMatrix<double>& C,
+                                                   const SparseMatrix<double>& D, const SubspaceOptions& options,
+                                                   deform::Deformer::SubspacePart* part) {
+    H_whole = H;
+    C_whole = C;
+    D_whole = D;
+    options_whole = options;
+    SubspaceSolver<double> solver;
+    const SubspaceSummary s = solver.precompute(H, C, D, options);
+    part->N_rows = solver.subspace().N;
+    part->UD_rows = solver.subspace().UD;
+    part->Hr = solver.reduced_hessian();
+    part->BtD = solver.reduced_linear_map();
+    return s;
+  };
+  deform::Deformer alone;
+  REQUIRE(alone.precompute_part(scenario.model, {}, {}, {0, 1}, record, [](MatD*) {}).ok());
+  SubspaceSolver<double> reference;
+  REQUIRE(reference.precompute(H_whole, C_whole, D_whole, options_whole).ok());
+
+  // Each rank assembles its rows only (on part of the elements), builds with
+  // MUMPS and keeps its rows (Deformer::precompute_part).
   bool compared = false;
   const deform::Deformer::PartBuilder both = [&](const SparseMatrix<double>& H, const SparseMatrix<double>& C,
                                                  const SparseMatrix<double>& D, const SubspaceOptions& options,
                                                  deform::Deformer::SubspacePart* part) {
-    SubspaceSolver<double> reference;
-    const SubspaceSummary ref = reference.precompute(H, C, D, options);
-    REQUIRE(ref.ok());
-    const auto rows = distributed::owned_rows(H.rows(), MPI_COMM_WORLD);
+    const auto rows = distributed::owned_rows(H.cols(), MPI_COMM_WORLD);
+    REQUIRE(H.rows() == rows.size());
+    // The distributed assembly: this rank's rows of the whole H_u and D_u.
+    const SparseMatrix<double> H_mine = H_whole.middleRows(rows.begin, rows.size());
+    const SparseMatrix<double> D_mine = D_whole.middleRows(rows.begin, rows.size());
+    CHECK(SparseMatrix<double>(H - H_mine).norm() < 1e-13 * H_mine.norm());
+    CHECK(SparseMatrix<double>(D - D_mine).norm() < 1e-13 * D_mine.norm());
+    CHECK(SparseMatrix<double>(C - C_whole).norm() == 0.0);
     distributed::DistributedSubspace mine;
-    const auto dist = distributed::build_subspace_mumps(MPI_COMM_WORLD, H.middleRows(rows.begin, rows.size()), C, D,
-                                                        options, {}, &mine);
+    const auto dist = distributed::build_subspace_mumps_rows(MPI_COMM_WORLD, H, C, D, options, {}, &mine);
     INFO(dist.brief_report());
     REQUIRE(dist.ok());
     CHECK(relative_difference(mine.Hr, reference.reduced_hessian()) < 1e-8);
@@ -71,7 +103,8 @@ TEST_CASE("MUMPS subspace of the cactus matches CHOLMOD's", "[distributed][data]
     MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
   };
   deform::Deformer part;
-  const auto pre = part.precompute_part(scenario.model, {}, {}, both, sum);
+  const auto pre = part.precompute_part(scenario.model, {}, {}, {rank, ranks}, both, sum);
+  if (ranks > 1) CHECK(pre.assembled_elements < pre.elements);
   REQUIRE(pre.ok());
   CHECK(compared);
 
@@ -82,8 +115,6 @@ TEST_CASE("MUMPS subspace of the cactus matches CHOLMOD's", "[distributed][data]
   const auto rows = part.basis_rows();
   const auto& a = part.reconstruction_basis();
   const auto& b = single.reconstruction_basis();
-  int ranks = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &ranks);
   if (ranks == 1) {
     CHECK((rows.first == 0 && rows.count == b.rows()));  // one part is the whole: usable as it is
     CHECK(part.set_handles(scenario.handles).ok());

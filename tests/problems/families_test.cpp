@@ -219,6 +219,28 @@ TEST_CASE("QP families: generators are deterministic and validate their options"
   CHECK(families::parse_family("portfolio") == Family::Portfolio);
 }
 
+TEST_CASE("QP families: the gmrf rows made alone are those of the whole family", "[qp][families][rows]") {
+  families::GmrfOptions g;
+  g.nx = 23;
+  g.ny = 17;
+  g.ridge = GENERATE(0.0, 0.25);
+  const families::QpFamily whole = families::make_gmrf(g);
+  const Index n = whole.n();
+  // Three blocks tiling the rows, one of them empty, as ranks would own them.
+  for (const auto& [first, end] : {std::pair<Index, Index>{0, 150}, {150, 150}, {150, n}}) {
+    const families::GmrfRows rows = families::make_gmrf_rows(g, first, end);
+    REQUIRE(rows.H.rows() == end - first);
+    REQUIRE(rows.H.cols() == n);
+    CHECK((rows.H - SparseMatrix<double>(whole.H.middleRows(first, end - first))).norm() == 0.0);
+    CHECK((rows.D - SparseMatrix<double>(whole.D.middleRows(first, end - first))).norm() == 0.0);
+  }
+  CHECK((families::make_gmrf_design(g) - whole.C).norm() == 0.0);
+  CHECK_THROWS_WITH(families::make_gmrf_rows(g, 10, n + 1), Catch::Contains("outside [0, 391)"));
+  CHECK_THROWS_WITH(families::make_gmrf_rows(g, 10, 9), Catch::Contains("outside"));
+  g.candidates = 0;
+  CHECK_THROWS_AS(families::make_gmrf_rows(g, 0, 1), std::invalid_argument);
+}
+
 TEST_CASE("QP families: the Theorem 4.10 bound holds on every generated demand", "[qp][families][theorem]") {
   const Family f = GENERATE(Family::Gmrf, Family::Trajectory, Family::Portfolio);
   INFO(families::to_string(f));

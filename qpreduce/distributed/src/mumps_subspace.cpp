@@ -90,16 +90,16 @@ struct Counts {
 // The distributed build. Every member function is collective.
 class MumpsBuild {
  public:
-  MumpsBuild(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, const SubspaceOptions& options,
+  MumpsBuild(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D_rows, const SubspaceOptions& options,
              const MumpsOptions& mumps, DistributedSubspace* out)
-      : comm(comm), H_rows(H_rows), C(C), D(D), options(options), mumps(mumps), out(out),
-        n(C.rows()), d(C.cols()), k(D.cols()) {
+      : comm(comm), H_rows(H_rows), C(C), D_rows(D_rows), options(options), mumps(mumps), out(out),
+        n(C.rows()), d(C.cols()), k(D_rows.cols()) {
     MPI_Comm_rank(comm, &rank);
     MPI_Comm_size(comm, &ranks);
     for (int r = 0; r < ranks; ++r) parts.push_back(owned_rows(n, r, ranks));
     rows = parts[static_cast<size_t>(rank)];
     C_rows = C.middleRows(rows.begin, rows.size());
-    D_rows = D.middleRows(rows.begin, rows.size());
+    D_norm = std::sqrt(allreduce(comm, D_rows.squaredNorm(), MPI_SUM));
     summary.n = n;
     summary.d = d;
     summary.k = k;
@@ -123,6 +123,9 @@ class MumpsBuild {
   bool factor_and_probe(MumpsSolver& solver, const SpD& K_rows, Index K_begin, Index K_order, const char* what);
   bool solve_columns(MumpsSolver& solver, Index K_order, Index columns,
                      const std::function<void(Index, MatD&)>& fill, MatD* owned);
+  bool solve_columns_of_D(MumpsSolver& solver, Index K_order, MatD* owned);
+  bool solve_blocks(MumpsSolver& solver, Index K_order, Index columns, const std::function<void(Index, MatD&)>& fill,
+                    const SpD* top_rows, MatD* owned);
   bool augmented_route(const std::vector<Index>& aug);
   bool kkt_route();
   bool psd_by_factorization();
@@ -131,7 +134,8 @@ class MumpsBuild {
 
   MPI_Comm comm;
   const SpD& H_rows;
-  const SpD &C, &D;
+  const SpD& C;
+  const SpD& D_rows;  // rows × k: this rank's rows of D
   const SubspaceOptions& options;
   const MumpsOptions& mumps;
   DistributedSubspace* out;
@@ -139,7 +143,8 @@ class MumpsBuild {
   int rank = 0, ranks = 1;
   std::vector<RowRange> parts;
   RowRange rows;
-  SpD C_rows, D_rows;
+  SpD C_rows;
+  double D_norm = 0.0;  // ‖D‖_F
   double tau = 0.0;
   MatD G, F;  // owned rows of G, F, then of N, UD
   DistributedSummary summary;
@@ -236,15 +241,32 @@ bool MumpsBuild::factor_and_probe(MumpsSolver& solver, const SpD& K_rows, Index 
 // first n unknowns go to their owners' `owned` (rows.size() × columns).
 bool MumpsBuild::solve_columns(MumpsSolver& solver, Index K_order, Index columns,
                                const std::function<void(Index, MatD&)>& fill, MatD* owned) {
+  return solve_blocks(solver, K_order, columns, fill, nullptr, owned);
+}
+
+// The same with D's columns on top of each block: gathered from the ranks'
+// rows (one column of n doubles at a time) into rank 0's block.
+bool MumpsBuild::solve_columns_of_D(MumpsSolver& solver, Index K_order, MatD* owned) {
+  return solve_blocks(solver, K_order, k, {}, &D_rows, owned);
+}
+
+bool MumpsBuild::solve_blocks(MumpsSolver& solver, Index K_order, Index columns,
+                              const std::function<void(Index, MatD&)>& fill, const SpD* top_rows, MatD* owned) {
   owned->resize(rows.size(), columns);
   const Index block = std::min<Index>(options.block_size, std::max<Index>(columns, 1));
   const Counts counts(parts);
   MatD rhs;
+  Vector<double> mine;
   for (Index j = 0; j < columns; j += block) {
     const Index b = std::min(block, columns - j);
     if (rank == 0) {
       rhs.setZero(K_order, b);
-      fill(j, rhs);
+      if (fill) fill(j, rhs);
+    }
+    for (Index c = 0; top_rows != nullptr && c < b; ++c) {
+      mine = Vector<double>(top_rows->col(j + c));
+      MPI_Gatherv(mine.data(), static_cast<int>(rows.size()), MPI_DOUBLE, rank == 0 ? rhs.col(c).data() : nullptr,
+                  counts.count.data(), counts.offset.data(), MPI_DOUBLE, 0, comm);
     }
     if (!solver.solve_on_root(rhs)) return fail_mumps(solver, "a MUMPS block solve");
     // Column by column: the first n rows of each solution column, to their owners.
@@ -318,7 +340,7 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
     return [&S](Index j, MatD& block) { block.topRows(S.rows()) = MatD(S.middleCols(j, block.cols())); };
   };
   if (!solve_columns(solver, n, d, dense_cols(C), &G)) return false;
-  if (!solve_columns(solver, n, k, dense_cols(D), &F)) return false;
+  if (!solve_columns_of_D(solver, n, &F)) return false;
   summary.solve_seconds = t.seconds();
 
   MatD S = MatD(C_rows.transpose() * G);
@@ -379,13 +401,12 @@ bool MumpsBuild::kkt_route() {
   MumpsSolver solver(comm, Symmetry::Indefinite, mumps);
   if (!factor_and_probe(solver, K_rows, rows.begin, K_order, "the KKT matrix [[H, C], [Cᵀ, 0]]")) return false;
   const Timer t;
-  // Right-hand sides [I; ...] for N: e_j in row n + j; for UD: D on top.
+  // Right-hand sides for N: e_j in row n + j; for UD: D on top.
   const auto n_rhs = [this](Index j, MatD& block) {
     for (Index c = 0; c < block.cols(); ++c) block(n + j + c, c) = 1.0;
   };
-  const auto ud_rhs = [this](Index j, MatD& block) { block.topRows(n) = MatD(D.middleCols(j, block.cols())); };
   if (!solve_columns(solver, K_order, d, n_rhs, &G)) return false;
-  if (!solve_columns(solver, K_order, k, ud_rhs, &F)) return false;
+  if (!solve_columns_of_D(solver, K_order, &F)) return false;  // D on top
   summary.solve_seconds = t.seconds();
   if (!all_true(comm, G.allFinite() && F.allFinite())) {
     return fail(Status::SingularKKT, "the KKT matrix is singular: MUMPS produced non-finite values");
@@ -399,7 +420,7 @@ bool MumpsBuild::check_ud_rank(const MatD& DtUD) {
   const MatD sym = 0.5 * (DtUD + DtUD.transpose());
   const auto eig = qpreduce::detail::symmetric_eigenvalues(sym);
   const double hn = std::sqrt(allreduce(comm, H_rows.squaredNorm(), MPI_SUM));
-  const double scale = std::max(eig.cwiseAbs().maxCoeff(), hn > 0 ? D.squaredNorm() / hn : 0.0);
+  const double scale = std::max(eig.cwiseAbs().maxCoeff(), hn > 0 ? D_norm * D_norm / hn : 0.0);
   summary.ud_condition = eig.maxCoeff() / std::max(eig.minCoeff(), 1e-300);
   const Index rank_ud = (eig.array() > options.rank_tolerance * scale).count();
   if (rank_ud < k) {
@@ -468,7 +489,7 @@ void MumpsBuild::reduced_operators() {
     r2sq = allreduce(comm, r2sq, MPI_SUM);
     const double bnorm = std::sqrt(allreduce(comm, G.squaredNorm() + F.squaredNorm(), MPI_SUM));
     const double hnorm = std::sqrt(allreduce(comm, H_rows.squaredNorm(), MPI_SUM));
-    const double scale1 = hnorm * bnorm + (k > 0 ? D.norm() : 0.0);
+    const double scale1 = hnorm * bnorm + (k > 0 ? D_norm : 0.0);
     const double scale2 = C.norm() * bnorm;
     const double r1 = scale1 > 0 ? std::sqrt(r1sq) / scale1 : std::sqrt(r1sq);
     const double r2 = scale2 > 0 ? std::sqrt(r2sq) / scale2 : std::sqrt(r2sq);
@@ -509,7 +530,7 @@ DistributedSummary MumpsBuild::run() {
 }
 
 // Input checks, agreed over the ranks so that every rank throws or none does.
-void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, const SubspaceOptions& options,
+void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D_rows, const SubspaceOptions& options,
                   const MumpsOptions& mumps, const DistributedSubspace* out) {
   std::string why;
   try {
@@ -525,7 +546,7 @@ void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, 
     const RowRange rows = owned_rows(n, comm);
     check_size("build_subspace_mumps: H_rows rows (this rank's owned rows)", rows.size(), H_rows.rows());
     check_size("build_subspace_mumps: H_rows columns", n, H_rows.cols());
-    check_size("build_subspace_mumps: D rows", n, D.rows());
+    check_size("build_subspace_mumps: D_rows rows (this rank's owned rows)", rows.size(), D_rows.rows());
     if (C.cols() == 0) throw std::invalid_argument("build_subspace_mumps: C has no columns (d = 0)");
     if (C.cols() > n) {
       throw std::invalid_argument(
@@ -533,7 +554,7 @@ void check_inputs(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D, 
     }
     check_finite("build_subspace_mumps: H rows", H_rows);
     check_finite("build_subspace_mumps: C", C);
-    check_finite("build_subspace_mumps: D", D);
+    check_finite("build_subspace_mumps: D rows", D_rows);
     for (Index c : options.augment_columns) {
       if (c < 0 || c >= C.cols()) {
         throw std::invalid_argument(
@@ -580,12 +601,22 @@ void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, V
   gather(part.UD_rows, &whole->UD);
 }
 
+DistributedSummary build_subspace_mumps_rows(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D_rows,
+                                             const SubspaceOptions& options, const MumpsOptions& mumps,
+                                             DistributedSubspace* out) {
+  check_inputs(comm, H_rows, C, D_rows, options, mumps, out);
+  *out = DistributedSubspace{};
+  return MumpsBuild(comm, H_rows, C, D_rows, options, mumps, out).run();
+}
+
 DistributedSummary build_subspace_mumps(MPI_Comm comm, const SpD& H_rows, const SpD& C, const SpD& D,
                                         const SubspaceOptions& options, const MumpsOptions& mumps,
                                         DistributedSubspace* out) {
-  check_inputs(comm, H_rows, C, D, options, mumps, out);
-  *out = DistributedSubspace{};
-  return MumpsBuild(comm, H_rows, C, D, options, mumps, out).run();
+  if (D.rows() != C.rows()) {  // agreed: the same whole matrices on every rank
+    throw std::invalid_argument(fmt::format("build_subspace_mumps: D has {} rows, C {}", D.rows(), C.rows()));
+  }
+  const RowRange rows = owned_rows(C.rows(), comm);
+  return build_subspace_mumps_rows(comm, H_rows, C, SpD(D.middleRows(rows.begin, rows.size())), options, mumps, out);
 }
 
 DistributedSummary build_subspace_mumps_on_root(MPI_Comm comm, const SpD& H, const SpD& C, const SpD& D,

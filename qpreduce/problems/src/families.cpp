@@ -258,6 +258,42 @@ QpFamily make_gmrf(const GmrfOptions& o) {
   return f;
 }
 
+GmrfRows make_gmrf_rows(const GmrfOptions& o, Index first, Index end) {
+  std::string why;
+  if (!o.is_valid(&why)) throw std::invalid_argument("make_gmrf_rows: " + why);
+  const Index n = o.nx * o.ny;
+  if (first < 0 || end < first || end > n) {
+    throw std::invalid_argument(fmt::format("make_gmrf_rows: rows [{}, {}) outside [0, {})", first, end, n));
+  }
+  // The grid Laplacian's rows (generators.h: −1 per grid edge, the degree
+  // plus the ridge on the diagonal, summed in the same order), and the
+  // trend basis's rows.
+  Triplets t;
+  t.reserve(static_cast<size_t>(5 * (end - first)));
+  for (Index v = first; v < end; ++v) {
+    const Index i = v % o.nx, j = v / o.nx;
+    double degree = 0.0;
+    for (const auto& [ok, u] : {std::pair<bool, Index>{i > 0, v - 1}, {i + 1 < o.nx, v + 1}, {j > 0, v - o.nx},
+                                {j + 1 < o.ny, v + o.nx}}) {
+      if (!ok) continue;
+      t.emplace_back(v - first, u, -1.0);
+      degree += 1.0;
+    }
+    t.emplace_back(v - first, v, degree + o.ridge);
+  }
+  GmrfRows rows;
+  rows.H.resize(end - first, n);
+  rows.H.setFromTriplets(t.begin(), t.end());
+  rows.D = gen::grid_trend_basis_rows(o.nx, o.ny, o.trend, first, end);
+  return rows;
+}
+
+SparseMatrix<double> make_gmrf_design(const GmrfOptions& o) {
+  std::string why;
+  if (!o.is_valid(&why)) throw std::invalid_argument("make_gmrf_design: " + why);
+  return gen::selection(o.nx * o.ny, gen::random_subset(o.nx * o.ny, o.candidates, o.seed));
+}
+
 QpFamily make_trajectory(const TrajectoryOptions& o) {
   QpFamily f = begin("make_trajectory", Family::Trajectory, o, &QpFamily::trajectory);
   const Index T = o.samples, n = T * o.dims;

@@ -156,19 +156,25 @@ SparseMatrix<double> gaussian_sparse(Index n, Index cols, std::uint64_t seed) {
 }
 
 SparseMatrix<double> grid_trend_basis(Index nx, Index ny, Index k) {
+  return grid_trend_basis_rows(nx, ny, k, 0, nx * ny);
+}
+
+SparseMatrix<double> grid_trend_basis_rows(Index nx, Index ny, Index k, Index first, Index end) {
   require_positive("grid_trend_basis: nx", nx);
   require_positive("grid_trend_basis: ny", ny);
   if (k < 0 || k > 10) throw std::invalid_argument(fmt::format("grid_trend_basis: k must lie in [0, 10], got {}", k));
+  if (first < 0 || end < first || end > nx * ny) {
+    throw std::invalid_argument(fmt::format("grid_trend_basis: rows [{}, {}) outside [0, {})", first, end, nx * ny));
+  }
   // Monomials x^a y^b in graded order, on coordinates scaled to [−1, 1].
   static const int powers[10][2] = {{0, 0}, {1, 0}, {0, 1}, {1, 1}, {2, 0}, {0, 2}, {2, 1}, {1, 2}, {3, 0}, {0, 3}};
-  const Index n = nx * ny;
-  Matrix<double> T(n, k);
-  for (Index j = 0; j < ny; ++j)
-    for (Index i = 0; i < nx; ++i) {
-      const double x = nx > 1 ? 2.0 * i / (nx - 1) - 1.0 : 0.0;
-      const double y = ny > 1 ? 2.0 * j / (ny - 1) - 1.0 : 0.0;
-      for (Index c = 0; c < k; ++c) T(i + nx * j, c) = std::pow(x, powers[c][0]) * std::pow(y, powers[c][1]);
-    }
+  Matrix<double> T(end - first, k);
+  for (Index v = first; v < end; ++v) {
+    const Index i = v % nx, j = v / nx;
+    const double x = nx > 1 ? 2.0 * i / (nx - 1) - 1.0 : 0.0;
+    const double y = ny > 1 ? 2.0 * j / (ny - 1) - 1.0 : 0.0;
+    for (Index c = 0; c < k; ++c) T(v - first, c) = std::pow(x, powers[c][0]) * std::pow(y, powers[c][1]);
+  }
   return T.sparseView();
 }
 

@@ -120,6 +120,9 @@ void check_components_pinned(const Model& model, const Groups& groups) {
 // The energy in the control layer u: E(u, S) = ½uᵀH_u u − Sᵀ D_uᵀ u + c(S),
 // with D_V the rotational term of V′ (the paper's Phase 2), K the S-term of
 // the eliminated Q (the exact Phase 2, arap_energy.h), and P.
+// In a process's part (Deformer::precompute_part) Hu, Du and DV hold only
+// its control rows [first, first + count): Hu count × n_u, Du count × 9d,
+// DV the rows of PᵀD_V (count × 9d, the paper's Phase 2 only).
 struct ControlSystem {
   SparseMatrix<double> Hu;  // n_u × n_u
   SparseMatrix<double> Du;  // n_u × 9d
@@ -127,6 +130,16 @@ struct ControlSystem {
   SparseMatrix<double> K;   // 9d × 9d, or empty when Q is kept in u
   SparseMatrix<double> P;   // 3n × n_u
 };
+
+// Control rows [first, end) of one process: the block partition of
+// qpreduce::distributed::owned_rows.
+struct ControlRows {
+  Index first = 0, end = 0;
+  Index count() const { return end - first; }
+};
+ControlRows control_rows(Index nu, Deformer::Partition part) {
+  return {nu * part.process / part.processes, nu * (part.process + 1) / part.processes};
+}
 
 // Q eliminated (the model's L_QQ is block diagonal): H_u = PᵀHP, D_u = PᵀD_s.
 // The full system and each product's input go as soon as they are used:
@@ -192,6 +205,223 @@ ControlSystem assemble_control_system(Model& model, const DeformableMesh& mesh) 
   return kept_q_control_system(model, full);
 }
 
+// ---- The distributed assembly (Deformer::precompute_part) ----
+//
+// E′ with Q eliminated is a sum over rotation elements, and an element only
+// reaches the rows of its own vertices: a free vertex's 3 control rows, or
+// its patch's 12. A process therefore assembles
+//   owned   the elements whose lowest free control row it owns (elements of
+//           patch vertices only: a block of them by index), each element
+//           owned by exactly one process;
+//   ghosts  the other elements with a vertex whose free rows it owns.
+// Its free rows of H_u and D_u are complete over owned + ghosts; the patch
+// unknowns' rows gather every element with a patch vertex, so each process
+// forms them from its owned elements and they are summed over the processes
+// (dense on the columns they can reach, 12s × |J|), as is K.
+
+struct ElementSplit {
+  std::vector<Index> owned, ghosts;  // ascending element indices
+};
+
+ElementSplit split_elements(const Model& model, ControlRows rows, Deformer::Partition part) {
+  const RotationElements& el = model.elements;
+  const Index r = el.size();
+  ElementSplit split;
+  for (Index k = 0; k < r; ++k) {
+    if (el.offsets[k] == el.offsets[k + 1]) continue;  // no edges, no energy
+    Index lowest = -1;
+    bool reaches_mine = false;
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e)
+      for (const Index v : {Index(el.edge_i[e]), Index(el.edge_j[e])}) {
+        const Index c = model.control_of_free[v];
+        if (c < 0) continue;
+        if (lowest < 0 || c < lowest) lowest = c;
+        if (c + 3 > rows.first && c < rows.end) reaches_mine = true;
+      }
+    const bool owned = lowest >= 0 ? lowest >= rows.first && lowest < rows.end
+                                   : k * part.processes / r == part.process;
+    if (owned) {
+      split.owned.push_back(k);
+    } else if (reaches_mine) {
+      split.ghosts.push_back(k);
+    }
+  }
+  return split;
+}
+
+// E′ on the elements `which` (ascending), Q eliminated: H, D_s, D_V over the
+// 3n vertex rows and K, the sums of those elements' terms.
+EliminatedArapSystem eliminated_on(const Model& model, const DeformableMesh& mesh, const std::vector<Index>& which) {
+  const Index nv = 3 * model.n, c9 = 9 * model.d;
+  if (which.empty()) {
+    EliminatedArapSystem none;
+    none.H.resize(nv, nv);
+    none.Ds.resize(nv, c9);
+    none.DV.resize(nv, c9);
+    none.K.resize(c9, c9);
+    return none;
+  }
+  std::vector<int> labels(which.size());
+  for (size_t i = 0; i < which.size(); ++i) labels[i] = model.clusters[static_cast<size_t>(which[i])];
+  ModifiedArapSystem sys =
+      model.energy_model->assemble(mesh.V, select_elements(model.elements, which), labels, model.d);
+  check_size("DeformationModel::assemble: L rows (selected elements)", nv + 4 * static_cast<Index>(which.size()),
+             sys.L.rows());
+  check_size("DeformationModel::assemble: D columns", c9, sys.D.cols());
+  return eliminate_rotation_corrections(sys);
+}
+
+// Whether the model's L_QQ is block diagonal, from one element's assembly.
+bool q_separable(const Model& model, const DeformableMesh& mesh) {
+  const RotationElements& el = model.elements;
+  for (Index k = 0; k < el.size(); ++k) {
+    if (el.offsets[k] == el.offsets[k + 1]) continue;
+    const std::vector<int> label{model.clusters[static_cast<size_t>(k)]};
+    return model.energy_model->assemble(mesh.V, select_elements(el, {k}), label, model.d).q_separable;
+  }
+  return true;
+}
+
+// Sparse rows → dense on the columns `col` maps (−1: never reached).
+Matrix<double> dense_on(const SparseMatrix<double>& A, const std::vector<Index>& col, Index width) {
+  Matrix<double> out = Matrix<double>::Zero(A.rows(), width);
+  for (Index c = 0; c < A.outerSize(); ++c)
+    for (SparseMatrix<double>::InnerIterator it(A, c); it; ++it) {
+      const Index j = col.empty() ? c : col[static_cast<size_t>(c)];
+      if (j < 0) throw std::logic_error("distributed assembly: a patch row reached an unexpected column");
+      out(it.row(), j) += it.value();
+    }
+  return out;
+}
+
+// The rows [first, end) of Pᵀ·X (X 3n × w) for this process: its free rows
+// from X (complete over owned + ghosts), then its patch rows from the summed
+// `patch` (12s × width on the columns `cols`, or all columns when empty).
+SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, const SparseMatrix<double>& P,
+                                        const SparseMatrix<double>& X, const Matrix<double>& patch,
+                                        const std::vector<Index>& cols) {
+  const Index free_end = std::min(rows.end, model.patch_base);
+  const Index free_count = std::max<Index>(free_end - rows.first, 0);
+  Triplets t;
+  if (free_count > 0) {
+    const SparseMatrix<double> PfT = P.middleCols(rows.first, free_count).transpose();
+    const SparseMatrix<double> free_rows = detail_deformer::parallel_product(PfT, X);
+    t.reserve(static_cast<size_t>(free_rows.nonZeros()));
+    for (Index c = 0; c < free_rows.outerSize(); ++c)
+      for (SparseMatrix<double>::InnerIterator it(free_rows, c); it; ++it) t.emplace_back(it.row(), c, it.value());
+  }
+  for (Index i = std::max(rows.first, model.patch_base); i < rows.end; ++i) {
+    const Index pr = i - model.patch_base, out_row = i - rows.first;
+    for (Index j = 0; j < patch.cols(); ++j)
+      if (patch(pr, j) != 0.0) t.emplace_back(out_row, cols.empty() ? j : cols[static_cast<size_t>(j)], patch(pr, j));
+  }
+  SparseMatrix<double> out(rows.count(), X.cols());
+  out.setFromTriplets(t.begin(), t.end());
+  return out;
+}
+
+// The control columns a patch unknown's row of H_u can reach: every column
+// of a vertex of an element with a patch vertex (ascending), and the map
+// column → position (−1 elsewhere).
+void patch_row_columns(const Model& model, std::vector<Index>* cols, std::vector<Index>* position) {
+  const RotationElements& el = model.elements;
+  std::vector<char> reach(static_cast<size_t>(model.nu), 0);
+  const auto mark_vertex = [&](Index v) {
+    const Index c = model.control_of_free[v];
+    const Index first = c >= 0 ? c : model.patch_base + 12 * model.patch_of_vertex[static_cast<size_t>(v)];
+    for (Index j = first; j < first + (c >= 0 ? 3 : 12); ++j) reach[static_cast<size_t>(j)] = 1;
+  };
+  for (Index k = 0; k < el.size(); ++k) {
+    bool patch = false;
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1] && !patch; ++e)
+      patch = model.control_of_free[el.edge_i[e]] < 0 || model.control_of_free[el.edge_j[e]] < 0;
+    if (!patch) continue;
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      mark_vertex(el.edge_i[e]);
+      mark_vertex(el.edge_j[e]);
+    }
+  }
+  cols->clear();
+  position->assign(static_cast<size_t>(model.nu), -1);
+  for (Index j = 0; j < model.nu; ++j)
+    if (reach[static_cast<size_t>(j)]) {
+      (*position)[static_cast<size_t>(j)] = static_cast<Index>(cols->size());
+      cols->push_back(j);
+    }
+}
+
+// K (9d × 9d, a 9 × 9 block per cluster) summed over the processes as 9 × 9d.
+SparseMatrix<double> summed_cluster_blocks(const SparseMatrix<double>& K, Index d,
+                                           const Deformer::SumOverProcesses& sum) {
+  Matrix<double> blocks = Matrix<double>::Zero(9, 9 * d);
+  for (Index c = 0; c < K.outerSize(); ++c)
+    for (SparseMatrix<double>::InnerIterator it(K, c); it; ++it) {
+      if (it.row() / 9 != c / 9) throw std::logic_error("distributed assembly: K is not 9 × 9 block diagonal");
+      blocks(it.row() % 9, c) += it.value();
+    }
+  sum(&blocks);
+  Triplets t;
+  for (Index c = 0; c < 9 * d; ++c)
+    for (Index a = 0; a < 9; ++a)
+      if (blocks(a, c) != 0.0) t.emplace_back(9 * (c / 9) + a, c, blocks(a, c));
+  SparseMatrix<double> out(9 * d, 9 * d);
+  out.setFromTriplets(t.begin(), t.end());
+  return out;
+}
+
+// This process's rows of the control system (Q eliminated), assembled on
+// its owned and ghost elements; *assembled counts them.
+ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh, ControlRows rows,
+                                  Deformer::Partition part, ClusterRotationFit fit,
+                                  const Deformer::SumOverProcesses& sum, Index* assembled) {
+  const ElementSplit split = split_elements(model, rows, part);
+  *assembled = static_cast<Index>(split.owned.size() + split.ghosts.size());
+  ControlSystem cs;
+  cs.P = model.control_matrix();
+  EliminatedArapSystem own = eliminated_on(model, mesh, split.owned);
+  cs.K = summed_cluster_blocks(own.K, model.d, sum);
+  free_sparse(&own.K);
+  // The patch unknowns' rows, from the owned elements, summed.
+  Matrix<double> patch_H, patch_D, patch_DV;
+  std::vector<Index> cols, position;
+  if (model.s > 0) {
+    patch_row_columns(model, &cols, &position);
+    const SparseMatrix<double> PpT = cs.P.rightCols(12 * model.s).transpose();  // 12s × 3n
+    patch_H = dense_on(detail_deformer::parallel_product(PpT, own.H) * cs.P, position, static_cast<Index>(cols.size()));
+    patch_D = dense_on(PpT * own.Ds, {}, 9 * model.d);
+    sum(&patch_H);
+    sum(&patch_D);
+    if (fit == ClusterRotationFit::PaperPhase2) {
+      patch_DV = dense_on(PpT * own.DV, {}, 9 * model.d);
+      sum(&patch_DV);
+    }
+  }
+  {  // + the ghosts: the free rows complete
+    EliminatedArapSystem ghosts = eliminated_on(model, mesh, split.ghosts);
+    own.H += ghosts.H;
+    own.Ds += ghosts.Ds;
+    if (fit == ClusterRotationFit::PaperPhase2) own.DV += ghosts.DV;
+  }
+  const SparseMatrix<double> HP = detail_deformer::parallel_product(own.H, cs.P);
+  free_sparse(&own.H);
+  cs.Hu = owned_control_rows(model, rows, cs.P, HP, patch_H, cols);
+  cs.Du = owned_control_rows(model, rows, cs.P, own.Ds, patch_D, {});
+  if (fit == ClusterRotationFit::PaperPhase2) cs.DV = owned_control_rows(model, rows, cs.P, own.DV, patch_DV, {});
+  return cs;
+}
+
+// The whole control system (γ > 0: Q kept in u, so the rows are those of
+// the grown n_u), then this process's rows.
+ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part) {
+  ControlSystem cs = assemble_control_system(model, mesh);
+  const ControlRows rows = control_rows(model.nu, part);
+  const SparseMatrix<double> PrT = cs.P.middleCols(rows.first, rows.count()).transpose();  // count × 3n
+  cs.Hu = SparseMatrix<double>(cs.Hu.middleRows(rows.first, rows.count()));
+  cs.Du = SparseMatrix<double>(cs.Du.middleRows(rows.first, rows.count()));
+  cs.DV = PrT * cs.DV;  // rows of PᵀD_V (P is zero on Q's columns, as in phase2_left)
+  return cs;
+}
+
 // C (n_u × nx): the linear proxies (group means of free vertices, Ŵ ⊗ I₃)
 // and the patch unknowns (Eq. 47) as columns of the constraint matrix.
 SparseMatrix<double> proxy_selection(const Model& model, const Groups& groups) {
@@ -211,11 +441,10 @@ SparseMatrix<double> proxy_selection(const Model& model, const Groups& groups) {
 // Augment with the cheapest columns: every patch column (one entry each) and,
 // when groups are long, only the shortest group's three columns of each
 // component (one group per component suffices).
-void choose_augment_columns(const Model& model, const Groups& groups, const SparseMatrix<double>& Hu,
-                            SubspaceOptions* sub) {
+void choose_augment_columns(const Model& model, const Groups& groups, double hu_nonzeros, SubspaceOptions* sub) {
   double fill = 0.0;
   for (const auto& g : groups) fill += 3.0 * static_cast<double>(g.size() * g.size());
-  if (!(fill > sub->max_augmentation_fill * static_cast<double>(Hu.nonZeros()) && model.m > 0)) return;
+  if (!(fill > sub->max_augmentation_fill * hu_nonzeros && model.m > 0)) return;
   const MeshComponents& comps = model.components;
   std::vector<Index> best(static_cast<size_t>(comps.count), -1);
   for (Index j = 0; j < model.m; ++j) {
@@ -251,13 +480,13 @@ void choose_ordering_groups(const Model& model, SubspaceOptions* sub) {
 // The engine's subspace options for this model: the user's, with the
 // augmentation columns and the ordering groups filled in when not given.
 SubspaceOptions subspace_options(const Model& model, const DeformerOptions& options, const Groups& groups,
-                                 const SparseMatrix<double>& Hu) {
+                                 double hu_nonzeros) {
   SubspaceOptions sub = options.subspace;
   // Phase 1 holds the rotational coordinates fixed (y = S), so U·D need not
   // have full rank: rotations whose effect the linear proxies or patches
   // already pin (all of them, with a proxy at every vertex) are legitimate.
   sub.check_dependent_cd = false;
-  if (sub.augment_columns.empty()) choose_augment_columns(model, groups, Hu, &sub);
+  if (sub.augment_columns.empty()) choose_augment_columns(model, groups, hu_nonzeros, &sub);
   if (sub.ordering_groups.empty()) choose_ordering_groups(model, &sub);
   return sub;
 }
@@ -291,16 +520,22 @@ void reduce_operators(Model& model, const ControlSystem& system, ClusterRotation
 // The same from this process's rows of B (Deformer::precompute_part): every
 // reduced operator is a sum over rows of B, formed on the owned rows and
 // summed over the processes; the float basis only for the owned rows.
-void reduce_operators_part(Model& model, const ControlSystem& system, ClusterRotationFit fit,
+// The system (this process's rows) is freed once used: the float basis made
+// beside the double rows of B is the last stage's peak.
+void reduce_operators_part(Model& model, ControlSystem* system, ClusterRotationFit fit,
                            Deformer::SubspacePart&& part, const Deformer::SumOverProcesses& sum,
                            const SubspaceOptions& sub) {
   const Index b = part.first_row, rows = part.N_rows.rows(), p = model.nx + 9 * model.d;
-  const SparseMatrix<double> left = phase2_left(system, fit).middleCols(b, rows);
-  model.MN = left * part.N_rows;
-  model.MU = left * part.UD_rows;
+  {  // left's columns [b, b + rows): the system holds this process's rows
+    const SparseMatrix<double> left =
+        fit == ClusterRotationFit::Exact ? system->Du.transpose() : SparseMatrix<double>(system->DV.transpose());
+    model.MN = left * part.N_rows;
+    model.MU = left * part.UD_rows;
+  }
   sum(&model.MN);
   sum(&model.MU);
-  if (fit == ClusterRotationFit::Exact && system.K.nonZeros() > 0) model.MU += system.K;
+  if (fit == ClusterRotationFit::Exact && system->K.nonZeros() > 0) model.MU += system->K;
+  for (SparseMatrix<double>* M : {&system->Hu, &system->Du, &system->DV, &system->K, &system->P}) free_sparse(M);
   Matrix<double> patch = Matrix<double>::Zero(12 * model.s, p);
   for (Index i = 0; i < 12 * model.s; ++i) {
     const Index r = model.patch_base + i - b;
@@ -328,8 +563,10 @@ struct Assembled {
 
 // Clusters, linear proxies, the energy in the control layer (Sections 4–5).
 // Returns false with *summary set when the clustering fails.
+// With `sum` (precompute_part) only this process's rows of H_u and D_u.
 bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const ProgressFn& progress, Model& model,
-              detail_deformer::Inputs* inputs, PrecomputeSummary* summary, Assembled* out) {
+              detail_deformer::Inputs* inputs, PrecomputeSummary* summary, Assembled* out,
+              Deformer::Partition partition = {}, const Deformer::SumOverProcesses& sum = {}) {
   auto report = [&](const char* stage, double f) {
     if (progress) progress(stage, f);
   };
@@ -358,10 +595,24 @@ bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const 
 
   report("energy", 0.15);
   t.reset();
-  out->system = assemble_control_system(model, mesh);
+  summary->assembled_elements = model.elements.size();
+  double hu_nonzeros = 0.0;
+  if (!sum) {
+    out->system = assemble_control_system(model, mesh);
+    hu_nonzeros = static_cast<double>(out->system.Hu.nonZeros());
+  } else {
+    out->system = q_separable(model, mesh)
+                      ? control_system_rows(model, mesh, control_rows(model.nu, partition), partition,
+                                            options.rotation_fit, sum, &summary->assembled_elements)
+                      : whole_then_rows(model, mesh, partition);
+    Matrix<double> nnz(1, 1);
+    nnz(0, 0) = static_cast<double>(out->system.Hu.nonZeros());
+    sum(&nnz);
+    hu_nonzeros = nnz(0, 0);
+  }
   out->C = proxy_selection(model, groups);
   summary->assembly_seconds = t.seconds();
-  out->sub = subspace_options(model, options, groups, out->system.Hu);
+  out->sub = subspace_options(model, options, groups, hu_nonzeros);
   return true;
 }
 
@@ -377,18 +628,22 @@ bool subspace_failed(PrecomputeSummary* summary) {
 
 PrecomputeSummary Deformer::precompute(const DeformableMesh& mesh, const DeformerOptions& options,
                                        const ProgressFn& progress) {
-  return run_precompute(mesh, options, progress, {}, {});
+  return run_precompute(mesh, options, progress, {}, {}, {});
 }
 
 PrecomputeSummary Deformer::precompute_part(const DeformableMesh& mesh, const DeformerOptions& options,
-                                            const ProgressFn& progress, const PartBuilder& build,
+                                            const ProgressFn& progress, Partition partition, const PartBuilder& build,
                                             const SumOverProcesses& sum) {
   if (!build || !sum) throw std::invalid_argument("Deformer::precompute_part: the builder and the sum are required");
-  return run_precompute(mesh, options, progress, build, sum);
+  if (partition.processes < 1 || partition.process < 0 || partition.process >= partition.processes) {
+    throw std::invalid_argument(fmt::format("Deformer::precompute_part: process {} of {} is not in [0, {})",
+                                            partition.process, partition.processes, partition.processes));
+  }
+  return run_precompute(mesh, options, progress, partition, build, sum);
 }
 
 PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const DeformerOptions& options,
-                                           const ProgressFn& progress, const PartBuilder& build,
+                                           const ProgressFn& progress, Partition partition, const PartBuilder& build,
                                            const SumOverProcesses& sum) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("DeformerOptions: " + why);
@@ -400,7 +655,7 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
   Model& model = st->model;
   PrecomputeSummary summary;
   Assembled as;
-  if (!assemble(mesh, options, progress, model, &st->inputs, &summary, &as)) return summary;
+  if (!assemble(mesh, options, progress, model, &st->inputs, &summary, &as, partition, sum)) return summary;
 
   report("subspace", 0.2);
   // The assembly's freed temporaries (about 300 MB on the Bumpy Plane) would
@@ -414,11 +669,16 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
       check_size("Deformer::precompute_part: N_rows columns (nx)", model.nx, part.N_rows.cols());
       check_size("Deformer::precompute_part: UD_rows columns (9d)", 9 * model.d, part.UD_rows.cols());
       check_size("Deformer::precompute_part: UD_rows rows", part.N_rows.rows(), part.UD_rows.rows());
-      if (part.first_row < 0 || part.first_row + part.N_rows.rows() > model.nu) {
-        throw std::invalid_argument(fmt::format("Deformer::precompute_part: rows [{}, {}) outside the {} control rows",
-                                                part.first_row, part.first_row + part.N_rows.rows(), model.nu));
+      const ControlRows mine = control_rows(model.nu, partition);
+      if (part.first_row != mine.first || part.N_rows.rows() != mine.count()) {
+        throw std::invalid_argument(fmt::format(
+            "Deformer::precompute_part: the builder returned rows [{}, {}) of N, UD; process {} of {} owns [{}, {})",
+            part.first_row, part.first_row + part.N_rows.rows(), partition.process, partition.processes, mine.first,
+            mine.end));
       }
     }
+    free_sparse(&as.system.Hu);  // H_r is built; H_u's rows are no longer needed
+    free_sparse(&as.C);
   } else {
     summary.subspace = model.solver.precompute(as.system.Hu, as.C, as.system.Du, as.sub);
   }
@@ -428,7 +688,7 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
   report("reduction", 0.9);
   t.reset();
   if (build) {
-    reduce_operators_part(model, as.system, options.rotation_fit, std::move(part), sum, as.sub);
+    reduce_operators_part(model, &as.system, options.rotation_fit, std::move(part), sum, as.sub);
   } else {
     reduce_operators(model, as.system, options.rotation_fit);
   }

@@ -165,6 +165,29 @@ RotationElements tet_elements(const Vertices& V, const Tetrahedra& T) {
   return el;
 }
 
+RotationElements select_elements(const RotationElements& el, const std::vector<Index>& keep) {
+  RotationElements out;
+  out.is_surface = el.is_surface;
+  out.measure.resize(static_cast<Index>(keep.size()));
+  if (el.normal.rows() > 0) out.normal.resize(static_cast<Index>(keep.size()), 3);
+  out.offsets.reserve(keep.size() + 1);
+  Index last = -1;
+  for (size_t i = 0; i < keep.size(); ++i) {
+    const Index k = keep[i];
+    if (k <= last || k >= el.size()) {
+      throw std::invalid_argument(fmt::format("select_elements: index {} ({}) is {}", i, k,
+                                              k >= el.size() ? fmt::format("not below the {} elements", el.size())
+                                                             : std::string("not ascending")));
+    }
+    last = k;
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) push_edge(out, el.edge_i[e], el.edge_j[e], el.weight[e]);
+    out.offsets.push_back(static_cast<Index>(out.weight.size()));
+    out.measure(static_cast<Index>(i)) = el.measure(k);
+    if (el.normal.rows() > 0) out.normal.row(static_cast<Index>(i)) = el.normal.row(k);
+  }
+  return out;
+}
+
 std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& el) {
   std::vector<std::pair<Index, Index>> pairs;
   if (el.is_surface) {

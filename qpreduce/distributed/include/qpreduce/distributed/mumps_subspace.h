@@ -104,7 +104,8 @@ struct DistributedSubspace {
 // Collective over `comm`. H_rows: rows owned_rows(n, comm) of the symmetric
 // PSD H (rows.size() × n; its symmetry is the caller's promise, only these
 // rows are seen); C (n × d) and D (n × k) whole on every rank (thin and
-// sparse). Options as for build_subspace; backend SparseLU selects the KKT
+// sparse; only this rank's rows of D are used: build_subspace_mumps_rows
+// takes just those). Options as for build_subspace; backend SparseLU selects the KKT
 // route, Auto chooses it on the same fill test, Cholmod/SimplicialLDLT the
 // augmented (or, augment = false, plain) SPD route. ordering_groups is ignored
 // (MUMPS orders the unknowns).
@@ -115,6 +116,14 @@ DistributedSummary build_subspace_mumps(MPI_Comm comm, const SparseMatrix<double
                                         const SparseMatrix<double>& C, const SparseMatrix<double>& D,
                                         const SubspaceOptions& options, const MumpsOptions& mumps,
                                         DistributedSubspace* out);
+
+// The same with D by rows too: D_rows holds rows owned_rows(n, comm) of D
+// (rows.size() × k), so that no rank holds the whole D either. Rank 0
+// gathers D's columns one at a time into its n × block_size right-hand side.
+DistributedSummary build_subspace_mumps_rows(MPI_Comm comm, const SparseMatrix<double>& H_rows,
+                                             const SparseMatrix<double>& C, const SparseMatrix<double>& D_rows,
+                                             const SubspaceOptions& options, const MumpsOptions& mumps,
+                                             DistributedSubspace* out);
 
 // Collective: the whole N (n × d) and UD (n × k) on `root`, gathered one
 // column at a time straight into place; other ranks' `whole` is left empty.

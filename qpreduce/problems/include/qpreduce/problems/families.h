@@ -119,6 +119,20 @@ SparseMatrix<double> baseline_bordering(const QpFamily& family);
 QpFamily make_gmrf(const GmrfOptions& options);
 QpFamily make_trajectory(const TrajectoryOptions& options);
 QpFamily make_portfolio(const PortfolioOptions& options);
+
+// Rows [first, end) of make_gmrf(options)'s H and D, the same entries
+// without the whole matrices: for a distributed build where each process
+// makes only its own rows (qpreduce::distributed::build_subspace_mumps_rows).
+// C (the selection of the candidate sites) is n × d with d entries and is
+// made whole by make_gmrf_design. Throws std::invalid_argument on invalid
+// options or a row range outside [0, n).
+struct GmrfRows {
+  SparseMatrix<double> H;  // (end − first) × n
+  SparseMatrix<double> D;  // (end − first) × k
+};
+GmrfRows make_gmrf_rows(const GmrfOptions& options, Index first, Index end);
+// make_gmrf's C (n × d) and candidate sites, and its kernel's size, without H or D.
+SparseMatrix<double> make_gmrf_design(const GmrfOptions& options);
 // A family of roughly `size` unknowns with otherwise default options
 // (gmrf: nx = ny = round(√size); trajectory: T = size/dims; portfolio:
 // assets = size − factors). Throws std::invalid_argument when size < 64.

@@ -50,6 +50,8 @@ SparseMatrix<double> gaussian_sparse(Index n, Index cols, std::uint64_t seed);
 // n × k smooth "trend" basis on an nx × ny grid: products of low-order
 // Legendre-like polynomials in x and y (1, x, y, xy, x², y², …), k ≤ 10.
 SparseMatrix<double> grid_trend_basis(Index nx, Index ny, Index k);
+// Its rows [first, end) alone ((end − first) × k, the same entries).
+SparseMatrix<double> grid_trend_basis_rows(Index nx, Index ny, Index k, Index first, Index end);
 
 // Standard normal vector / matrix.
 Vector<double> gaussian_vector(Index n, std::uint64_t seed);

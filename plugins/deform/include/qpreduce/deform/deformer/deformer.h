@@ -127,6 +127,10 @@ using ProgressFn = std::function<void(const std::string& stage, double fraction)
 struct PrecomputeSummary : Outcome {
   Index vertices = 0, elements = 0, rotational_proxies = 0, linear_proxies = 0, patches = 0;
   Index reduced_size = 0;  // 3m + 12s + 9d
+  // The rotation elements this process assembled: all of them, except in
+  // Deformer::precompute_part with more than one process (its elements and
+  // the neighbours its rows need).
+  Index assembled_elements = 0;
   SubspaceSummary subspace;
   double clustering_seconds = 0.0, assembly_seconds = 0.0, subspace_seconds = 0.0, reduction_seconds = 0.0,
          total_seconds = 0.0;
@@ -168,15 +172,25 @@ class Deformer {
 
   // A precompute whose subspace is built across processes (`qpr precompute`
   // under mpirun: qpreduce::distributed's MUMPS build), no process holding
-  // the whole n_u × p double basis B = [N UD]. Every process calls it
-  // together with the same model and options, and assembles the same
-  // H_u (n_u × n_u), C (n_u × nx), D_u (n_u × 9d). Then:
-  //   `build` fills this process's SubspacePart: a contiguous block of rows
-  //     of N and UD (first_row; the blocks ascend with the process rank and
-  //     tile the n_u rows), and the whole H_r = BᵀH_uB (p × p) and BᵀD_u
-  //     (p × 9d), as SubspaceSolver::precompute would make them; a summary
-  //     that is not ok() ends precompute with its status (it must be the
-  //     same on every process);
+  // the whole n_u × n_u H_u nor the whole n_u × p double basis B = [N UD].
+  // Every process calls it together with the same model and options and its
+  // place in the partition: process r of K owns the control rows
+  // [⌊r·n_u/K⌋, ⌊(r+1)·n_u/K⌋) (qpreduce::distributed::owned_rows). Then:
+  //   assembly — each process assembles the energy only on the rotation
+  //     elements its rows need (those with a vertex whose control rows it
+  //     owns; the rows of a patch's 12 unknowns are summed over the
+  //     processes from each one's own elements), and gets its rows of H_u
+  //     (rows × n_u) and of D_u (rows × 9d); C (n_u × nx, one entry per
+  //     proxy vertex) is whole everywhere. A model whose L_QQ is not block
+  //     diagonal (γ > 0: Q stays in u) is assembled whole and sliced.
+  //     Elements follow the vertex order, so a mesh whose vertex numbering
+  //     has no locality (a random permutation) leaves each process nearly
+  //     every element: PrecomputeSummary::assembled_elements says how many;
+  //   `build` gets these rows, fills this process's SubspacePart — its rows
+  //     of N and UD (first_row must be its first owned row), and the whole
+  //     H_r = BᵀH_uB (p × p) and BᵀD_u (p × 9d) as SubspaceSolver::precompute
+  //     would make them — and returns a summary; one that is not ok() ends
+  //     precompute with its status (it must be the same on every process);
   //   `sum` replaces a matrix by its sum over the processes, on every
   //     process (an all-reduce; the same shape everywhere).
   // The reduced operators are sums over the rows of B (M_N = D_uᵀ·N etc.,
@@ -185,18 +199,24 @@ class Deformer {
   // basis P·B: the vertex rows whose control unknowns it owns (contiguous;
   // rows of patch vertices go with the free row before them). Such a
   // deformer can only be saved, with the other processes' rows, by
-  // save(path, blocks) on one process; set_handles refuses it.
+  // save(path, blocks) on one process; set_handles refuses it (unless K = 1).
   struct SubspacePart {
     Index first_row = 0;             // N_rows, UD_rows are rows [first_row, first_row + rows) of N, UD
     Matrix<double> N_rows, UD_rows;  // rows × nx, rows × 9d
     Matrix<double> Hr, BtD;          // p × p, p × 9d: whole, the same on every process
   };
+  struct Partition {
+    int process = 0, processes = 1;  // this process r and the count K (the MPI rank and size)
+  };
+  // H: this process's rows of H_u (rows × n_u); C whole (n_u × nx); D: its
+  // rows of D_u (rows × 9d).
   using PartBuilder = std::function<SubspaceSummary(const SparseMatrix<double>& H, const SparseMatrix<double>& C,
                                                     const SparseMatrix<double>& D, const SubspaceOptions& options,
                                                     SubspacePart* part)>;
   using SumOverProcesses = std::function<void(Matrix<double>* M)>;
   PrecomputeSummary precompute_part(const DeformableMesh& model, const DeformerOptions& options,
-                                    const ProgressFn& progress, const PartBuilder& build, const SumOverProcesses& sum);
+                                    const ProgressFn& progress, Partition partition, const PartBuilder& build,
+                                    const SumOverProcesses& sum);
   // Rows [first, first + count) of the reconstruction basis (3n rows in all)
   // that reconstruction_basis() holds: all of them, except after
   // precompute_part.
@@ -299,7 +319,8 @@ class Deformer {
   struct State;
   // precompute (build empty: the engine's single-process build) and precompute_part.
   PrecomputeSummary run_precompute(const DeformableMesh& model, const DeformerOptions& options,
-                                   const ProgressFn& progress, const PartBuilder& build, const SumOverProcesses& sum);
+                                   const ProgressFn& progress, Partition partition, const PartBuilder& build,
+                                   const SumOverProcesses& sum);
   std::unique_ptr<State> state_;
 };
 

@@ -43,6 +43,13 @@ RotationElements spokes_and_rims_elements(const Vertices& V, const Triangles& F)
 // One element per tetrahedron: V n × 3, T m × 4; r = m elements of six
 // edges, weights (1/6)·ℓ_opp·cot θ_opp, measures the volumes, no normals.
 RotationElements tet_elements(const Vertices& V, const Tetrahedra& T);
+// The elements `keep` (ascending indices into `elements`), renumbered 0, 1,
+// … in that order, with their edges, weights, measures and normals. E′
+// without the moving-frame term (γ = 0) is a sum over elements, so L and D
+// assembled on disjoint subsets add up to those of the whole (up to the
+// element rows of Q, renumbered). Throws std::invalid_argument on an index
+// out of range or not ascending.
+RotationElements select_elements(const RotationElements& elements, const std::vector<Index>& keep);
 
 struct EnergyParameters {
   // α: overall penalty on the linearised rotation correction q_k (Eq. 10).

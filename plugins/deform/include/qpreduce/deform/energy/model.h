@@ -103,7 +103,10 @@ class DeformationModel {
   virtual std::vector<std::pair<std::string, double>> parameters() const = 0;
   // The energy blocks for rest positions V (n × 3), rotation elements and
   // their cluster labels (r entries in [0, d)). Throws std::invalid_argument
-  // on bad input.
+  // on bad input. When the result is q_separable, the blocks must be sums
+  // of per-element terms (the element's rows of V′ and its 4 rows of Q):
+  // Deformer::precompute_part assembles disjoint subsets of the elements
+  // (select_elements) on different processes and adds their rows.
   virtual ModifiedArapSystem assemble(const Vertices& V, const RotationElements& elements,
                                       const std::vector<int>& clusters, Index d) const = 0;
   // The Phase 2 projection for these clusters.
