@@ -81,25 +81,27 @@ qpreduce::deform::Deformer::PartBuilder mumps_builder(int block, const qpreduce:
 }
 
 // The float basis travels to rank 0 in chunks of this many rows (p floats
-// each): rank 0 holds its own rows and one chunk, never the whole basis.
+// each), made from each rank's double rows as they go (Deformer::basis_block):
+// no rank holds the float basis, rank 0 one chunk of it at a time.
 constexpr qpreduce::Index kChunkRows = 4096;
 
 // Rank r > 0: its rows of the reconstruction basis to rank 0, a header
 // (first row, rows) and then the rows chunk by chunk.
 void send_basis_rows(const qpreduce::deform::Deformer& deformer) {
   const auto rows = deformer.basis_rows();
-  const auto& basis = deformer.reconstruction_basis();
   const long long header[2] = {static_cast<long long>(rows.first), static_cast<long long>(rows.count)};
   MPI_Send(header, 2, MPI_LONG_LONG, 0, 0, MPI_COMM_WORLD);
+  qpreduce::deform::Deformer::BasisRows chunk;
   for (qpreduce::Index i = 0; i < rows.count; i += kChunkRows) {
-    const qpreduce::Index c = std::min(kChunkRows, rows.count - i);
-    MPI_Send(basis.row(i).data(), static_cast<int>(c * basis.cols()), MPI_FLOAT, 0, 1, MPI_COMM_WORLD);
+    deformer.basis_block(rows.first + i, std::min(kChunkRows, rows.count - i), &chunk);
+    MPI_Send(chunk.data(), static_cast<int>(chunk.size()), MPI_FLOAT, 0, 1, MPI_COMM_WORLD);
   }
 }
 
-// Rank 0: the blocks for Deformer::save, its own rows first, then rank 1's,
-// …, each in chunks as they arrive.
-qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::deform::Deformer& deformer, int ranks) {
+// Rank 0: the blocks for Deformer::save (p columns), its own rows first,
+// then rank 1's, …, each in chunks as they arrive.
+qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::deform::Deformer& deformer, int ranks,
+                                                           qpreduce::Index p) {
   struct Source {
     int rank = 0;
     qpreduce::Index first = 0, count = 0, done = 0;
@@ -108,8 +110,7 @@ qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::defor
   const auto own = deformer.basis_rows();
   at->first = own.first;
   at->count = own.count;
-  return [&deformer, ranks, at](qpreduce::Index* first, qpreduce::deform::Deformer::BasisRows* block) {
-    const qpreduce::Index p = deformer.reconstruction_basis().cols();
+  return [&deformer, ranks, p, at](qpreduce::Index* first, qpreduce::deform::Deformer::BasisRows* block) {
     while (at->done == at->count) {  // the next rank's header
       if (++at->rank >= ranks) return false;
       long long header[2] = {0, 0};
@@ -119,10 +120,10 @@ qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::defor
       at->done = 0;
     }
     const qpreduce::Index c = std::min(kChunkRows, at->count - at->done);
-    block->resize(c, p);
     if (at->rank == 0) {
-      *block = deformer.reconstruction_basis().middleRows(at->done, c);
+      deformer.basis_block(at->first + at->done, c, block);
     } else {
+      block->resize(c, p);
       MPI_Recv(block->data(), static_cast<int>(c * p), MPI_FLOAT, at->rank, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
     }
     *first = at->first + at->done;
@@ -192,7 +193,7 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   trace("saving", 1.0);
   // The cache, written by rank 0 with every rank's rows of the float basis.
   if (mpi.rank == 0) {
-    deformer.save(a.cache, receive_basis_rows(deformer, mpi.size));
+    deformer.save(a.cache, receive_basis_rows(deformer, mpi.size, pre.reduced_size));
   } else {
     send_basis_rows(deformer);
   }

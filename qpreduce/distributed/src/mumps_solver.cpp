@@ -88,14 +88,15 @@ bool MumpsSolver::factor(const SparseMatrix<double>& rows, Index row_begin, Inde
   if (N > std::numeric_limits<MUMPS_INT>::max()) {
     throw std::invalid_argument(fmt::format("MUMPS: order {} exceeds its 32-bit index range", N));
   }
+  // The lower triangle as MUMPS's distributed COO (1-based), for the
+  // analysis and the factorization only.
   std::vector<MUMPS_INT> irn, jcn;
   std::vector<double> a;
-  const SparseMatrix<double> by_col = rows;  // column-major: rows × N
-  irn.reserve(static_cast<size_t>(by_col.nonZeros()));
+  irn.reserve(static_cast<size_t>(rows.nonZeros() / 2 + rows.rows()));
   jcn.reserve(irn.capacity());
   a.reserve(irn.capacity());
-  for (Index j = 0; j < by_col.outerSize(); ++j) {
-    for (SparseMatrix<double>::InnerIterator it(by_col, j); it; ++it) {
+  for (Index j = 0; j < rows.outerSize(); ++j) {
+    for (SparseMatrix<double>::InnerIterator it(rows, j); it; ++it) {
       const Index i = row_begin + it.row();
       if (j > i || it.value() == 0.0) continue;
       irn.push_back(static_cast<MUMPS_INT>(i + 1));

@@ -312,22 +312,26 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
   summary.rho = aug.empty() ? 0.0
                             : options.rho_scale * (mean_diag > 0 ? mean_diag : 1.0) /
                                   (col_norm2 / static_cast<double>(aug.size()));
-  SpD Hrho_rows = H_rows;
+  SpD augmented;  // the rows of H + ρCpCpᵀ, for the factorization only
   if (!aug.empty()) {
     const SpD Cp_rows = Cp.middleRows(rows.begin, rows.size());
-    Hrho_rows = SpD(H_rows + summary.rho * SpD(Cp_rows * Cp.transpose())).pruned();
+    augmented = SpD(H_rows + summary.rho * SpD(Cp_rows * Cp.transpose())).pruned();
   }
+  const SpD& Hrho_rows = aug.empty() ? H_rows : augmented;
   // Gershgorin bound on λ_max(H_ρ): the largest absolute row sum.
   double bound = 0.0;
   {
-    const Eigen::SparseMatrix<double, Eigen::RowMajor> R = Hrho_rows;
-    for (Index i = 0; i < R.rows(); ++i) bound = std::max(bound, R.row(i).cwiseAbs().sum());
+    Vector<double> row_sums = Vector<double>::Zero(Hrho_rows.rows());
+    for (Index j = 0; j < Hrho_rows.outerSize(); ++j)
+      for (SpD::InnerIterator it(Hrho_rows, j); it; ++it) row_sums(it.row()) += std::abs(it.value());
+    if (row_sums.size() > 0) bound = row_sums.maxCoeff();
   }
   const double hrho_bound = allreduce(comm, bound, MPI_MAX);
 
   const char* what = aug.empty() ? "H" : "H + ρCCᵀ";
   MumpsSolver solver(comm, Symmetry::PositiveDefinite, mumps);
   if (!factor_and_probe(solver, Hrho_rows, rows.begin, n, what)) return false;
+  SpD().swap(augmented);  // the factor has it; the rows of H stay, for H·B
   if (solver.negative_pivots() > 0) {
     if (options.check_psd && !psd_by_factorization()) return false;
     return fail(Status::SingularKKT,
@@ -400,6 +404,7 @@ bool MumpsBuild::kkt_route() {
   }
   MumpsSolver solver(comm, Symmetry::Indefinite, mumps);
   if (!factor_and_probe(solver, K_rows, rows.begin, K_order, "the KKT matrix [[H, C], [Cᵀ, 0]]")) return false;
+  SpD().swap(K_rows);  // the factor has it
   const Timer t;
   // Right-hand sides for N: e_j in row n + j; for UD: D on top.
   const auto n_rhs = [this](Index j, MatD& block) {

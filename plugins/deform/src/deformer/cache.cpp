@@ -403,7 +403,7 @@ void Deformer::save(const std::string& path) const {
     throw std::invalid_argument(fmt::format(
         "Deformer::save: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (precompute_part); "
         "save(path, blocks) with every part's rows",
-        model.basis_first, model.basis_first + model.basis.rows(), 3 * model.n));
+        model.basis_first, model.basis_first + model.basis_count(), 3 * model.n));
   }
   // Blocks of 4,096 rows: a copy of one block at a time, not of the basis.
   constexpr Index kBlockRows = 4096;

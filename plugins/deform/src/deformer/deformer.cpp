@@ -97,7 +97,24 @@ const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Def
   return state_->model.basis;
 }
 Deformer::RowBlock Deformer::basis_rows() const {
-  return {state_->model.basis_first, state_->model.basis.rows()};
+  if (!state_) return {};
+  return {state_->model.basis_first, state_->model.basis_count()};
+}
+
+void Deformer::basis_block(Index first, Index count, BasisRows* rows) const {
+  if (!state_) throw std::invalid_argument("Deformer::basis_block: call precompute or load first");
+  if (rows == nullptr) throw std::invalid_argument("Deformer::basis_block: output pointer is null");
+  const detail_deformer::Model& model = state_->model;
+  const RowBlock mine = basis_rows();
+  if (count < 0 || first < mine.first || first + count > mine.first + mine.count) {
+    throw std::invalid_argument(fmt::format("Deformer::basis_block: rows [{}, {}) outside this deformer's rows [{}, {})",
+                                            first, first + count, mine.first, mine.first + mine.count));
+  }
+  if (model.part_held) {
+    model.basis_rows_from(model.part_first_row, model.part_N, model.part_UD, first, count, rows);
+  } else {
+    *rows = model.basis.middleRows(first - mine.first, count);
+  }
 }
 const Eigen::VectorXf& Deformer::reduced_coordinates() const { return state_->pose.wf; }
 

@@ -201,7 +201,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     throw std::invalid_argument(fmt::format(
         "Deformer::set_handles: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (a part of a "
         "distributed precompute); save it with the other parts' rows and load the cache",
-        model.basis_first, model.basis_first + model.basis.rows(), 3 * model.n));
+        model.basis_first, model.basis_first + model.basis_count(), 3 * model.n));
   }
   OnSite& onsite = st.onsite;
   detail_deformer::check_handles(handles, model.n, model.patch_types);

@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <optional>
+#include <tuple>
 #include <utility>
 
 namespace qpreduce::deform {
@@ -271,6 +272,31 @@ EliminatedArapSystem eliminated_on(const Model& model, const DeformableMesh& mes
   return eliminate_rotation_corrections(sys);
 }
 
+// Adds E′ on the elements `which` (ascending) to *sum, Q eliminated, in
+// about eight chunks (of at least 1,024 elements): the elimination's
+// temporaries (a chunk's whole system and its products) are then a
+// chunk's, not those of all the process's elements, which were its
+// assembly's peak. D_V only when `with_dv` (the paper's Phase 2), K only
+// while *sum still has it.
+void add_eliminated(const Model& model, const DeformableMesh& mesh, const std::vector<Index>& which, bool with_dv,
+                    EliminatedArapSystem* sum) {
+  const size_t kAssemblyChunk = std::max<size_t>(1024, (which.size() + 7) / 8);
+  const auto add = [](SparseMatrix<double>* to, SparseMatrix<double>* from) {
+    SparseMatrix<double> total = *to + *from;
+    to->swap(total);
+    free_sparse(from);
+  };
+  for (size_t b = 0; b < which.size(); b += kAssemblyChunk) {
+    const std::vector<Index> chunk(which.begin() + static_cast<std::ptrdiff_t>(b),
+                                   which.begin() + static_cast<std::ptrdiff_t>(std::min(b + kAssemblyChunk, which.size())));
+    EliminatedArapSystem part = eliminated_on(model, mesh, chunk);
+    add(&sum->H, &part.H);
+    add(&sum->Ds, &part.Ds);
+    if (sum->K.rows() > 0) add(&sum->K, &part.K);
+    if (with_dv) add(&sum->DV, &part.DV);
+  }
+}
+
 // Whether the model's L_QQ is block diagonal, from one element's assembly.
 bool q_separable(const Model& model, const DeformableMesh& mesh) {
   const RotationElements& el = model.elements;
@@ -294,29 +320,47 @@ Matrix<double> dense_on(const SparseMatrix<double>& A, const std::vector<Index>&
   return out;
 }
 
-// The rows [first, end) of Pᵀ·X (X 3n × w) for this process: its free rows
-// from X (complete over owned + ghosts), then its patch rows from the summed
-// `patch` (12s × width on the columns `cols`, or all columns when empty).
+// The rows [first, end) of Pᵀ·X·R (X 3n × w; R = `right`, or I when null)
+// for this process: its free rows from X (complete over owned + ghosts),
+// then its patch rows from the summed `patch` (12s × width on the columns
+// `cols`, or all columns when empty). Built column by column into reserved
+// space: triplets of the free rows (16 bytes an entry, and setFromTriplets'
+// own copy) were the distributed assembly's peak.
 SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, const SparseMatrix<double>& P,
                                         const SparseMatrix<double>& X, const Matrix<double>& patch,
-                                        const std::vector<Index>& cols) {
+                                        const std::vector<Index>& cols, const SparseMatrix<double>* right = nullptr) {
   const Index free_end = std::min(rows.end, model.patch_base);
   const Index free_count = std::max<Index>(free_end - rows.first, 0);
-  Triplets t;
+  const Index width = right != nullptr ? right->cols() : X.cols();
+  SparseMatrix<double> free_rows(free_count, width);
   if (free_count > 0) {
     const SparseMatrix<double> PfT = P.middleCols(rows.first, free_count).transpose();
-    const SparseMatrix<double> free_rows = detail_deformer::parallel_product(PfT, X);
-    t.reserve(static_cast<size_t>(free_rows.nonZeros()));
-    for (Index c = 0; c < free_rows.outerSize(); ++c)
-      for (SparseMatrix<double>::InnerIterator it(free_rows, c); it; ++it) t.emplace_back(it.row(), c, it.value());
+    free_rows = detail_deformer::parallel_product(PfT, X);
+    if (right != nullptr) {
+      SparseMatrix<double> times_right = detail_deformer::parallel_product(free_rows, *right);
+      free_rows.swap(times_right);
+    }
   }
-  for (Index i = std::max(rows.first, model.patch_base); i < rows.end; ++i) {
-    const Index pr = i - model.patch_base, out_row = i - rows.first;
+  const Index patch_first = std::max(rows.first, model.patch_base);
+  if (patch_first >= rows.end) return free_rows;  // no patch row here
+  // The patch rows [patch_first, end) below the free ones, column by column.
+  const auto column = [&](Index j) { return cols.empty() ? j : cols[static_cast<size_t>(j)]; };
+  Eigen::VectorXi per_column(width);
+  for (Index c = 0; c < width; ++c) per_column(c) = static_cast<int>(free_rows.col(c).nonZeros());
+  for (Index i = patch_first; i < rows.end; ++i)
     for (Index j = 0; j < patch.cols(); ++j)
-      if (patch(pr, j) != 0.0) t.emplace_back(out_row, cols.empty() ? j : cols[static_cast<size_t>(j)], patch(pr, j));
-  }
-  SparseMatrix<double> out(rows.count(), X.cols());
-  out.setFromTriplets(t.begin(), t.end());
+      if (patch(i - model.patch_base, j) != 0.0) ++per_column(column(j));
+  SparseMatrix<double> out(rows.count(), width);
+  out.reserve(per_column);
+  for (Index c = 0; c < width; ++c)
+    for (SparseMatrix<double>::InnerIterator it(free_rows, c); it; ++it) out.insert(it.row(), c) = it.value();
+  free_sparse(&free_rows);
+  for (Index j = 0; j < patch.cols(); ++j)
+    for (Index i = patch_first; i < rows.end; ++i) {
+      const double v = patch(i - model.patch_base, j);
+      if (v != 0.0) out.insert(i - rows.first, column(j)) = v;
+    }
+  out.makeCompressed();
   return out;
 }
 
@@ -378,7 +422,9 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
   *assembled = static_cast<Index>(split.owned.size() + split.ghosts.size());
   ControlSystem cs;
   cs.P = model.control_matrix();
-  EliminatedArapSystem own = eliminated_on(model, mesh, split.owned);
+  const bool with_dv = fit == ClusterRotationFit::PaperPhase2;
+  EliminatedArapSystem own = eliminated_on(model, mesh, {});  // zero, of the right shapes
+  add_eliminated(model, mesh, split.owned, with_dv, &own);
   cs.K = summed_cluster_blocks(own.K, model.d, sum);
   free_sparse(&own.K);
   // The patch unknowns' rows, from the owned elements, summed.
@@ -391,27 +437,21 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
     patch_D = dense_on(PpT * own.Ds, {}, 9 * model.d);
     sum(&patch_H);
     sum(&patch_D);
-    if (fit == ClusterRotationFit::PaperPhase2) {
+    if (with_dv) {
       patch_DV = dense_on(PpT * own.DV, {}, 9 * model.d);
       sum(&patch_DV);
     }
   }
-  {  // + the ghosts: the free rows complete
-    EliminatedArapSystem ghosts = eliminated_on(model, mesh, split.ghosts);
-    own.H += ghosts.H;
-    own.Ds += ghosts.Ds;
-    if (fit == ClusterRotationFit::PaperPhase2) own.DV += ghosts.DV;
-  }
-  const SparseMatrix<double> HP = detail_deformer::parallel_product(own.H, cs.P);
+  add_eliminated(model, mesh, split.ghosts, with_dv, &own);  // the free rows complete
+  cs.Hu = owned_control_rows(model, rows, cs.P, own.H, patch_H, cols, &cs.P);
   free_sparse(&own.H);
-  cs.Hu = owned_control_rows(model, rows, cs.P, HP, patch_H, cols);
   cs.Du = owned_control_rows(model, rows, cs.P, own.Ds, patch_D, {});
-  if (fit == ClusterRotationFit::PaperPhase2) cs.DV = owned_control_rows(model, rows, cs.P, own.DV, patch_DV, {});
+  if (with_dv) cs.DV = owned_control_rows(model, rows, cs.P, own.DV, patch_DV, {});
   return cs;
 }
 
-// The whole control system (γ > 0: Q kept in u, so the rows are those of
-// the grown n_u), then this process's rows.
+// The whole control system, then this process's rows (γ > 0: Q kept in u,
+// so the rows are those of the grown n_u; or one process).
 ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part) {
   ControlSystem cs = assemble_control_system(model, mesh);
   const ControlRows rows = control_rows(model.nu, part);
@@ -547,9 +587,17 @@ void reduce_operators_part(Model& model, ControlSystem* system, ClusterRotationF
   norms.topRows(model.nx) = part.N_rows.colwise().squaredNorm().transpose();
   norms.bottomRows(9 * model.d) = part.UD_rows.colwise().squaredNorm().transpose();
   sum(&norms);
-  model.make_basis(b, part.N_rows, part.UD_rows);
-  part.N_rows = Matrix<double>();
-  part.UD_rows = Matrix<double>();
+  if (b == 0 && rows == model.nu) {  // one process: the whole float basis, usable as it is
+    model.make_basis(b, part.N_rows, part.UD_rows);
+    part.N_rows = Matrix<double>();
+    part.UD_rows = Matrix<double>();
+  } else {  // the double rows kept; float rows made when saved (Deformer::basis_block)
+    model.part_held = true;
+    model.part_first_row = b;
+    std::tie(model.basis_first, model.part_vertex_rows) = model.vertex_rows_of(b, rows);
+    model.part_N = std::move(part.N_rows);
+    model.part_UD = std::move(part.UD_rows);
+  }
   model.solver.restore_without_basis(model.nu, model.nx, norms.col(0).cwiseSqrt(), std::move(part.Hr),
                                      std::move(part.BtD), sub);
 }
@@ -601,7 +649,9 @@ bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const 
     out->system = assemble_control_system(model, mesh);
     hu_nonzeros = static_cast<double>(out->system.Hu.nonZeros());
   } else {
-    out->system = q_separable(model, mesh)
+    // One process (K = 1) holds the whole system anyway: the single-process
+    // assembly, which the distributed one is tested against.
+    out->system = partition.processes > 1 && q_separable(model, mesh)
                       ? control_system_rows(model, mesh, control_rows(model.nu, partition), partition,
                                             options.rotation_fit, sum, &summary->assembled_elements)
                       : whole_then_rows(model, mesh, partition);

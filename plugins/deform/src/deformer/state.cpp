@@ -184,14 +184,10 @@ SparseMatrix<double> Model::control_matrix() const {
   return P;
 }
 
-void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows) {
-  const Index rows = N_rows.rows(), p = nx + 9 * d;
-  check_size("Model::make_basis: UD rows", rows, UD_rows.rows());
-  check_size("Model::make_basis: patch rows", 12 * s, patch_rows.rows());
-  // The vertex rows this block of control rows gives: row 3v + a goes with
-  // its control unknown (free v) or with the last free row before it (a
-  // patch vertex; the first block when there is none). control_of_free
-  // ascends with v, so these rows are contiguous.
+std::pair<Index, Index> Model::vertex_rows_of(Index first_row, Index rows) const {
+  // Row 3v + a goes with its control unknown (free v) or with the last free
+  // row before it (a patch vertex; the first block when there is none).
+  // control_of_free ascends with v, so these rows are contiguous.
   const auto mine = [&](Index key) { return key < 0 ? first_row == 0 : key >= first_row && key < first_row + rows; };
   Index first = -1, last = -1, key = -1;
   for (Index v = 0; v < n; ++v)
@@ -202,10 +198,19 @@ void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matr
         last = 3 * v + a;
       }
     }
-  const Index count = first < 0 ? 0 : last - first + 1;
-  // P's rows [first, first + count) split by its columns: PB on this block's
-  // rows of [N UD], PP on the patch unknowns' rows (patch_rows).
+  return first < 0 ? std::pair<Index, Index>{0, 0} : std::pair<Index, Index>{first, last - first + 1};
+}
+
+void Model::basis_rows_from(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows,
+                            Index first, Index count, RowMatrixF* out) const {
+  const Index rows = N_rows.rows(), p = nx + 9 * d;
+  check_size("Model::basis_rows_from: UD rows", rows, UD_rows.rows());
+  check_size("Model::basis_rows_from: patch rows", 12 * s, patch_rows.rows());
+  // P's rows [first, first + count) split by its columns: PB on the control
+  // rows of [N UD] they use (lo ≤ c − first_row < hi), PP on the patch
+  // unknowns' rows (patch_rows).
   Triplets tb, tp, row;
+  Index lo = rows, hi = 0;
   for (Index i = first; i < first + count; ++i) {
     row.clear();
     control_row(i / 3, static_cast<int>(i % 3), 1.0, 0, &row);
@@ -215,26 +220,38 @@ void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matr
         tp.emplace_back(i - first, c - patch_base, e.value());
       } else if (c >= first_row && c < first_row + rows) {
         tb.emplace_back(i - first, c - first_row, e.value());
+        lo = std::min(lo, c - first_row);
+        hi = std::max(hi, c - first_row + 1);
       } else {
-        throw std::logic_error(fmt::format("Model::make_basis: vertex row {} needs control row {} outside [{}, {})", i,
-                                           c, first_row, first_row + rows));
+        throw std::logic_error(fmt::format("Model::basis_rows_from: vertex row {} needs control row {} outside [{}, {})",
+                                           i, c, first_row, first_row + rows));
       }
     }
   }
-  SparseMatrix<double> PB(count, rows), PP(count, 12 * s);
+  lo = std::min(lo, hi);
+  for (auto& t : tb) t = Eigen::Triplet<double>(t.row(), t.col() - lo, t.value());
+  SparseMatrix<double> PB(count, hi - lo), PP(count, 12 * s);
   PB.setFromTriplets(tb.begin(), tb.end());
   PP.setFromTriplets(tp.begin(), tp.end());
-  basis_first = first < 0 ? 0 : first;
-  basis.resize(count, p);
-  constexpr Index kBlock = 32;  // columns per double temporary (count × 32)
+  out->resize(count, p);
+  constexpr Index kBlock = 32;  // columns per double temporary ((hi − lo) × 32)
+  Matrix<double> block, product;
   for (Index j = 0; j < p; j += kBlock) {
     const Index w = std::min(kBlock, p - j);
-    Matrix<double> block(rows, w);
-    for (Index c = 0; c < w; ++c) block.col(c) = j + c < nx ? N_rows.col(j + c) : UD_rows.col(j + c - nx);
-    Matrix<double> product = PB * block;
+    block.resize(hi - lo, w);
+    for (Index c = 0; c < w; ++c)
+      block.col(c) = j + c < nx ? N_rows.col(j + c).segment(lo, hi - lo) : UD_rows.col(j + c - nx).segment(lo, hi - lo);
+    product = PB * block;
     if (s > 0) product += PP * patch_rows.middleCols(j, w);
-    basis.middleCols(j, w) = product.cast<float>();
+    out->middleCols(j, w) = product.cast<float>();
   }
+}
+
+void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows) {
+  check_size("Model::make_basis: UD rows", N_rows.rows(), UD_rows.rows());
+  const auto [first, count] = vertex_rows_of(first_row, N_rows.rows());
+  basis_first = first;
+  basis_rows_from(first_row, N_rows, UD_rows, first, count, &basis);
 }
 
 void Model::take_patch_rows() {

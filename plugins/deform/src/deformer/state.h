@@ -24,6 +24,7 @@
 #include <qpreduce/subspace_solver.h>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace qpreduce::deform::detail_deformer {
@@ -86,7 +87,16 @@ struct Model {
   std::unique_ptr<ClusterProjection> projection;  // the energy model's Phase 2
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
-  Index basis_first = 0;  // basis holds rows [basis_first, + basis.rows()): all 3n, except after precompute_part
+  Index basis_first = 0;  // this process's rows [basis_first, + basis_count()): all 3n, except after precompute_part
+  // After precompute_part with more than one process: its control rows
+  // [part_first_row, + part_N.rows()) of N and UD in double, from which
+  // basis_rows_from makes float rows when asked (basis_block); basis stays
+  // empty. Such a part can only be saved, and the float rows made beside
+  // the double ones were the distributed precompute's last peak.
+  bool part_held = false;
+  Matrix<double> part_N, part_UD;  // rows × nx, rows × 9d
+  Index part_first_row = 0, part_vertex_rows = 0;
+  Index basis_count() const { return part_held ? part_vertex_rows : basis.rows(); }
   // For the on-site step's A_r = AᵀB from contiguous rows: the control rows
   // of the patch unknowns, [N UD](patch_base + i, :) (12s × (nx + 9d)), and
   // the vertex of each free control triple (control row 3i + a is basis row
@@ -124,6 +134,14 @@ struct Model {
   // make_basis sets basis_first), once patch_rows is set; through
   // rows × 32 double blocks, never the whole double product.
   void make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows);
+  // The vertex rows [first, first + count) that control rows
+  // [first_row, first_row + rows) give (see make_basis).
+  std::pair<Index, Index> vertex_rows_of(Index first_row, Index rows) const;
+  // Rows [first, first + count) of P·[N UD] in float into *out (count × p),
+  // from control rows [first_row, first_row + N_rows.rows()) of N, UD (which
+  // must hold every control row these vertex rows use) and patch_rows.
+  void basis_rows_from(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows, Index first,
+                       Index count, RowMatrixF* out) const;
   // patch_rows from the solver's double basis (which it then still holds).
   void take_patch_rows();
   bool whole_basis() const { return basis_first == 0 && basis.rows() == 3 * n; }

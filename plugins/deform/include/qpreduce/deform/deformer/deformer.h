@@ -197,9 +197,12 @@ class Deformer {
   // the rows of the patch unknowns, ‖B_j‖), so every process ends with all
   // of them, and with the rows basis_rows() of the float reconstruction
   // basis P·B: the vertex rows whose control unknowns it owns (contiguous;
-  // rows of patch vertices go with the free row before them). Such a
-  // deformer can only be saved, with the other processes' rows, by
-  // save(path, blocks) on one process; set_handles refuses it (unless K = 1).
+  // rows of patch vertices go with the free row before them). With K > 1 it
+  // keeps its rows of B in double and makes the float rows when asked
+  // (basis_block), so that the two are never held together;
+  // reconstruction_basis() is then empty. Such a deformer can only be saved,
+  // with the other processes' rows, by save(path, blocks) on one process;
+  // set_handles refuses it. With K = 1 it is an ordinary deformer.
   struct SubspacePart {
     Index first_row = 0;             // N_rows, UD_rows are rows [first_row, first_row + rows) of N, UD
     Matrix<double> N_rows, UD_rows;  // rows × nx, rows × 9d
@@ -218,12 +221,19 @@ class Deformer {
                                     const ProgressFn& progress, Partition partition, const PartBuilder& build,
                                     const SumOverProcesses& sum);
   // Rows [first, first + count) of the reconstruction basis (3n rows in all)
-  // that reconstruction_basis() holds: all of them, except after
-  // precompute_part.
+  // that this deformer has (basis_block): all of them, except after
+  // precompute_part with more than one process.
   struct RowBlock {
     Index first = 0, count = 0;
   };
   RowBlock basis_rows() const;
+  using BasisRows = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  // Rows [first, first + count) of the float reconstruction basis (count × p),
+  // within basis_rows(): a copy of reconstruction_basis()'s, or after
+  // precompute_part with K > 1 made from this process's double rows of B
+  // (the same floats make_basis would store). Throws std::invalid_argument
+  // outside basis_rows() or before precompute.
+  void basis_block(Index first, Index count, BasisRows* rows) const;
 
   // Writes the precomputed model to `path` (binary, versioned, CRC-32
   // checked; layout in docs/formats.md: the float reconstruction basis in row
@@ -239,7 +249,6 @@ class Deformer {
   // together they cover the 3n rows). Throws std::invalid_argument (and
   // leaves no file) when the blocks do not tile the 3n rows, have another
   // width, or hold NaN/Inf.
-  using BasisRows = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   using BasisBlocks = std::function<bool(Index* first_row, BasisRows* rows)>;
   void save(const std::string& path, const BasisBlocks& next) const;
 
@@ -307,8 +316,8 @@ class Deformer {
   const Eigen::Matrix3d& global_rotation() const;
   // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
   // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
-  // Empty before precompute; after precompute_part only the rows
-  // basis_rows() (row i here is row basis_rows().first + i).
+  // Empty before precompute, and after precompute_part with more than one
+  // process (its rows basis_rows() come from basis_block).
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
   // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
   // and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
