@@ -559,9 +559,9 @@ void reduce_operators(Model& model, const ControlSystem& system, ClusterRotation
 
 // The same from this process's rows of B (Deformer::precompute_part): every
 // reduced operator is a sum over rows of B, formed on the owned rows and
-// summed over the processes; the float basis only for the owned rows.
-// The system (this process's rows) is freed once used: the float basis made
-// beside the double rows of B is the last stage's peak.
+// summed over the processes. The system (this process's rows) is freed once
+// used. With more than one process the double rows are kept and the float
+// rows made when asked (Deformer::basis_block), never the two together.
 void reduce_operators_part(Model& model, ControlSystem* system, ClusterRotationFit fit,
                            Deformer::SubspacePart&& part, const Deformer::SumOverProcesses& sum,
                            const SubspaceOptions& sub) {
