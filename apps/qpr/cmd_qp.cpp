@@ -54,6 +54,8 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <functional>
+#include <utility>
 #include <vector>
 
 namespace qpr {
@@ -254,22 +256,42 @@ SpMat bordering_columns(const SpMat& H, const SpMat& C) {
 }
 
 // The QP (H, C, D) and its demands, read and checked before any expensive step.
+// H and D hold rows [first_row, first_row + H.rows()): all of them, except on
+// a rank of --backend mumps that needs only its own (read_problem).
 struct Problem {
   SpMat H, C, D;
+  Index first_row = 0;
   std::vector<Demand> demands;
-  Index n() const { return H.rows(); }
+  Index n() const { return H.cols(); }
+  bool whole() const { return H.rows() == H.cols(); }
 };
 
-Problem read_problem(const Options& opt) {
+// rows: null, the whole H and D; else only rows [first, end) of them (each
+// file is still read and checked whole: qpreduce::read_market_sparse_rows).
+Problem read_problem(const Options& opt, const std::function<std::pair<Index, Index>(Index n)>& rows_of = {}) {
   Problem p;
   qpreduce::MarketReadOptions oh;
   oh.require_symmetric = true;
-  p.H = qpreduce::read_market_sparse(opt.H, oh);
-  const Index n = p.H.rows();
+  std::pair<Index, Index> range{0, 0};
+  bool part = false;  // only some rows of H and D
+  if (rows_of) {
+    const Index n = qpreduce::read_market_size(opt.H, oh).first;
+    range = rows_of(n);
+    part = range.first != 0 || range.second != n;
+  }
+  p.H = part ? qpreduce::read_market_sparse_rows(opt.H, range.first, range.second, oh)
+             : qpreduce::read_market_sparse(opt.H, oh);
+  p.first_row = part ? range.first : 0;
+  const Index n = p.H.cols();
   qpreduce::MarketReadOptions on;
   on.rows = n;
   p.C = qpreduce::read_market_sparse(opt.C, on);
-  p.D = opt.D.empty() ? SpMat(n, 0) : qpreduce::read_market_sparse(opt.D, on);
+  if (opt.D.empty()) {
+    p.D = SpMat(p.H.rows(), 0);
+  } else {
+    p.D = part ? qpreduce::read_market_sparse_rows(opt.D, range.first, range.second, on)
+               : qpreduce::read_market_sparse(opt.D, on);
+  }
   const fs::path dpath = opt.demands;
   if (!fs::exists(dpath)) throw std::invalid_argument(fmt::format("{}: no such file or directory", opt.demands));
   const std::vector<DemandFiles> files = fs::is_directory(dpath) ? list_directory(dpath) : read_manifest(dpath);
@@ -482,7 +504,8 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
   r["reconstruct_seconds"] = t_recon;
   r["fast_path"] = cs.fast_path;
   r["factored"] = cs.factored;  // A_c demands: M_q kept factored (subspace_solver.h)
-  const Vec q = d.in_D ? Vec(p.D * d.Y) : d.q;
+  // q = D·Y for the full solves (rank 0 holds the whole D when they run).
+  const Vec q = !d.in_D ? d.q : p.whole() ? Vec(p.D * d.Y) : Vec();
   r["constraint_residual"] = (d.A.transpose() * ws.X - d.b).norm() / std::max(1.0, d.b.norm());
   if (opt.check_full) check_full(d, q, p, s, ws, r, row, tally);
   if (opt.baseline) run_baseline(d, q, p, s, ws, r, row);
@@ -525,22 +548,29 @@ int run_qp(const Options& opt) {
     fs::create_directories(opt.out);
     qpreduce::check_destination((fs::path(opt.out) / "X_.mtx").string(), "solutions (--out)");
   }
-  const Problem p = read_problem(opt);
-
+  Problem p;
   Solvers s;
   s.sopt.augment = !opt.no_augment;
   qpreduce::SubspaceSummary pre;
   if (opt.backend == "mumps") {
 #ifdef QPREDUCE_HAVE_MPI
-    // Every rank reads the files, hands MUMPS its rows of H and keeps its
-    // rows of B (docs/scaling.md): no rank holds the n × p basis. The ranks
-    // solve every demand together (A_r and q_r summed, X gathered to rank 0);
-    // rank 0 checks and reports.
+    // Every rank reads the files and keeps only its rows of H and D (rank 0
+    // the whole of them when --check-full or --baseline needs them), hands
+    // MUMPS its rows and keeps its rows of B (docs/scaling.md): no rank holds
+    // the n × p basis. The ranks solve every demand together (A_r and q_r
+    // summed, X gathered to rank 0); rank 0 checks and reports.
     MPI_Comm_rank(MPI_COMM_WORLD, &s.rank);
+    const bool whole = s.rank == 0 && (opt.check_full || opt.baseline);
+    p = read_problem(opt, [whole](Index n) {
+      const auto r = qpreduce::distributed::owned_rows(n, MPI_COMM_WORLD);
+      return whole ? std::pair<Index, Index>{0, n} : std::pair<Index, Index>{r.begin, r.end};
+    });
     const auto rows = qpreduce::distributed::owned_rows(p.n(), MPI_COMM_WORLD);
+    const SpMat H_rows = p.whole() ? SpMat(p.H.middleRows(rows.begin, rows.size())) : SpMat();
+    const SpMat D_rows = p.whole() ? SpMat(p.D.middleRows(rows.begin, rows.size())) : SpMat();
     s.part.emplace();
-    pre = qpreduce::distributed::build_subspace_mumps(MPI_COMM_WORLD, p.H.middleRows(rows.begin, rows.size()), p.C,
-                                                      p.D, s.sopt, {}, &*s.part);
+    pre = qpreduce::distributed::build_subspace_mumps_rows(MPI_COMM_WORLD, p.whole() ? H_rows : p.H, p.C,
+                                                           p.whole() ? D_rows : p.D, s.sopt, {}, &*s.part);
     if (pre.ok()) {  // ‖B_j‖ for ConstraintOptions::drop_tolerance
       qpreduce::Matrix<double> norms(s.part->d + s.part->k, 1);
       norms.topRows(s.part->d) = s.part->N_rows.colwise().squaredNorm().transpose();
@@ -551,6 +581,7 @@ int run_qp(const Options& opt) {
     if (s.rank != 0 && !pre.ok()) return 3;
 #endif
   } else {
+    p = read_problem(opt);
     pre = s.solver.precompute(p.H, p.C, p.D, s.sopt);
   }
   if (s.rank == 0) fmt::print("precompute: {}\n", pre.brief_report());

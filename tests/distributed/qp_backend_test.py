@@ -9,7 +9,9 @@ demands pinning some stations with q = D·Y, one with a general q), solves it
 with the single-process backend and with MUMPS on 2 ranks — each rank
 keeping its rows of the basis, A_r and q_r summed over the ranks, X gathered
 to rank 0 (`--out` writes X_<name>.mtx; `--check-full` and the report on
-rank 0) — and checks that every solution agrees to 1e-8 relative. Then `--backend nonsense` is refused with a message naming the option.
+rank 0) — and checks that every solution agrees to 1e-8 relative; again on
+3 ranks without --check-full, where every rank reads only its rows of H and
+D; a NaN in the last rank's rows of H fails the job naming the file. Then `--backend nonsense` is refused with a message naming the option.
 """
 import json
 import os
@@ -77,14 +79,27 @@ def main():
         doc = json.load(f)
     if doc["failures"] or len(doc["demands"]) != 4 or any(r["status"] != "success" for r in doc["demands"]):
         sys.exit(f"FAILED: the 2-rank report: {json.dumps(doc)[:2000]}")
-    for name in ["a", "b", "c", "d"]:
-        x = read_dense(os.path.join(work, "auto", f"X_{name}.mtx"))
-        y = read_dense(os.path.join(work, "mumps", f"X_{name}.mtx"))
-        diff = sum((u - v) ** 2 for u, v in zip(x, y)) ** 0.5
-        ref = sum(u * u for u in x) ** 0.5
-        print(f"demand {name}: relative difference {diff / ref:.2e}")
-        if len(x) != N or len(y) != N or not diff <= 1e-8 * ref:
-            sys.exit(f"FAILED: demand {name}: {len(x)}, {len(y)} entries, relative difference {diff / ref:.2e}")
+    # Without --check-full every rank, rank 0 too, reads only its rows of H and D; 3 ranks, uneven rows.
+    run([mpirun, "--oversubscribe", "-np", "3", qpr, *common, "--backend", "mumps",
+         "--out", os.path.join(work, "mumps_rows")])
+    for out in ["mumps", "mumps_rows"]:
+        for name in ["a", "b", "c", "d"]:
+            x = read_dense(os.path.join(work, "auto", f"X_{name}.mtx"))
+            y = read_dense(os.path.join(work, out, f"X_{name}.mtx"))
+            diff = sum((u - v) ** 2 for u, v in zip(x, y)) ** 0.5
+            ref = sum(u * u for u in x) ** 0.5
+            print(f"{out}, demand {name}: relative difference {diff / ref:.2e}")
+            if len(x) != N or len(y) != N or not diff <= 1e-8 * ref:
+                sys.exit(f"FAILED: {out}, demand {name}: {len(x)}, {len(y)} entries, "
+                         f"relative difference {diff / ref:.2e}")
+    # A broken entry in the last rank's rows of H: every rank reads the whole file, so the job
+    # fails with the file and line, whichever rank owns them.
+    bad = os.path.join(work, "H_bad.mtx")
+    write_coo(bad, N, N, H[:-1] + [(N - 1, N - 2, float("nan"))], symmetric=True)
+    p = run([mpirun, "--oversubscribe", "-np", "2", qpr, *[bad if a.endswith("H.mtx") else a for a in common],
+             "--backend", "mumps"], expect=None)
+    if "H_bad.mtx" not in p.stderr or "not finite" not in p.stderr:
+        sys.exit(f"FAILED: the broken H is not named:\n{p.stderr}")
     p = run([qpr, *common, "--backend", "nonsense"], expect=None)
     if "backend" not in p.stderr:
         sys.exit(f"FAILED: the refusal does not name --backend:\n{p.stderr}")

@@ -118,3 +118,51 @@ TEST_CASE("Matrix Market: malformed files are rejected with file and line", "[qp
     }
   }
 }
+
+TEST_CASE("Matrix Market: a range of rows is those rows of the whole matrix", "[qp][io][rows]") {
+  const SparseMatrix<double> L = generators::grid_laplacian_2d(7, 5, 0.3);  // 35 × 35, symmetric
+  const SparseMatrix<double> G = generators::gaussian_sparse(35, 4, 11);
+  const std::string pl = (temp_dir() / "Lr.mtx").string(), ps = (temp_dir() / "Lsr.mtx").string(),
+                    pg = (temp_dir() / "Gr.mtx").string();
+  write_market(pl, L);                      // general storage
+  write_market(ps, L, /*symmetric=*/true);  // lower triangle only
+  write_market(pg, G);
+  MarketReadOptions sym;
+  sym.require_symmetric = true;
+  CHECK(read_market_size(pl, sym) == std::pair<Index, Index>{35, 35});
+  CHECK(read_market_size(pg) == std::pair<Index, Index>{35, 4});
+  // Three blocks tiling the rows, one of them empty, as ranks would own them.
+  for (const auto& [first, end] : {std::pair<Index, Index>{0, 12}, {12, 12}, {12, 35}}) {
+    INFO("rows [" << first << ", " << end << ")");
+    for (const std::string& path : {pl, ps}) {
+      const SparseMatrix<double> rows = read_market_sparse_rows(path, first, end, sym);
+      REQUIRE(rows.rows() == end - first);
+      REQUIRE(rows.cols() == 35);
+      CHECK(SparseMatrix<double>(rows - SparseMatrix<double>(L.middleRows(first, end - first))).norm() == 0.0);
+    }
+    const SparseMatrix<double> g = read_market_sparse_rows(pg, first, end);
+    CHECK(SparseMatrix<double>(g - SparseMatrix<double>(G.middleRows(first, end - first))).norm() == 0.0);
+  }
+  CHECK_THROWS_WITH(read_market_sparse_rows(pl, 30, 36), Catch::Contains("outside the matrix's 35 rows"));
+  CHECK_THROWS_AS(read_market_sparse_rows(pl, 5, 4), std::invalid_argument);
+
+  // An asymmetric pair across two blocks: the reader of either block sees it
+  // (it keeps the mirrors of its columns), with the whole file's tolerance.
+  const std::string asym = write_text("asym.mtx", kHeader + "4 4 4\n1 1 2\n4 1 1\n1 4 1.5\n4 4 2\n");
+  for (const auto& [first, end] : {std::pair<Index, Index>{0, 2}, {2, 4}}) {
+    try {
+      read_market_sparse_rows(asym, first, end, sym);
+      if (first == 0) FAIL("rows [0, 2) hold (1, 4) = 1.5 against (4, 1) = 1 and were accepted");
+    } catch (const MatrixMarketError& e) {
+      CHECK_THAT(e.problem(), Catch::Contains("not symmetric"));
+    }
+  }
+  // A malformed line outside the kept rows still fails the read.
+  const std::string broken = write_text("broken_rows.mtx", kHeader + "4 4 2\n1 1 2\n4 4 x\n");
+  try {
+    read_market_sparse_rows(broken, 0, 2);
+    FAIL("a malformed entry in another block's rows was accepted");
+  } catch (const MatrixMarketError& e) {
+    CHECK(e.line() == 4);
+  }
+}

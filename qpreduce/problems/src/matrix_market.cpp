@@ -53,12 +53,26 @@ constexpr Index kFreeDimension = Index(1) << 22;
 
 Index dimension_limit(Index file_bytes) { return std::max(kFreeDimension, kDimensionsPerByte * file_bytes); }
 
+// Rows [first, end) of the matrix to keep (end < 0: all of them).
+struct RowFilter {
+  Index first = 0, end = -1;
+  bool all() const { return end < 0; }
+  bool has(Index i) const { return all() || (i >= first && i < end); }
+};
+
 struct Parsed {
   Index rows = 0, cols = 0;
   Index file_bytes = 0;
   Symmetry symmetry = Symmetry::General;
   long size_line = 0;
-  std::vector<Entry> entries;  // 0-based, as stored (one triangle for symmetric)
+  std::vector<Entry> entries;  // 0-based, as stored (one triangle for symmetric); see keep()
+  double max_abs = 0.0;        // over every value read, kept or not
+  RowFilter filter;
+  bool mirrors = false;  // keep the entries of the filter's columns too (symmetric storage, symmetry check)
+  // Whether entry (i, j) is kept: in a row of the filter, or with mirrors
+  // in one of its columns (it then gives row j by symmetry, or is the
+  // mirror a kept entry is checked against).
+  bool keep(Index i, Index j) const { return filter.has(i) || (mirrors && filter.has(j)); }
 };
 
 std::string lower(std::string s) {
@@ -225,13 +239,14 @@ void read_array_values(LineReader& r, Field field, Parsed& p) {
   const bool sym = p.symmetry == Symmetry::Symmetric;
   Index i = 0, j = 0;
   const Index total = sym ? p.rows * (p.rows + 1) / 2 : p.rows * p.cols;
-  p.entries.reserve(static_cast<size_t>(total));
+  if (p.filter.all()) p.entries.reserve(static_cast<size_t>(total));
   for (Index e = 0; e < total; ++e) {
     if (!r.next_data(&line)) r.fail(fmt::format("expected {} values, the file ends after {}", total, e));
     const std::vector<std::string> t = split(line);
     if (t.size() != 1) r.fail(fmt::format("expected 1 value per line (array storage), got {} fields", t.size()));
     const double v = parse_value(r, t[0], field);
-    if (v != 0.0) p.entries.push_back({i, j, v, r.line()});
+    p.max_abs = std::max(p.max_abs, std::abs(v));
+    if (v != 0.0 && p.keep(i, j)) p.entries.push_back({i, j, v, r.line()});
     if (++i == p.rows) {
       ++j;
       i = sym ? j : 0;
@@ -243,7 +258,7 @@ void read_array_values(LineReader& r, Field field, Parsed& p) {
 void read_coordinate_entries(LineReader& r, Field field, Index declared, Parsed& p) {
   std::string line;
   const bool sym = p.symmetry == Symmetry::Symmetric;
-  p.entries.reserve(static_cast<size_t>(declared));
+  if (p.filter.all()) p.entries.reserve(static_cast<size_t>(declared));
   const size_t fields = field == Field::Pattern ? 2 : 3;
   for (Index e = 0; e < declared; ++e) {
     if (!r.next_data(&line)) r.fail(fmt::format("expected {} entries, the file ends after {}", declared, e));
@@ -257,7 +272,8 @@ void read_coordinate_entries(LineReader& r, Field field, Index declared, Parsed&
     if (j < 1 || j > p.cols) r.fail(fmt::format("col {} out of range [1, {}]", j, p.cols));
     if (sym && i < j) r.fail(fmt::format("entry ({}, {}) above the diagonal in symmetric storage", i, j));
     const double v = field == Field::Pattern ? 1.0 : parse_value(r, t[2], field);
-    p.entries.push_back({i - 1, j - 1, v, r.line()});
+    p.max_abs = std::max(p.max_abs, std::abs(v));
+    if (p.keep(i - 1, j - 1)) p.entries.push_back({i - 1, j - 1, v, r.line()});
   }
 }
 
@@ -276,9 +292,10 @@ void sort_and_reject_duplicates(const std::string& path, std::vector<Entry>& ent
 
 // General storage checked for symmetry: |a_ij − a_ji| ≤ tolerance · max|a|.
 // Precondition: entries sorted by (col, row).
-void check_symmetric(const std::string& path, const std::vector<Entry>& entries, double symmetry_tolerance) {
-  double max_abs = 0.0;
-  for (const Entry& e : entries) max_abs = std::max(max_abs, std::abs(e.value));
+// max_abs: over every value of the file (not only the kept entries, whose
+// mirrors are kept with them).
+void check_symmetric(const std::string& path, const std::vector<Entry>& entries, double symmetry_tolerance,
+                     double max_abs) {
   const double tol = symmetry_tolerance * max_abs;
   auto find = [&](Index row, Index col) -> const Entry* {
     const auto it = std::lower_bound(entries.begin(), entries.end(), std::make_pair(col, row),
@@ -302,17 +319,37 @@ void check_symmetric(const std::string& path, const std::vector<Entry>& entries,
   }
 }
 
-Parsed parse(const std::string& path, const MarketReadOptions& options) {
+// The header and the size line of the file `r` reads, into *p (rows, cols,
+// symmetry, the file's size); returns the header and the declared entries.
+// (Precondition: options.is_valid, checked by check_read_options before the
+// file is opened.)
+std::pair<Header, Index> read_preamble(LineReader& r, const std::string& path, const MarketReadOptions& options,
+                                       Parsed* p) {
+  const Header header = read_header(r, path);
+  p->symmetry = header.symmetry;
+  std::error_code ec;
+  p->file_bytes = static_cast<Index>(std::filesystem::file_size(path, ec));
+  if (ec) p->file_bytes = 0;
+  const Index declared = read_size_line(r, header, options, *p);
+  return {header, declared};
+}
+
+void check_read_options(const MarketReadOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("MarketReadOptions: " + why);
+}
+
+Parsed parse(const std::string& path, const MarketReadOptions& options, RowFilter filter = {}) {
+  check_read_options(options);
   LineReader r(path);
-  const Header header = read_header(r, path);
   Parsed p;
-  p.symmetry = header.symmetry;
-  std::error_code ec;
-  p.file_bytes = static_cast<Index>(std::filesystem::file_size(path, ec));
-  if (ec) p.file_bytes = 0;
-  const Index declared = read_size_line(r, header, options, p);
+  const auto [header, declared] = read_preamble(r, path, options, &p);
+  p.filter = filter;
+  p.mirrors = header.symmetry == Symmetry::Symmetric || options.require_symmetric;
+  if (!filter.all() && (filter.first < 0 || filter.first > filter.end || filter.end > p.rows)) {
+    throw std::invalid_argument(fmt::format("{}: rows [{}, {}) outside the matrix's {} rows", path, filter.first,
+                                            filter.end, p.rows));
+  }
   if (header.array) read_array_values(r, header.field, p);
   else read_coordinate_entries(r, header.field, declared, p);
   std::string line;
@@ -321,24 +358,52 @@ Parsed parse(const std::string& path, const MarketReadOptions& options) {
   }
   sort_and_reject_duplicates(path, p.entries);
   if (options.require_symmetric && p.symmetry != Symmetry::Symmetric) {
-    check_symmetric(path, p.entries, options.symmetry_tolerance);
+    check_symmetric(path, p.entries, options.symmetry_tolerance, p.max_abs);
   }
   return p;
 }
 
 }  // namespace
 
-SparseMatrix<double> read_market_sparse(const std::string& path, const MarketReadOptions& options) {
-  const Parsed p = parse(path, options);
+namespace {
+// The kept rows [first, first + count) of a parsed file, symmetric storage
+// expanded.
+SparseMatrix<double> sparse_rows(const Parsed& p, Index first, Index count) {
   std::vector<Eigen::Triplet<double>> t;
   t.reserve(p.entries.size() * (p.symmetry == Symmetry::Symmetric ? 2 : 1));
+  const auto put = [&](Index i, Index j, double v) {
+    if (i >= first && i < first + count) t.emplace_back(i - first, j, v);
+  };
   for (const Entry& e : p.entries) {
-    t.emplace_back(e.row, e.col, e.value);
-    if (p.symmetry == Symmetry::Symmetric && e.row != e.col) t.emplace_back(e.col, e.row, e.value);
+    put(e.row, e.col, e.value);
+    if (p.symmetry == Symmetry::Symmetric && e.row != e.col) put(e.col, e.row, e.value);
   }
-  SparseMatrix<double> M(p.rows, p.cols);
+  SparseMatrix<double> M(count, p.cols);
   M.setFromTriplets(t.begin(), t.end());
   return M;
+}
+}  // namespace
+
+std::pair<Index, Index> read_market_size(const std::string& path, const MarketReadOptions& options) {
+  check_read_options(options);
+  LineReader r(path);
+  Parsed p;
+  read_preamble(r, path, options, &p);
+  return {p.rows, p.cols};
+}
+
+SparseMatrix<double> read_market_sparse(const std::string& path, const MarketReadOptions& options) {
+  const Parsed p = parse(path, options);
+  return sparse_rows(p, 0, p.rows);
+}
+
+SparseMatrix<double> read_market_sparse_rows(const std::string& path, Index first, Index end,
+                                             const MarketReadOptions& options) {
+  if (first < 0 || end < first) {
+    throw std::invalid_argument(fmt::format("read_market_sparse_rows: rows [{}, {}) is not a range", first, end));
+  }
+  const Parsed p = parse(path, options, RowFilter{first, end});
+  return sparse_rows(p, first, end - first);
 }
 
 Matrix<double> read_market_dense(const std::string& path, const MarketReadOptions& options) {

@@ -55,6 +55,18 @@ struct MarketReadOptions {
 // (file and line) on any problem listed above, std::invalid_argument on
 // invalid options.
 SparseMatrix<double> read_market_sparse(const std::string& path, const MarketReadOptions& options = {});
+// (rows, cols) from the header and the size line alone, checked as the
+// readers check them (a process that reads only some rows learns n first).
+std::pair<Index, Index> read_market_size(const std::string& path, const MarketReadOptions& options = {});
+// Rows [first, end) only ((end − first) × cols), for a process that owns
+// those rows of a distributed build: the whole file is read and checked as
+// above (a broken file fails on every reader), but only the entries of
+// these rows are kept — with symmetric storage or require_symmetric, also
+// those of these columns, for the mirrors, so the symmetry check covers
+// every kept entry (tolerance relative to the whole file's max|a|).
+// Throws std::invalid_argument when [first, end) is not within the rows.
+SparseMatrix<double> read_market_sparse_rows(const std::string& path, Index first, Index end,
+                                             const MarketReadOptions& options = {});
 // The same into a dense matrix (vectors: rows × 1, usually array storage).
 Matrix<double> read_market_dense(const std::string& path, const MarketReadOptions& options = {});
 
