@@ -48,13 +48,13 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iterator>
 #include <map>
 #include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
-#include <functional>
 #include <utility>
 #include <vector>
 
@@ -256,18 +256,18 @@ SpMat bordering_columns(const SpMat& H, const SpMat& C) {
 }
 
 // The QP (H, C, D) and its demands, read and checked before any expensive step.
-// H and D hold rows [first_row, first_row + H.rows()): all of them, except on
-// a rank of --backend mumps that needs only its own (read_problem).
+// H and D hold all n rows, except on a rank of --backend mumps that needs
+// only its own (read_problem; whole() says which).
 struct Problem {
   SpMat H, C, D;
-  Index first_row = 0;
   std::vector<Demand> demands;
   Index n() const { return H.cols(); }
   bool whole() const { return H.rows() == H.cols(); }
 };
 
-// rows: null, the whole H and D; else only rows [first, end) of them (each
-// file is still read and checked whole: qpreduce::read_market_sparse_rows).
+// rows_of: empty, the whole H and D; else rows_of(n) = [first, end), the
+// rows of them to keep (each file is still read and checked whole:
+// qpreduce::read_market_sparse_rows).
 Problem read_problem(const Options& opt, const std::function<std::pair<Index, Index>(Index n)>& rows_of = {}) {
   Problem p;
   qpreduce::MarketReadOptions oh;
@@ -281,7 +281,6 @@ Problem read_problem(const Options& opt, const std::function<std::pair<Index, In
   }
   p.H = part ? qpreduce::read_market_sparse_rows(opt.H, range.first, range.second, oh)
              : qpreduce::read_market_sparse(opt.H, oh);
-  p.first_row = part ? range.first : 0;
   const Index n = p.H.cols();
   qpreduce::MarketReadOptions on;
   on.rows = n;
