@@ -55,8 +55,10 @@ inline SparseMatrix<double> parallel_product(const SparseMatrix<double>& A, cons
   Index offset = 0, col = 0;
   for (auto& p : part) {
     for (Index j = 0; j < p.cols(); ++j) R.outerIndexPtr()[col + j] = static_cast<int>(offset + p.outerIndexPtr()[j]);
-    std::memcpy(R.innerIndexPtr() + offset, p.innerIndexPtr(), sizeof(int) * static_cast<size_t>(p.nonZeros()));
-    std::memcpy(R.valuePtr() + offset, p.valuePtr(), sizeof(double) * static_cast<size_t>(p.nonZeros()));
+    if (p.nonZeros() > 0) {  // (an empty part, or an empty R, may have null storage)
+      std::memcpy(R.innerIndexPtr() + offset, p.innerIndexPtr(), sizeof(int) * static_cast<size_t>(p.nonZeros()));
+      std::memcpy(R.valuePtr() + offset, p.valuePtr(), sizeof(double) * static_cast<size_t>(p.nonZeros()));
+    }
     offset += p.nonZeros();
     col += p.cols();
     p = SparseMatrix<double>();
