@@ -452,13 +452,18 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
 
 // The whole control system, then this process's rows (γ > 0: Q kept in u,
 // so the rows are those of the grown n_u; or one process).
-ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part) {
+ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part,
+                              ClusterRotationFit fit) {
   ControlSystem cs = assemble_control_system(model, mesh);
   const ControlRows rows = control_rows(model.nu, part);
-  const SparseMatrix<double> PrT = cs.P.middleCols(rows.first, rows.count()).transpose();  // count × 3n
   cs.Hu = SparseMatrix<double>(cs.Hu.middleRows(rows.first, rows.count()));
   cs.Du = SparseMatrix<double>(cs.Du.middleRows(rows.first, rows.count()));
-  cs.DV = PrT * cs.DV;  // rows of PᵀD_V (P is zero on Q's columns, as in phase2_left)
+  if (fit == ClusterRotationFit::PaperPhase2) {  // rows of PᵀD_V (P is zero on Q's columns, as in phase2_left)
+    const SparseMatrix<double> PrT = cs.P.middleCols(rows.first, rows.count()).transpose();  // count × 3n
+    cs.DV = PrT * cs.DV;
+  } else {
+    free_sparse(&cs.DV);  // only the paper's Phase 2 reads it
+  }
   return cs;
 }
 
@@ -654,7 +659,7 @@ bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const 
     out->system = partition.processes > 1 && q_separable(model, mesh)
                       ? control_system_rows(model, mesh, control_rows(model.nu, partition), partition,
                                             options.rotation_fit, sum, &summary->assembled_elements)
-                      : whole_then_rows(model, mesh, partition);
+                      : whole_then_rows(model, mesh, partition, options.rotation_fit);
     Matrix<double> nnz(1, 1);
     nnz(0, 0) = static_cast<double>(out->system.Hu.nonZeros());
     sum(&nnz);
