@@ -333,10 +333,12 @@ double relative_difference(const SparseMatrix<double>& a, const SparseMatrix<dou
   return SparseMatrix<double>(a - b).norm() / std::max(b.norm(), 1e-300);
 }
 
-// K parts assemble only their rows of H_u and D_u (on part of the elements),
-// and those rows are the whole assembly's (the one-part run) to round-off;
-// the float basis rows match the single-process precompute's.
-void check_assembled_rows(const DeformableMesh& model, const DeformerOptions& o, int K) {
+// K parts assemble only their rows of H_u and D_u (on part of the elements;
+// `whole_allowed` parts may need every element, as the first does with Q
+// kept when it owns every vertex row), and those rows are the whole
+// assembly's (the one-part run) to round-off; the float basis rows match the
+// single-process precompute's.
+void check_assembled_rows(const DeformableMesh& model, const DeformerOptions& o, int K, int whole_allowed = 0) {
   SharedBuild shared;
   Deformer one;
   REQUIRE(one.precompute_part(model, o, {}, {0, 1}, whole_build(&shared), [](Matrix<double>*) {}).ok());
@@ -348,6 +350,7 @@ void check_assembled_rows(const DeformableMesh& model, const DeformerOptions& o,
   const std::vector<PrecomputeSummary> summaries = run_parts(model, o, &shared, &parts);
   const Index n = shared.H.rows();
   Index assembled = 0;
+  int whole = 0;
   for (int t = 0; t < K; ++t) {
     INFO("part " << t << " of " << K << ": " << summaries[t].message);
     REQUIRE(summaries[t].ok());
@@ -357,7 +360,8 @@ void check_assembled_rows(const DeformableMesh& model, const DeformerOptions& o,
     // The same sums in another order: round-off only.
     CHECK(relative_difference(shared.H_rows[t], shared.H.middleRows(begin, end - begin)) < 1e-13);
     CHECK(relative_difference(shared.D_rows[t], shared.D.middleRows(begin, end - begin)) < 1e-13);
-    CHECK(summaries[t].assembled_elements < summaries[t].elements);
+    CHECK(summaries[t].assembled_elements <= summaries[t].elements);
+    if (summaries[t].assembled_elements == summaries[t].elements) ++whole;
     assembled += summaries[t].assembled_elements;
     const auto rows = parts[t].basis_rows();
     if (rows.count == 0) continue;
@@ -367,6 +371,7 @@ void check_assembled_rows(const DeformableMesh& model, const DeformerOptions& o,
     const Matrix<float> b = reference.reconstruction_basis().middleRows(rows.first, rows.count);
     CHECK((Matrix<float>(a) - b).norm() <= 1e-5 * b.norm());
   }
+  CHECK(whole <= whole_allowed);
   CHECK(assembled >= summaries[0].elements);  // each element by its owner, and as a ghost where needed
 }
 
@@ -397,6 +402,21 @@ TEST_CASE("cache: a precompute in parts assembles only its rows, and they match 
     DeformerOptions o = small_options();
     o.model = ModelKind::Conformal;
     check_assembled_rows(model, o, 3);
+    SECTION("and gamma > 0: Q kept, its rows need each element's neighbours") {
+      o.energy.gamma = 0.5;
+      // 4 rows of Q per tet outnumber the vertex rows: the first part owns them all.
+      check_assembled_rows(model, o, 3, 1);
+    }
+  }
+  SECTION("surface with two patches, gamma > 0 (Q kept in u)") {
+    DeformerOptions o = small_options();
+    o.energy.gamma = 0.5;
+    check_assembled_rows(bent_cylinder().model, o, 3);
+    SECTION("and the paper's Phase 2") {
+      o.rotation_fit = ClusterRotationFit::PaperPhase2;
+      o.anderson_window = 0;
+      check_assembled_rows(bent_cylinder().model, o, 4);
+    }
   }
 }
 

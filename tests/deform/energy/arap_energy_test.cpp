@@ -149,6 +149,42 @@ TEST_CASE("eliminating Q gives the minimum of E′ over Q", "[arap][energy]") {
   CHECK((e.H * tx).norm() <= 1e-10 * H.norm());
 }
 
+TEST_CASE("the neighbour pairs of a subset of elements are the whole's pairs with both kept", "[arap][energy]") {
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const EnergyCase c = energy_case(tet);
+  const auto whole = element_neighbours(c.el);
+  REQUIRE(!whole.empty());
+  std::vector<Index> keep;  // every third element, and a run in the middle
+  for (Index k = 0; k < c.el.size(); ++k)
+    if (k % 3 == 0 || (k > c.el.size() / 3 && k < c.el.size() / 2)) keep.push_back(k);
+  const RotationElements subset = select_elements(c.el, keep);
+  REQUIRE(subset.original == keep);
+  std::vector<Index> position(static_cast<size_t>(c.el.size()), -1);
+  for (size_t i = 0; i < keep.size(); ++i) position[static_cast<size_t>(keep[i])] = static_cast<Index>(i);
+  std::vector<std::pair<Index, Index>> expected;
+  for (const auto& [k, j] : whole)
+    if (position[k] >= 0 && position[j] >= 0) expected.emplace_back(position[k], position[j]);
+  REQUIRE(!expected.empty());
+  CHECK(element_neighbours(subset) == expected);
+  // A subset of the subset still knows its elements' places in the whole.
+  const RotationElements twice = select_elements(subset, {1, 2});
+  CHECK(twice.original == std::vector<Index>{keep[1], keep[2]});
+  // With γ > 0 the subset assembles (its pairs in its own numbering); a
+  // surface subset that lost its vertices is refused, not read out of range.
+  EnergyParameters moving;
+  moving.gamma = 0.5;
+  std::vector<int> labels(keep.size());
+  for (size_t i = 0; i < keep.size(); ++i) labels[i] = c.clusters[static_cast<size_t>(keep[i])];
+  CHECK(assemble_modified_arap(c.V, subset, labels, c.d, moving).L.rows() ==
+        3 * c.V.rows() + 4 * static_cast<Index>(keep.size()));
+  if (!tet) {
+    RotationElements lost = subset;
+    lost.original.clear();
+    CHECK_THROWS_WITH(assemble_modified_arap(c.V, lost, labels, c.d, moving), Catch::Contains("select_elements"));
+  }
+}
+
 TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range", "[arap][phase2]") {
   // G = R·S, S symmetric positive definite with cond S from 1 to 99 (the
   // closed-form path takes cond G < 100): the polar factor is R exactly.

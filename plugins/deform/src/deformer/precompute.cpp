@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <iterator>
 #include <optional>
 #include <tuple>
 #include <utility>
@@ -172,27 +173,44 @@ ControlSystem eliminated_control_system(const Model& model, ModifiedArapSystem* 
   return cs;
 }
 
-// Q kept: u = [control (n_u − 4r); Q], [V′; Q] = blockdiag(P_V, I)·u.
-ControlSystem kept_q_control_system(Model& model, const ModifiedArapSystem& full) {
-  ControlSystem cs;
-  model.keep_rotation_corrections();
-  cs.P = model.control_matrix();
-  const Index n = model.n, r = model.elements.size();
-  SparseMatrix<double> Pfull(3 * n + 4 * r, model.nu);
+// Q kept: u = [control (patch_base + 12s); Q (4r)]. The model's blocks on
+// the elements `which` (ascending; null: all of them, in order) in the
+// control layer: H_u = P̂ᵀ·L·P̂ (symmetrised), D_u = P̂ᵀ·D (n_u × 9d) and
+// D_V = D's vertex rows (3n × 9d), where P̂ ((3n + 4|which|) × n_u) is
+// blockdiag(P, I): the subset's [V′; Q] from u. P: control_matrix().
+ControlSystem kept_q_blocks(const Model& model, const ModifiedArapSystem& sys, const SparseMatrix<double>& P,
+                            const std::vector<Index>* which) {
+  const Index nv = 3 * model.n, w = which != nullptr ? static_cast<Index>(which->size()) : model.elements.size();
+  const Index q0 = model.patch_base + 12 * model.s;
+  check_size("DeformationModel::assemble: L rows", nv + 4 * w, sys.L.rows());
+  check_size("DeformationModel::assemble: D columns", 9 * model.d, sys.D.cols());
+  SparseMatrix<double> Phat(nv + 4 * w, model.nu);
   {
     Triplets tp;
-    tp.reserve(static_cast<size_t>(cs.P.nonZeros() + 4 * r));
-    for (Index c = 0; c < cs.P.outerSize(); ++c)
-      for (SparseMatrix<double>::InnerIterator it(cs.P, c); it; ++it) tp.emplace_back(it.row(), c, it.value());
-    const Index q0 = model.patch_base + 12 * model.s;
-    for (Index i = 0; i < 4 * r; ++i) tp.emplace_back(3 * n + i, q0 + i, 1.0);
-    Pfull.setFromTriplets(tp.begin(), tp.end());
+    tp.reserve(static_cast<size_t>(P.nonZeros() + 4 * w));
+    for (Index c = 0; c < P.outerSize(); ++c)
+      for (SparseMatrix<double>::InnerIterator it(P, c); it; ++it) tp.emplace_back(it.row(), c, it.value());
+    for (Index i = 0; i < w; ++i) {
+      const Index k = which != nullptr ? (*which)[static_cast<size_t>(i)] : i;
+      for (int c = 0; c < 4; ++c) tp.emplace_back(nv + 4 * i + c, q0 + 4 * k + c, 1.0);
+    }
+    Phat.setFromTriplets(tp.begin(), tp.end());
   }
-  const SparseMatrix<double> Pt = Pfull.transpose();
-  cs.Hu = Pt * full.L * Pfull;
+  const SparseMatrix<double> PhatT = Phat.transpose();
+  ControlSystem cs;
+  cs.Hu = PhatT * sys.L * Phat;
   cs.Hu = 0.5 * (cs.Hu + SparseMatrix<double>(cs.Hu.transpose()));
-  cs.Du = Pt * full.D;
-  cs.DV = full.D.topRows(3 * n);
+  cs.Du = PhatT * sys.D;
+  cs.DV = sys.D.topRows(nv);
+  return cs;
+}
+
+// Q kept, the whole system: [V′; Q] = blockdiag(P_V, I)·u.
+ControlSystem kept_q_control_system(Model& model, const ModifiedArapSystem& full) {
+  model.keep_rotation_corrections();
+  const SparseMatrix<double> P = model.control_matrix();
+  ControlSystem cs = kept_q_blocks(model, full, P, nullptr);
+  cs.P = P;
   return cs;
 }
 
@@ -272,29 +290,38 @@ EliminatedArapSystem eliminated_on(const Model& model, const DeformableMesh& mes
   return eliminate_rotation_corrections(sys);
 }
 
-// Adds E′ on the elements `which` (ascending) to *sum, Q eliminated, in
-// about eight chunks (of at least 1,024 elements): the elimination's
-// temporaries (a chunk's whole system and its products) are then a
-// chunk's, not those of all the process's elements, which were its
-// assembly's peak. D_V only when `with_dv` (the paper's Phase 2), K only
-// while *sum still has it.
+// Calls f(chunk) on `which` (ascending) in about eight chunks of at least
+// 1,024 elements: an assembly's temporaries (a chunk's whole system and its
+// products) are then a chunk's, not those of all the process's elements,
+// which were its assembly's peak.
+template <class F>
+void for_each_chunk(const std::vector<Index>& which, F&& f) {
+  const size_t chunk_size = std::max<size_t>(1024, (which.size() + 7) / 8);
+  for (size_t b = 0; b < which.size(); b += chunk_size) {
+    f(std::vector<Index>(which.begin() + static_cast<std::ptrdiff_t>(b),
+                         which.begin() + static_cast<std::ptrdiff_t>(std::min(b + chunk_size, which.size()))));
+  }
+}
+
+// *to += *from; *from is freed.
+void add_sparse(SparseMatrix<double>* to, SparseMatrix<double>* from) {
+  SparseMatrix<double> total = *to + *from;
+  to->swap(total);
+  free_sparse(from);
+}
+
+// Adds E′ on the elements `which` (ascending) to *sum, Q eliminated, chunk
+// by chunk (for_each_chunk). D_V only when `with_dv` (the paper's Phase 2),
+// K only while *sum still has it.
 void add_eliminated(const Model& model, const DeformableMesh& mesh, const std::vector<Index>& which, bool with_dv,
                     EliminatedArapSystem* sum) {
-  const size_t kAssemblyChunk = std::max<size_t>(1024, (which.size() + 7) / 8);
-  const auto add = [](SparseMatrix<double>* to, SparseMatrix<double>* from) {
-    SparseMatrix<double> total = *to + *from;
-    to->swap(total);
-    free_sparse(from);
-  };
-  for (size_t b = 0; b < which.size(); b += kAssemblyChunk) {
-    const std::vector<Index> chunk(which.begin() + static_cast<std::ptrdiff_t>(b),
-                                   which.begin() + static_cast<std::ptrdiff_t>(std::min(b + kAssemblyChunk, which.size())));
+  for_each_chunk(which, [&](const std::vector<Index>& chunk) {
     EliminatedArapSystem part = eliminated_on(model, mesh, chunk);
-    add(&sum->H, &part.H);
-    add(&sum->Ds, &part.Ds);
-    if (sum->K.rows() > 0) add(&sum->K, &part.K);
-    if (with_dv) add(&sum->DV, &part.DV);
-  }
+    add_sparse(&sum->H, &part.H);
+    add_sparse(&sum->Ds, &part.Ds);
+    if (sum->K.rows() > 0) add_sparse(&sum->K, &part.K);
+    if (with_dv) add_sparse(&sum->DV, &part.DV);
+  });
 }
 
 // Whether the model's L_QQ is block diagonal, from one element's assembly.
@@ -320,12 +347,49 @@ Matrix<double> dense_on(const SparseMatrix<double>& A, const std::vector<Index>&
   return out;
 }
 
+// The rows [first, end) of a control-layer matrix (width columns): the rows
+// of `base` (its first base->rows(), which must be complete except for the
+// patch unknowns' rows, skipped), then the patch rows from the summed
+// `patch` (12s × |cols| on the columns `cols`, or all columns when empty).
+// Built column by column into reserved space: triplets of the free rows
+// (16 bytes an entry, and setFromTriplets' own copy) were the distributed
+// assembly's peak. `base` is freed.
+SparseMatrix<double> with_patch_rows(const Model& model, ControlRows rows, SparseMatrix<double>* base,
+                                     const Matrix<double>& patch, const std::vector<Index>& cols) {
+  const Index width = base->cols(), patch_end = model.patch_base + 12 * model.s;
+  const Index patch_first = std::max(rows.first, model.patch_base), patch_last = std::min(rows.end, patch_end);
+  const auto in_patch = [&](Index i) { return rows.first + i >= model.patch_base && rows.first + i < patch_end; };
+  if (patch_first >= patch_last && base->rows() == rows.count()) {  // no patch row here
+    SparseMatrix<double> out;
+    out.swap(*base);
+    return out;
+  }
+  const auto column = [&](Index j) { return cols.empty() ? j : cols[static_cast<size_t>(j)]; };
+  Eigen::VectorXi per_column = Eigen::VectorXi::Zero(width);
+  for (Index c = 0; c < width; ++c)
+    for (SparseMatrix<double>::InnerIterator it(*base, c); it; ++it) per_column(c) += in_patch(it.row()) ? 0 : 1;
+  for (Index i = patch_first; i < patch_last; ++i)
+    for (Index j = 0; j < patch.cols(); ++j)
+      if (patch(i - model.patch_base, j) != 0.0) ++per_column(column(j));
+  SparseMatrix<double> out(rows.count(), width);
+  out.reserve(per_column);
+  for (Index c = 0; c < width; ++c)
+    for (SparseMatrix<double>::InnerIterator it(*base, c); it; ++it)
+      if (!in_patch(it.row())) out.insert(it.row(), c) = it.value();
+  free_sparse(base);
+  for (Index j = 0; j < patch.cols(); ++j)
+    for (Index i = patch_first; i < patch_last; ++i) {
+      const double v = patch(i - model.patch_base, j);
+      if (v != 0.0) out.insert(i - rows.first, column(j)) = v;
+    }
+  out.makeCompressed();
+  return out;
+}
+
 // The rows [first, end) of Pᵀ·X·R (X 3n × w; R = `right`, or I when null)
-// for this process: its free rows from X (complete over owned + ghosts),
-// then its patch rows from the summed `patch` (12s × width on the columns
-// `cols`, or all columns when empty). Built column by column into reserved
-// space: triplets of the free rows (16 bytes an entry, and setFromTriplets'
-// own copy) were the distributed assembly's peak.
+// for this process (Q eliminated: control rows only): its free rows from X
+// (complete over owned + ghosts), then its patch rows from the summed
+// `patch` (with_patch_rows).
 SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, const SparseMatrix<double>& P,
                                         const SparseMatrix<double>& X, const Matrix<double>& patch,
                                         const std::vector<Index>& cols, const SparseMatrix<double>* right = nullptr) {
@@ -341,32 +405,13 @@ SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, co
       free_rows.swap(times_right);
     }
   }
-  const Index patch_first = std::max(rows.first, model.patch_base);
-  if (patch_first >= rows.end) return free_rows;  // no patch row here
-  // The patch rows [patch_first, end) below the free ones, column by column.
-  const auto column = [&](Index j) { return cols.empty() ? j : cols[static_cast<size_t>(j)]; };
-  Eigen::VectorXi per_column(width);
-  for (Index c = 0; c < width; ++c) per_column(c) = static_cast<int>(free_rows.col(c).nonZeros());
-  for (Index i = patch_first; i < rows.end; ++i)
-    for (Index j = 0; j < patch.cols(); ++j)
-      if (patch(i - model.patch_base, j) != 0.0) ++per_column(column(j));
-  SparseMatrix<double> out(rows.count(), width);
-  out.reserve(per_column);
-  for (Index c = 0; c < width; ++c)
-    for (SparseMatrix<double>::InnerIterator it(free_rows, c); it; ++it) out.insert(it.row(), c) = it.value();
-  free_sparse(&free_rows);
-  for (Index j = 0; j < patch.cols(); ++j)
-    for (Index i = patch_first; i < rows.end; ++i) {
-      const double v = patch(i - model.patch_base, j);
-      if (v != 0.0) out.insert(i - rows.first, column(j)) = v;
-    }
-  out.makeCompressed();
-  return out;
+  return with_patch_rows(model, rows, &free_rows, patch, cols);
 }
 
 // The control columns a patch unknown's row of H_u can reach: every column
-// of a vertex of an element with a patch vertex (ascending), and the map
-// column → position (−1 elsewhere).
+// of a vertex of an element with a patch vertex, and that element's 4
+// columns of Q when Q is kept in u (ascending), and the map column →
+// position (−1 elsewhere).
 void patch_row_columns(const Model& model, std::vector<Index>* cols, std::vector<Index>* position) {
   const RotationElements& el = model.elements;
   std::vector<char> reach(static_cast<size_t>(model.nu), 0);
@@ -384,6 +429,9 @@ void patch_row_columns(const Model& model, std::vector<Index>* cols, std::vector
       mark_vertex(el.edge_i[e]);
       mark_vertex(el.edge_j[e]);
     }
+    const Index q = model.patch_base + 12 * model.s + 4 * k;  // element k's Q, when kept
+    if (model.keep_q)
+      for (Index j = q; j < q + 4; ++j) reach[static_cast<size_t>(j)] = 1;
   }
   cols->clear();
   position->assign(static_cast<size_t>(model.nu), -1);
@@ -450,8 +498,106 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
   return cs;
 }
 
-// The whole control system, then this process's rows (γ > 0: Q kept in u,
-// so the rows are those of the grown n_u; or one process).
+// ---- γ > 0: Q kept in u = [control (patch_base + 12s); Q (4r)] ----
+//
+// The moving-frame term (Eq. 11) couples neighbouring elements' Q, so the
+// blocks are no longer sums over elements alone; a process's rows are still
+// complete on a subset of them:
+//   a free vertex's rows    every element with that vertex (owned + ghosts);
+//   element k's rows of Q   k and its neighbours (element_neighbours), whose
+//                           pairs select_elements keeps;
+// all assembled in one piece. The patch unknowns' rows are summed over the
+// processes from each one's owned elements with a patch vertex (the pairs
+// reach no patch row). K is empty: Q is not eliminated.
+ControlSystem kept_q_control_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part,
+                                  ClusterRotationFit fit, const Deformer::SumOverProcesses& sum, Index* assembled) {
+  model.keep_rotation_corrections();
+  const ControlRows rows = control_rows(model.nu, part);
+  const RotationElements& el = model.elements;
+  const Index r = el.size(), q0 = model.patch_base + 12 * model.s, c9 = 9 * model.d;
+  const bool with_dv = fit == ClusterRotationFit::PaperPhase2;
+  ControlSystem cs;
+  cs.P = model.control_matrix();
+  const ElementSplit split = split_elements(model, rows, part);
+  const auto blocks_on = [&](const std::vector<Index>& which) {
+    std::vector<int> labels(which.size());
+    for (size_t i = 0; i < which.size(); ++i) labels[i] = model.clusters[static_cast<size_t>(which[i])];
+    const ModifiedArapSystem sys = model.energy_model->assemble(mesh.V, select_elements(el, which), labels, model.d);
+    return kept_q_blocks(model, sys, cs.P, &which);
+  };
+  // The patch rows, [patch_base, q0): from the owned elements with a patch vertex, summed.
+  Matrix<double> patch_H, patch_D, patch_DV;
+  std::vector<Index> cols, position;
+  if (model.s > 0) {
+    std::vector<Index> with_patch;
+    for (const Index k : split.owned) {
+      bool patch = false;
+      for (Index e = el.offsets[k]; e < el.offsets[k + 1] && !patch; ++e)
+        patch = model.control_of_free[el.edge_i[e]] < 0 || model.control_of_free[el.edge_j[e]] < 0;
+      if (patch) with_patch.push_back(k);
+    }
+    const ControlSystem own = blocks_on(with_patch);
+    patch_row_columns(model, &cols, &position);
+    patch_H = dense_on(own.Hu.middleRows(model.patch_base, 12 * model.s), position, static_cast<Index>(cols.size()));
+    patch_D = dense_on(own.Du.middleRows(model.patch_base, 12 * model.s), {}, c9);
+    sum(&patch_H);
+    sum(&patch_D);
+    if (with_dv) {
+      const SparseMatrix<double> PpT = cs.P.middleCols(model.patch_base, 12 * model.s).transpose();  // 12s × 3n
+      patch_DV = dense_on(PpT * own.DV, {}, c9);
+      sum(&patch_DV);
+    }
+  }
+  // This process's rows of H_u, D_u and PᵀD_V: the free vertex rows from
+  // owned + ghosts chunk by chunk, the rows of Q from one assembly on their
+  // elements and those elements' neighbours; each keeps only its own rows.
+  SparseMatrix<double> H(rows.count(), model.nu), D(rows.count(), c9), DV(rows.count(), c9);
+  const SparseMatrix<double> PrT = cs.P.middleCols(rows.first, rows.count()).transpose();  // count × 3n
+  const auto add_rows = [&](const std::vector<Index>& which, bool vertex_rows) {
+    ControlSystem b = blocks_on(which);
+    const auto mine = [&](const SparseMatrix<double>& A) {
+      SparseMatrix<double> out = A.middleRows(rows.first, rows.count());
+      out.prune([&](Index i, Index, double) { return (rows.first + i < model.patch_base) == vertex_rows; });
+      return out;
+    };
+    SparseMatrix<double> Hb = mine(b.Hu), Db = mine(b.Du);
+    free_sparse(&b.Hu);
+    add_sparse(&H, &Hb);
+    add_sparse(&D, &Db);
+    if (with_dv && vertex_rows) {  // P is zero on Q's columns: PᵀD_V has no row of Q
+      SparseMatrix<double> DVb = PrT * b.DV;
+      add_sparse(&DV, &DVb);
+    }
+  };
+  std::vector<Index> vertex_elements = split.owned;
+  vertex_elements.insert(vertex_elements.end(), split.ghosts.begin(), split.ghosts.end());
+  std::sort(vertex_elements.begin(), vertex_elements.end());
+  for_each_chunk(vertex_elements, [&](const std::vector<Index>& chunk) { add_rows(chunk, true); });
+  std::vector<Index> q_elements;
+  if (rows.end > q0) {
+    std::vector<char> keep(static_cast<size_t>(r), 0), here(static_cast<size_t>(r), 0);
+    for (Index k = (std::max(rows.first, q0) - q0) / 4; k <= (rows.end - 1 - q0) / 4; ++k)
+      here[static_cast<size_t>(k)] = keep[static_cast<size_t>(k)] = 1;
+    for (const auto& [k, j] : element_neighbours(el)) {
+      if (here[static_cast<size_t>(k)]) keep[static_cast<size_t>(j)] = 1;
+      if (here[static_cast<size_t>(j)]) keep[static_cast<size_t>(k)] = 1;
+    }
+    for (Index k = 0; k < r; ++k)
+      if (keep[static_cast<size_t>(k)]) q_elements.push_back(k);
+    add_rows(q_elements, false);
+  }
+  std::vector<Index> both;
+  std::set_union(vertex_elements.begin(), vertex_elements.end(), q_elements.begin(), q_elements.end(),
+                 std::back_inserter(both));
+  *assembled = static_cast<Index>(both.size());
+  cs.Hu = with_patch_rows(model, rows, &H, patch_H, cols);
+  cs.Du = with_patch_rows(model, rows, &D, patch_D, {});
+  if (with_dv) cs.DV = with_patch_rows(model, rows, &DV, patch_DV, {});
+  return cs;
+}
+
+// The whole control system, then this process's rows: one process (K = 1)
+// holds the whole system anyway.
 ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer::Partition part,
                               ClusterRotationFit fit) {
   ControlSystem cs = assemble_control_system(model, mesh);
@@ -656,10 +802,15 @@ bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const 
   } else {
     // One process (K = 1) holds the whole system anyway: the single-process
     // assembly, which the distributed one is tested against.
-    out->system = partition.processes > 1 && q_separable(model, mesh)
-                      ? control_system_rows(model, mesh, control_rows(model.nu, partition), partition,
-                                            options.rotation_fit, sum, &summary->assembled_elements)
-                      : whole_then_rows(model, mesh, partition, options.rotation_fit);
+    if (partition.processes == 1) {
+      out->system = whole_then_rows(model, mesh, partition, options.rotation_fit);
+    } else if (q_separable(model, mesh)) {
+      out->system = control_system_rows(model, mesh, control_rows(model.nu, partition), partition,
+                                        options.rotation_fit, sum, &summary->assembled_elements);
+    } else {
+      out->system = kept_q_control_rows(model, mesh, partition, options.rotation_fit, sum,
+                                        &summary->assembled_elements);
+    }
     Matrix<double> nnz(1, 1);
     nnz(0, 0) = static_cast<double>(out->system.Hu.nonZeros());
     sum(&nnz);

@@ -171,6 +171,7 @@ RotationElements select_elements(const RotationElements& el, const std::vector<I
   out.measure.resize(static_cast<Index>(keep.size()));
   if (el.normal.rows() > 0) out.normal.resize(static_cast<Index>(keep.size()), 3);
   out.offsets.reserve(keep.size() + 1);
+  out.original.reserve(keep.size());
   Index last = -1;
   for (size_t i = 0; i < keep.size(); ++i) {
     const Index k = keep[i];
@@ -183,6 +184,7 @@ RotationElements select_elements(const RotationElements& el, const std::vector<I
     for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) push_edge(out, el.edge_i[e], el.edge_j[e], el.weight[e]);
     out.offsets.push_back(static_cast<Index>(out.weight.size()));
     out.measure(static_cast<Index>(i)) = el.measure(k);
+    out.original.push_back(el.original.empty() ? k : el.original[static_cast<size_t>(k)]);
     if (el.normal.rows() > 0) out.normal.row(static_cast<Index>(i)) = el.normal.row(k);
   }
   return out;
@@ -191,10 +193,24 @@ RotationElements select_elements(const RotationElements& el, const std::vector<I
 std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& el) {
   std::vector<std::pair<Index, Index>> pairs;
   if (el.is_surface) {
-    // Element k is vertex k: neighbours are the mesh edges.
+    // Element k is vertex k (original[k] in a subset): neighbours are the
+    // mesh edges between two elements present.
+    std::vector<Index> element_of;  // vertex → element, −1: not kept (subsets only)
+    if (!el.original.empty()) {
+      Index top = 0;
+      for (const Index v : el.original) top = std::max(top, v + 1);
+      for (size_t e = 0; e < el.edge_i.size(); ++e) top = std::max<Index>(top, std::max(el.edge_i[e], el.edge_j[e]) + 1);
+      element_of.assign(static_cast<size_t>(top), -1);
+      for (Index k = 0; k < el.size(); ++k) element_of[static_cast<size_t>(el.original[static_cast<size_t>(k)])] = k;
+    }
     pairs.reserve(el.edge_i.size() / 3);
     for (size_t e = 0; e < el.edge_i.size(); ++e) {
-      const Index i = el.edge_i[e], j = el.edge_j[e];
+      Index i = el.edge_i[e], j = el.edge_j[e];
+      if (!element_of.empty()) {
+        i = element_of[static_cast<size_t>(i)];
+        j = element_of[static_cast<size_t>(j)];
+        if (i < 0 || j < 0) continue;
+      }
       if (i != j) pairs.emplace_back(std::min(i, j), std::max(i, j));
     }
   } else {
@@ -420,6 +436,12 @@ ModifiedArapSystem assemble_modified_arap(const Vertices& V, const RotationEleme
   add_vertex_block(n, &t);
   if (params.gamma > 0.0) {
     for (const auto& [k, j] : element_neighbours(el)) {
+      if (j >= r) {  // a surface subset made without select_elements: element ≠ vertex
+        throw std::invalid_argument(fmt::format(
+            "assemble_modified_arap: the surface elements' neighbour pair ({}, {}) is not below the {} elements "
+            "(element k is vertex k; make subsets with select_elements, which records their vertices)",
+            k, j, r));
+      }
       const double w = params.gamma * 0.5 * (el.measure(k) + el.measure(j));
       add_moving_frame_pair(nv + 4 * k, nv + 4 * j, cluster[k], cluster[j], w, &t.l, &t.d, &t.n);
     }

@@ -31,6 +31,10 @@ struct RotationElements {
   Eigen::VectorXd measure;         // a_k, r entries
   Vertices normal;                 // r × 3 unit normals (surfaces), empty for tets
   bool is_surface = true;
+  // The index of each element in the set it was selected from
+  // (select_elements), r entries; empty: element k is itself. On surfaces
+  // element k is the spokes and rims of vertex original[k].
+  std::vector<Index> original;
 
   Index size() const { return static_cast<Index>(offsets.size()) - 1; }
 };
@@ -48,7 +52,9 @@ RotationElements tet_elements(const Vertices& V, const Tetrahedra& T);
 // without the moving-frame term (γ = 0) is a sum over elements, so L and D
 // assembled on disjoint subsets add up to those of the whole (up to the
 // element rows of Q, renumbered). Throws std::invalid_argument on an index
-// out of range or not ascending.
+// out of range or not ascending. The moving-frame pairs (element_neighbours)
+// of the subset are the pairs of the whole with both elements kept, so an
+// element's rows of Q are complete when its neighbours are kept with it.
 RotationElements select_elements(const RotationElements& elements, const std::vector<Index>& keep);
 
 struct EnergyParameters {
@@ -80,7 +86,8 @@ struct ModifiedArapSystem {
 
 // Pairs (k, j), k < j, of neighbouring rotation elements (the set H of
 // Eq. 11): surface elements k, j whose vertices share an edge; tets sharing a
-// face. Sorted.
+// face. Sorted. On a subset (select_elements) the pairs of kept elements,
+// in the subset's numbering.
 std::vector<std::pair<Index, Index>> element_neighbours(const RotationElements& elements);
 
 // Assembles E′ (Eq. 8–11) as L, D and N (shapes above) for the rest pose V

@@ -103,10 +103,13 @@ class DeformationModel {
   virtual std::vector<std::pair<std::string, double>> parameters() const = 0;
   // The energy blocks for rest positions V (n × 3), rotation elements and
   // their cluster labels (r entries in [0, d)). Throws std::invalid_argument
-  // on bad input. When the result is q_separable, the blocks must be sums
-  // of per-element terms (the element's rows of V′ and its 4 rows of Q):
-  // Deformer::precompute_part assembles disjoint subsets of the elements
-  // (select_elements) on different processes and adds their rows.
+  // on bad input. The rows of V′ must be sums of per-element terms, and so
+  // must the rows of Q when the result is q_separable (each element's own 4
+  // rows); otherwise an element's rows of Q must be complete whenever it is
+  // assembled with its neighbours (element_neighbours, which on a subset
+  // keeps the pairs of kept elements). Deformer::precompute_part assembles
+  // subsets of the elements (select_elements) on different processes and
+  // adds or keeps their rows accordingly.
   virtual ModifiedArapSystem assemble(const Vertices& V, const RotationElements& elements,
                                       const std::vector<int>& clusters, Index d) const = 0;
   // The Phase 2 projection for these clusters.
