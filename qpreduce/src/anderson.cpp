@@ -3,6 +3,8 @@
 
 #include "qpreduce/support.h"
 
+#include "simd_kernels.h"
+
 #include <Eigen/Cholesky>
 #include <fmt/format.h>
 
@@ -29,6 +31,10 @@ void AndersonAcceleration::reset(Index n, const AndersonOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("AndersonAcceleration: " + why);
   if (n < 1) throw std::invalid_argument(fmt::format("AndersonAcceleration: the iterate size must be at least 1, got {}", n));
+  if (n == n_ && options.window == window_) {  // the same sizes (each frame's run): the history is all to drop
+    restart();
+    return;
+  }
   n_ = n;
   window_ = options.window;
   dF_.setZero(n, window_);
@@ -58,7 +64,7 @@ void AndersonAcceleration::push_difference(const Eigen::Ref<const Eigen::VectorX
   history_ = std::min(history_ + 1, window_);
   next_ = (next_ + 1) % window_;
   column_.resize(history_);
-  column_.noalias() = dF_.leftCols(history_).transpose() * dF_.col(c);
+  detail::gemtv(dF_.data(), n_, history_, n_, dF_.col(c).data(), column_.data());
   gram_.col(c).head(history_) = column_;
   gram_.row(c).head(history_) = column_.transpose();
 }
@@ -67,12 +73,18 @@ void AndersonAcceleration::push_difference(const Eigen::Ref<const Eigen::VectorX
 void AndersonAcceleration::solve_coefficients() {
   const int h = history_;
   rhs_.resize(h);
-  rhs_.noalias() = dF_.leftCols(h).transpose() * f_;
+  detail::gemtv(dF_.data(), n_, h, n_, f_.data(), rhs_.data());
   Small a = gram_.topLeftCorner(h, h);
   const double scale = a.diagonal().maxCoeff();
   a.diagonal().array() += kRelativeRegularisation * (scale > 0.0 ? scale : 1.0);
-  const Eigen::LDLT<Small> ldlt(a);
-  theta_ = ldlt.solve(rhs_);
+  // Cholesky (no pivoting: a third of the LDLT's work at m = 5); the LDLT
+  // when round-off leaves a nearly dependent history not positive definite.
+  const Eigen::LLT<Small> llt(a);
+  if (llt.info() == Eigen::Success) {
+    theta_ = llt.solve(rhs_);
+  } else {
+    theta_ = Eigen::LDLT<Small>(a).solve(rhs_);
+  }
 }
 
 void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& gx,
@@ -81,9 +93,9 @@ void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, cons
   check_size("AndersonAcceleration::step: x", n_, x.size());
   check_size("AndersonAcceleration::step: gx", n_, gx.size());
   check_size("AndersonAcceleration::step: out", n_, out.size());
+  f_prev_.swap(f_);  // f_{k−1} (when has_previous_); f_ is overwritten next
   f_ = gx - x;
   if (has_previous_) push_difference(gx);
-  f_prev_ = f_;
   g_prev_ = gx;  // before out is written: out may alias gx
   has_previous_ = true;
   if (history_ > 0) solve_coefficients();
@@ -92,7 +104,10 @@ void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, cons
     has_previous_ = true;
   }
   if (out.data() != gx.data()) out = gx;
-  if (history_ > 0) out.noalias() -= dG_.leftCols(history_) * theta_;
+  if (history_ > 0) {
+    column_ = -theta_;  // scratch: out += ΔG·(−θ)
+    detail::gemv_add(dG_.data(), n_, history_, n_, column_.data(), out.data());
+  }
 }
 
 }  // namespace qpreduce

@@ -108,6 +108,7 @@ PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const Phas
     return e;
   }
   e.AyLy.topRows(m) = Ay;
+  e.ay_zero = Ay.cwiseAbs().maxCoeff() == 0.0;
   if (options.soft) {
     const double two_delta = 2.0 * options.delta;
     e.Lb = two_delta * (Az * op.Mb() - Matrix<double>::Identity(m, m));

@@ -132,10 +132,13 @@ struct FusedWorkspace {
   Matrix<double> y2;
   Matrix<float> yf2;
   // Accelerated rounds: the iterate tried, the plain step from the last
-  // accepted one, the extrapolation (k each); [A_y·y; Λ_y·y] (2m), Λ_b·b (m).
+  // accepted one, the extrapolation (k each); [A_y·y; Λ_y·y] (2m), Λ_b·b (m);
+  // the energy's constraint term when affine in y, c₀ + cᵀy (c = Λ_yᵀb, k).
   AndersonAcceleration anderson;
   int anderson_window = 0;
-  Vector<double> y_try, y_plain, y_next, ay_ly, lambda_b;
+  Vector<double> y_try, y_plain, y_next, ay_ly, lambda_b, lyb;
+  double blb = 0.0;
+  bool constraint_affine = false;
   // Second-order steps: c = g′ − D∘y (k), the gradient and step in the
   // tangent coordinates ω (3d), T (9 × 3d: block a's tangent basis in
   // columns 3a..3a+2), Q·T (k × 3d), the model Hessian and its damped copy

@@ -39,6 +39,7 @@ class FactoredPhaseOne;
 struct PhaseOneEnergy {
   Matrix<double> AyLy;  // [A_y; Λ_y] (2m × k): one product gives A_y·y and Λ_y·y
   Matrix<double> Lb;    // Λ_b (m × m)
+  bool ay_zero = true;  // A_y = 0 (or m = 0): the energy's constraint term is affine in y
 };
 
 class PhaseOneOperator {

@@ -52,6 +52,7 @@ struct Avx<double> {
   __attribute__((target("avx2,fma"))) static V set1(double a) { return _mm256_set1_pd(a); }
   __attribute__((target("avx2,fma"))) static V zero() { return _mm256_setzero_pd(); }
   __attribute__((target("avx2,fma"))) static V fma(V a, V b, V c) { return _mm256_fmadd_pd(a, b, c); }
+  __attribute__((target("avx2,fma"))) static V add(V a, V b) { return _mm256_add_pd(a, b); }
 };
 template <>
 struct Avx<float> {
@@ -62,6 +63,7 @@ struct Avx<float> {
   __attribute__((target("avx2,fma"))) static V set1(float a) { return _mm256_set1_ps(a); }
   __attribute__((target("avx2,fma"))) static V zero() { return _mm256_setzero_ps(); }
   __attribute__((target("avx2,fma"))) static V fma(V a, V b, V c) { return _mm256_fmadd_ps(a, b, c); }
+  __attribute__((target("avx2,fma"))) static V add(V a, V b) { return _mm256_add_ps(a, b); }
 };
 
 // y += M·x, M column-major rows × cols with leading dimension ld.
@@ -93,6 +95,30 @@ __attribute__((target("avx2,fma"))) void gemv_add_avx2(const T* M, Index rows, I
     const auto xj = A::set1(x[j]);
     for (Index i = 0; i < vrows; i += W) A::store(y + i, A::fma(A::load(c + i), xj, A::load(y + i)));
     for (Index i = vrows; i < rows; ++i) y[i] += c[i] * x[j];
+  }
+}
+
+// y = Mᵀ·x (y cols entries, overwritten) for a column-major block M (rows ×
+// cols, leading dimension ld): one dot product a column, two accumulators.
+// For the thin tall blocks of AndersonAcceleration (n × m, m ≤ 16), where
+// Eigen's transposed product pays its blocking set-up on every call.
+template <typename T>
+__attribute__((target("avx2,fma"))) void gemtv_avx2(const T* M, Index rows, Index cols, Index ld, const T* x, T* y) {
+  using A = Avx<T>;
+  constexpr Index W = A::width;
+  const Index vrows = rows - rows % W;
+  for (Index j = 0; j < cols; ++j) {
+    const T* c = M + j * ld;
+    auto a = A::zero(), b = A::zero();
+    Index i = 0;
+    for (; i + 2 * W <= vrows; i += 2 * W) {
+      a = A::fma(A::load(c + i), A::load(x + i), a);
+      b = A::fma(A::load(c + i + W), A::load(x + i + W), b);
+    }
+    if (i < vrows) a = A::fma(A::load(c + i), A::load(x + i), a);
+    T sum = hsum(A::add(a, b));
+    for (i = vrows; i < rows; ++i) sum += c[i] * x[i];
+    y[j] = sum;
   }
 }
 
@@ -290,6 +316,19 @@ void gemv_add(const T* M, Index rows, Index cols, Index ld, const T* x, T* y) {
 #endif
   const Eigen::Map<const Matrix<T>, 0, Eigen::OuterStride<>> Mv(M, rows, cols, Eigen::OuterStride<>(ld));
   Eigen::Map<Vector<T>>(y, rows).noalias() += Mv * Eigen::Map<const Vector<T>>(x, cols);
+}
+
+// y = Mᵀ·x for a column-major block M (rows × cols, leading dimension ld).
+template <typename T>
+void gemtv(const T* M, Index rows, Index cols, Index ld, const T* x, T* y) {
+#ifdef QPREDUCE_HAVE_AVX2_KERNELS
+  if (cpu_has_avx2_fma()) {
+    gemtv_avx2(M, rows, cols, ld, x, y);
+    return;
+  }
+#endif
+  const Eigen::Map<const Matrix<T>, 0, Eigen::OuterStride<>> Mv(M, rows, cols, Eigen::OuterStride<>(ld));
+  Eigen::Map<Vector<T>>(y, cols).noalias() = Mv.transpose() * Eigen::Map<const Vector<T>>(x, rows);
 }
 
 // y = M·x (+ y when accumulate), M a whole column-major matrix.

@@ -676,31 +676,28 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   //
   // Nearly conformal G (the retraction of an extrapolated rotation, a
   // Phase 2 input of a rigidly moved cluster with isotropic covariance):
-  // X = G/∛det G = Q·H with H symmetric positive definite, det H = 1, and
-  // E = H − I small. A Newton step gives Q·½(H + H⁻¹), whose E is
-  // ½E²H⁻¹: ‖E′‖ ≤ ‖E‖²/(2(1 − ‖E‖)). ‖XᵀX − I‖_F = ‖E(2I + E)‖_F ≥ ‖E‖_F
-  // bounds ‖E‖ from the start, so the steps run until that bound is below
-  // 1e-17: two to four inverses instead of the eigenvalues (whose closed
-  // form costs an acos, a sincos and three square roots).
+  // X = G/r = Q·H with r² = ‖G‖²_F/3 (the mean squared singular value), H
+  // symmetric positive definite and E = H − I small. A Newton step gives
+  // Q·½(H + H⁻¹), whose E is ½E²H⁻¹ (any symmetric E):
+  // ‖E′‖ ≤ ‖E‖²/(2(1 − ‖E‖)). ‖XᵀX − I‖_F = ‖E(2I + E)‖_F ≥ ‖E‖_F (the
+  // eigenvalues of E are above −1) bounds ‖E‖ from the start, so the steps
+  // run until that bound is below 1e-17: two to four inverses instead of the
+  // eigenvalues (whose closed form costs an acos, a sincos and three square
+  // roots). Scaling by ‖G‖ rather than ∛det G costs no cube root and makes
+  // the same test the bound.
   const double norm = G.norm();
   const double det = G.determinant();
   if (!(det > 1e-6 * norm * norm * norm)) return fit_rotation_svd(G);
   const Eigen::Matrix3d M = G.transpose() * G;
-  // Pre-test without the cube root, scaling by the mean squared singular
-  // value tr M / 3 = ‖G‖²/3 (costs a 3×3 difference on the inputs that fail).
-  if ((M * (3.0 / (norm * norm)) - Eigen::Matrix3d::Identity()).squaredNorm() < 0.09) {
-    const double r = std::cbrt(det);
-    Eigen::Matrix3d defect = M / (r * r);
-    defect.diagonal().array() -= 1.0;
-    double e = defect.norm();
-    if (e < 0.1) {
-      Eigen::Matrix3d X = G / r;
-      while (e > 1e-17) {
-        X = 0.5 * (X + X.inverse().transpose());
-        e = e * e / (2.0 * (1.0 - e));
-      }
-      return X;
+  const double e2 = (M * (3.0 / (norm * norm)) - Eigen::Matrix3d::Identity()).squaredNorm();
+  if (e2 < 0.01) {
+    double e = std::sqrt(e2);
+    Eigen::Matrix3d X = G * (std::sqrt(3.0) / norm);
+    while (e > 1e-17) {
+      X = 0.5 * (X + X.inverse().transpose());
+      e = e * e / (2.0 * (1.0 - e));
     }
+    return X;
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
   eig.computeDirect(M, Eigen::EigenvaluesOnly);
