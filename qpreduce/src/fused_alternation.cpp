@@ -275,7 +275,7 @@ void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
   const detail::PhaseOneEnergy& E = *M.energy_seen;
   const Index m = E.Lb.rows(), k = M.k();
   const auto Ay = E.AyLy.topRows(m), Ly = E.AyLy.bottomRows(m);
-  if (M.q() != k || m == 0 || Ay.cwiseAbs().maxCoeff() == 0.0) return;
+  if (M.q() != k || E.ay_zero) return;
   M.Fb.noalias() -= Ay.transpose() * E.Lb;
   if (M.factored) {
     detail::FactoredRounds& fr = M.factored_rounds;
@@ -429,7 +429,6 @@ void constraint_term(const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vec
   W.constraint_affine = corrected || E.ay_zero;
   if (!W.constraint_affine) return;
   W.blb = b.dot(W.lambda_b);
-  W.lyb.resize(E.AyLy.cols());
   if (m == 0) {
     W.lyb.setZero();
   } else {
@@ -625,6 +624,7 @@ void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const Inp
   W.y_next.resize(k);
   W.ay_ly.resize(2 * m);
   W.lambda_b.resize(m);
+  W.lyb.resize(k);
 }
 
 // Sizes the second-order steps' workspace (allocates only when k changes).
@@ -648,6 +648,7 @@ void prepare_second_order(const FixedCoordinateSolver<double>& phase1, Index k, 
   W.g_keep.resize(k);
   W.ay_ly.resize(2 * m);
   W.lambda_b.resize(m);
+  W.lyb.resize(k);
 }
 
 }  // namespace

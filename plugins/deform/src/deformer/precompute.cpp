@@ -408,6 +408,14 @@ SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, co
   return with_patch_rows(model, rows, &free_rows, patch, cols);
 }
 
+// Whether element k has a vertex in a patch (its energy reaches patch rows).
+bool has_patch_vertex(const Model& model, Index k) {
+  const RotationElements& el = model.elements;
+  for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e)
+    if (model.control_of_free[el.edge_i[e]] < 0 || model.control_of_free[el.edge_j[e]] < 0) return true;
+  return false;
+}
+
 // The control columns a patch unknown's row of H_u can reach: every column
 // of a vertex of an element with a patch vertex, and that element's 4
 // columns of Q when Q is kept in u (ascending), and the map column →
@@ -421,10 +429,7 @@ void patch_row_columns(const Model& model, std::vector<Index>* cols, std::vector
     for (Index j = first; j < first + (c >= 0 ? 3 : 12); ++j) reach[static_cast<size_t>(j)] = 1;
   };
   for (Index k = 0; k < el.size(); ++k) {
-    bool patch = false;
-    for (Index e = el.offsets[k]; e < el.offsets[k + 1] && !patch; ++e)
-      patch = model.control_of_free[el.edge_i[e]] < 0 || model.control_of_free[el.edge_j[e]] < 0;
-    if (!patch) continue;
+    if (!has_patch_vertex(model, k)) continue;
     for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
       mark_vertex(el.edge_i[e]);
       mark_vertex(el.edge_j[e]);
@@ -530,12 +535,8 @@ ControlSystem kept_q_control_rows(Model& model, const DeformableMesh& mesh, Defo
   std::vector<Index> cols, position;
   if (model.s > 0) {
     std::vector<Index> with_patch;
-    for (const Index k : split.owned) {
-      bool patch = false;
-      for (Index e = el.offsets[k]; e < el.offsets[k + 1] && !patch; ++e)
-        patch = model.control_of_free[el.edge_i[e]] < 0 || model.control_of_free[el.edge_j[e]] < 0;
-      if (patch) with_patch.push_back(k);
-    }
+    for (const Index k : split.owned)
+      if (has_patch_vertex(model, k)) with_patch.push_back(k);
     const ControlSystem own = blocks_on(with_patch);
     patch_row_columns(model, &cols, &position);
     patch_H = dense_on(own.Hu.middleRows(model.patch_base, 12 * model.s), position, static_cast<Index>(cols.size()));
