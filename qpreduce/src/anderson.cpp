@@ -40,7 +40,6 @@ void AndersonAcceleration::reset(Index n, const AndersonOptions& options) {
   dF_.setZero(n, window_);
   dG_.setZero(n, window_);
   f_.setZero(n);
-  f_prev_.setZero(n);
   g_prev_.setZero(n);
   gram_.setZero(window_, window_);
   rhs_.setZero(window_);
@@ -55,35 +54,82 @@ void AndersonAcceleration::restart() {
   has_previous_ = false;
 }
 
-// Appends f_k − f_{k−1} and G(x_k) − G(x_{k−1}) as column next_ (the oldest
-// once the window is full) and updates that row and column of the Gram matrix.
-void AndersonAcceleration::push_difference(const Eigen::Ref<const Eigen::VectorXd>& gx) {
+// With f_{k−1} in f_ and G(x_{k−1}) in g_prev_: writes f_k − f_{k−1} and
+// G(x_k) − G(x_{k−1}) into column next_ (the oldest once the window is full)
+// and f_k, G(x_k) over the previous ones, in one pass; then that row and
+// column of the Gram matrix and ΔFᵀf_k. Only the new column's entry of
+// ΔFᵀf_k needs a product: for the others, f_k = f_{k−1} + Δf_c gives
+// Δf_jᵀf_k = Δf_jᵀf_{k−1} + (ΔFᵀΔF)_jc, the last step's entry plus the new
+// Gram entry (each column's entry is so updated at most window − 1 times
+// before its column is overwritten and recomputed).
+void AndersonAcceleration::push_difference(const double* __restrict x, const double* __restrict gx) {
   const int c = next_;
-  dF_.col(c) = f_ - f_prev_;
-  dG_.col(c) = gx - g_prev_;
+  // Six distinct arrays (x and gx are the caller's): restrict lets the
+  // compiler vectorise the pass.
+  double* __restrict df = dF_.col(c).data();
+  double* __restrict dg = dG_.col(c).data();
+  double* __restrict f = f_.data();
+  double* __restrict g = g_prev_.data();
+  for (Index i = 0; i < n_; ++i) {
+    const double fi = gx[i] - x[i];
+    df[i] = fi - f[i];
+    dg[i] = gx[i] - g[i];
+    f[i] = fi;
+    g[i] = gx[i];
+  }
   history_ = std::min(history_ + 1, window_);
   next_ = (next_ + 1) % window_;
-  column_.resize(history_);
-  detail::gemtv(dF_.data(), n_, history_, n_, dF_.col(c).data(), column_.data());
-  gram_.col(c).head(history_) = column_;
-  gram_.row(c).head(history_) = column_.transpose();
+  detail::gemtv(dF_.data(), n_, history_, n_, df, column_.data());
+  for (int j = 0; j < history_; ++j) {
+    gram_(j, c) = column_(j);
+    gram_(c, j) = column_(j);
+    if (j != c) rhs_(j) += column_(j);
+  }
+  rhs_(c) = dF_.col(c).dot(f_);
 }
 
-// θ = (ΔFᵀΔF + λI)⁻¹ ΔFᵀ f_k over the differences held.
+// θ = (ΔFᵀΔF + λI)⁻¹ ΔFᵀ f_k over the h differences held. The h × h system
+// (h ≤ 16) by an unblocked Cholesky on the stack: Eigen's LLT of a dynamic
+// matrix costs several times the arithmetic at these sizes (callgrind, the
+// deformer's accelerated rounds); Eigen's LDLT when round-off leaves a nearly
+// dependent history not positive definite.
 void AndersonAcceleration::solve_coefficients() {
   const int h = history_;
-  rhs_.resize(h);
-  detail::gemtv(dF_.data(), n_, h, n_, f_.data(), rhs_.data());
-  Small a = gram_.topLeftCorner(h, h);
-  const double scale = a.diagonal().maxCoeff();
-  a.diagonal().array() += kRelativeRegularisation * (scale > 0.0 ? scale : 1.0);
-  // Cholesky (no pivoting: a third of the LDLT's work at m = 5); the LDLT
-  // when round-off leaves a nearly dependent history not positive definite.
-  const Eigen::LLT<Small> llt(a);
-  if (llt.info() == Eigen::Success) {
-    theta_ = llt.solve(rhs_);
+  double scale = 0.0;
+  for (int j = 0; j < h; ++j) scale = std::max(scale, gram_(j, j));
+  const double shift = kRelativeRegularisation * (scale > 0.0 ? scale : 1.0);
+  double L[kMaxWindow][kMaxWindow];  // lower triangle: ΔFᵀΔF + λI = L·Lᵀ
+  bool positive = true;
+  for (int j = 0; j < h && positive; ++j) {
+    double pivot = gram_(j, j) + shift;
+    for (int k = 0; k < j; ++k) pivot -= L[j][k] * L[j][k];
+    if (!(pivot > 0.0)) {
+      positive = false;
+      break;
+    }
+    L[j][j] = std::sqrt(pivot);
+    for (int i = j + 1; i < h; ++i) {
+      double v = gram_(i, j);
+      for (int k = 0; k < j; ++k) v -= L[i][k] * L[j][k];
+      L[i][j] = v / L[j][j];
+    }
+  }
+  theta_.resize(h);
+  if (positive) {
+    for (int i = 0; i < h; ++i) {  // L·z = rhs
+      double v = rhs_(i);
+      for (int k = 0; k < i; ++k) v -= L[i][k] * theta_(k);
+      theta_(i) = v / L[i][i];
+    }
+    for (int i = h - 1; i >= 0; --i) {  // Lᵀ·θ = z
+      double v = theta_(i);
+      for (int k = i + 1; k < h; ++k) v -= L[k][i] * theta_(k);
+      theta_(i) = v / L[i][i];
+    }
   } else {
-    theta_ = Eigen::LDLT<Small>(a).solve(rhs_);
+    Small a = gram_.topLeftCorner(h, h);
+    a.diagonal().array() += shift;
+    theta_ = Eigen::LDLT<Small>(a).solve(rhs_.head(h));
   }
 }
 
@@ -93,10 +139,12 @@ void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, cons
   check_size("AndersonAcceleration::step: x", n_, x.size());
   check_size("AndersonAcceleration::step: gx", n_, gx.size());
   check_size("AndersonAcceleration::step: out", n_, out.size());
-  f_prev_.swap(f_);  // f_{k−1} (when has_previous_); f_ is overwritten next
-  f_ = gx - x;
-  if (has_previous_) push_difference(gx);
-  g_prev_ = gx;  // before out is written: out may alias gx
+  if (has_previous_) {
+    push_difference(x.data(), gx.data());
+  } else {
+    f_ = gx - x;
+    g_prev_ = gx;
+  }
   has_previous_ = true;
   if (history_ > 0) solve_coefficients();
   if (history_ > 0 && !theta_.allFinite()) {  // cannot happen with λ > 0 and finite input; never return NaN
@@ -105,7 +153,7 @@ void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, cons
   }
   if (out.data() != gx.data()) out = gx;
   if (history_ > 0) {
-    column_ = -theta_;  // scratch: out += ΔG·(−θ)
+    column_.head(history_) = -theta_;  // scratch: out += ΔG·(−θ)
     detail::gemv_add(dG_.data(), n_, history_, n_, column_.data(), out.data());
   }
 }

@@ -10,8 +10,9 @@
 // one step is
 //     θ* = argmin_θ ‖f_k − ΔF·θ‖²,      x_{k+1} = G(x_k) − ΔG·θ*.
 // θ* comes from the normal equations (ΔFᵀΔF + λI)θ = ΔFᵀf_k, with the Gram
-// matrix ΔFᵀΔF (m × m, m ≤ 16) updated by one column per step (O(n·m)) and
-// solved by a fixed-max-size LDLT; λ = 1e-12 · max diag(ΔFᵀΔF) only keeps
+// matrix ΔFᵀΔF (m × m, m ≤ 16) and the right-hand side ΔFᵀf_k updated by one
+// column per step (O(n·m), one pass writing the new differences) and solved
+// by Cholesky (LDLT if that fails); λ = 1e-12 · max diag(ΔFᵀΔF) only keeps
 // nearly dependent differences from blowing θ up (it changes θ by a relative
 // ~1e-12 when ΔF is well conditioned).
 //
@@ -67,7 +68,7 @@ class AndersonAcceleration {
   using Small = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxWindow, kMaxWindow>;
   using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxWindow, 1>;
 
-  void push_difference(const Eigen::Ref<const Eigen::VectorXd>& gx);
+  void push_difference(const double* x, const double* gx);
   void solve_coefficients();
 
   Index n_ = 0;
@@ -76,9 +77,10 @@ class AndersonAcceleration {
   int next_ = 0;      // the column the next difference overwrites
   bool has_previous_ = false;
   Eigen::MatrixXd dF_, dG_;        // n × window
-  Eigen::VectorXd f_, f_prev_, g_prev_;  // n
+  Eigen::VectorXd f_, g_prev_;     // f_k and G(x_k) of the last step (n)
   Small gram_;                     // ΔFᵀΔF, history × history in the top-left corner
-  SmallVector rhs_, theta_, column_;
+  SmallVector rhs_;                // ΔFᵀf_k (window; the first history_ entries)
+  SmallVector theta_, column_;
 };
 
 }  // namespace qpreduce

@@ -225,6 +225,50 @@ TEST_CASE("fit_rotation's Newton path for nearly conformal input gives the exact
   CHECK(worst_orthogonality < 1e-14);
 }
 
+TEST_CASE("fit_rotations fits every block as fit_rotation does, four at a time or alone", "[arap][phase2]") {
+  // d = 1 … 11 blocks (a partial group of four at the end), mixing the
+  // batched Newton path (nearly conformal, ε from 1e-12 to 0.03) with blocks
+  // it must hand to fit_rotation: far from conformal, reflected, singular.
+  double worst = 0.0, worst_trace = 0.0;
+  for (Index d = 1; d <= 11; ++d) {
+    Eigen::VectorXd s(9 * d), expected(9 * d), trace(d);
+    std::vector<double> expected_trace(static_cast<size_t>(d));
+    for (Index a = 0; a < d; ++a) {
+      const Eigen::VectorXd r = random_vector(14, static_cast<unsigned>(700 + 16 * d + a));
+      const Eigen::Matrix3d R = rotation(3.0 * r(0), r.segment<3>(1));
+      Eigen::Matrix3d E;
+      E << r(4), r(5), r(6), r(5), r(7), r(8), r(6), r(8), r(9);
+      Eigen::Matrix3d G;
+      switch ((a + d) % 5) {
+        case 0: G = R * Eigen::Vector3d(3.0, 2.0, 1.0).asDiagonal(); break;       // far from conformal
+        case 1: G = R * Eigen::Vector3d(1.0, 1.0, -1.0).asDiagonal(); break;      // reflected
+        case 2: G = R * Eigen::Vector3d(1.0, 1.0, 1e-9).asDiagonal(); break;      // nearly singular
+        default: {                                                                 // nearly conformal
+          const double eps = std::pow(10.0, -12.0 + 10.5 * std::abs(r(11)) / (1.0 + std::abs(r(11))));
+          G = (0.2 + std::abs(r(10))) * R * (Eigen::Matrix3d::Identity() + eps * E / E.norm());
+        }
+      }
+      Eigen::Map<Eigen::Matrix3d>(s.data() + 9 * a) = G;
+      const Eigen::Matrix3d F = fit_rotation(G);
+      Eigen::Map<Eigen::Matrix3d>(expected.data() + 9 * a) = F;
+      expected_trace[static_cast<size_t>(a)] = F.cwiseProduct(G).sum();
+    }
+    fit_rotations(s.data(), d, trace.data());
+    for (Index a = 0; a < d; ++a) {
+      const Eigen::Map<const Eigen::Matrix3d> F(s.data() + 9 * a), want(expected.data() + 9 * a);
+      worst = std::max(worst, (F - want).norm());
+      worst_trace = std::max(worst_trace, std::abs(trace(a) - expected_trace[static_cast<size_t>(a)]) /
+                                              std::abs(expected_trace[static_cast<size_t>(a)]));
+      CHECK(F.determinant() > 0.0);
+    }
+    Eigen::VectorXd again = expected;  // without trace, and on rotations: unchanged
+    fit_rotations(again.data(), d);
+    CHECK((again - expected).norm() < 1e-14 * std::sqrt(static_cast<double>(d)));
+  }
+  CHECK(worst < 1e-14);
+  CHECK(worst_trace < 1e-14);
+}
+
 TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
   for (unsigned seed = 0; seed < 50; ++seed) {
     const Eigen::VectorXd a = random_vector(4, seed);

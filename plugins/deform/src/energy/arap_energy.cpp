@@ -725,6 +725,109 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   return fit_rotation_svd(G);  // did not settle (never seen): exact fallback
 }
 
+namespace {
+
+// Four blocks side by side: x[i][l] is entry i (column-major) of lane l's block.
+constexpr int kLanes = 4;
+using Lanes = double[9][kLanes];
+
+// GCC makes an AVX2 + FMA copy of the lane loops too and picks it at load
+// time (ifunc); elsewhere the compiler's default vector width.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define QPREDUCE_LANE_CLONES __attribute__((target_clones("arch=haswell", "default")))
+#else
+#define QPREDUCE_LANE_CLONES
+#endif
+
+// `steps` Newton steps X ← ½(X + X⁻ᵀ) in each lane, X⁻ᵀ = cof(X)/det X.
+QPREDUCE_LANE_CLONES void newton_polar_lanes(Lanes& x, int steps) {
+  for (int it = 0; it < steps; ++it) {
+    for (int l = 0; l < kLanes; ++l) {
+      const double a = x[0][l], d = x[1][l], g = x[2][l], b = x[3][l], e = x[4][l], h = x[5][l], c = x[6][l],
+                   f = x[7][l], i = x[8][l];
+      const double c00 = e * i - f * h, c01 = f * g - d * i, c02 = d * h - e * g;
+      const double c10 = c * h - b * i, c11 = a * i - c * g, c12 = b * g - a * h;
+      const double c20 = b * f - c * e, c21 = c * d - a * f, c22 = a * e - b * d;
+      const double half_inv_det = 0.5 / (a * c00 + b * c01 + c * c02);
+      x[0][l] = 0.5 * a + half_inv_det * c00;
+      x[1][l] = 0.5 * d + half_inv_det * c10;
+      x[2][l] = 0.5 * g + half_inv_det * c20;
+      x[3][l] = 0.5 * b + half_inv_det * c01;
+      x[4][l] = 0.5 * e + half_inv_det * c11;
+      x[5][l] = 0.5 * h + half_inv_det * c21;
+      x[6][l] = 0.5 * c + half_inv_det * c02;
+      x[7][l] = 0.5 * f + half_inv_det * c12;
+      x[8][l] = 0.5 * i + half_inv_det * c22;
+    }
+  }
+}
+
+// Per lane: ‖G‖², det G and e² = ‖GᵀG·3/‖G‖² − I‖²_F (fit_rotation's tests).
+QPREDUCE_LANE_CLONES void conformality_lanes(const Lanes& x, double* norm2, double* det, double* e2) {
+  for (int l = 0; l < kLanes; ++l) {
+    const double a = x[0][l], d = x[1][l], g = x[2][l], b = x[3][l], e = x[4][l], h = x[5][l], c = x[6][l],
+                 f = x[7][l], i = x[8][l];
+    const double n2 = a * a + b * b + c * c + d * d + e * e + f * f + g * g + h * h + i * i;
+    det[l] = a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g);
+    // M = GᵀG: column j of G is (x[3j], x[3j+1], x[3j+2]).
+    const double m00 = a * a + d * d + g * g, m11 = b * b + e * e + h * h, m22 = c * c + f * f + i * i;
+    const double m01 = a * b + d * e + g * h, m02 = a * c + d * f + g * i, m12 = b * c + e * f + h * i;
+    const double s = 3.0 / n2;
+    const double r0 = s * m00 - 1.0, r1 = s * m11 - 1.0, r2 = s * m22 - 1.0;
+    e2[l] = r0 * r0 + r1 * r1 + r2 * r2 + 2.0 * s * s * (m01 * m01 + m02 * m02 + m12 * m12);
+    norm2[l] = n2;
+  }
+}
+
+}  // namespace
+
+void fit_rotations(double* s, Index d, double* trace) {
+  for (Index a0 = 0; a0 < d; a0 += kLanes) {
+    const int lanes = static_cast<int>(std::min<Index>(kLanes, d - a0));
+    alignas(32) Lanes x;
+    for (int l = 0; l < lanes; ++l)
+      for (int i = 0; i < 9; ++i) x[i][l] = s[9 * (a0 + l) + i];
+    for (int l = lanes; l < kLanes; ++l)  // a partial group: identities in the idle lanes
+      for (int i = 0; i < 9; ++i) x[i][l] = i % 4 == 0 ? 1.0 : 0.0;
+    double norm2[kLanes], det[kLanes], e2[kLanes];
+    conformality_lanes(x, norm2, det, e2);
+    bool newton[kLanes];
+    double worst = 0.0;  // the largest e² of the lanes taking Newton steps
+    for (int l = 0; l < kLanes; ++l) {
+      const double norm = std::sqrt(norm2[l]);
+      newton[l] = det[l] > 1e-6 * norm * norm * norm && e2[l] < 0.01;
+      if (!newton[l]) {  // fit_rotation below; the identity meanwhile
+        for (int i = 0; i < 9; ++i) x[i][l] = i % 4 == 0 ? 1.0 : 0.0;
+        continue;
+      }
+      worst = std::max(worst, e2[l]);
+      const double scale = std::sqrt(3.0) / norm;
+      for (int i = 0; i < 9; ++i) x[i][l] *= scale;
+    }
+    // fit_rotation's a-priori bound on the polar error, for the worst lane
+    // (the bound grows with e, so no lane needs more steps).
+    int steps = 0;
+    for (double e = std::sqrt(worst); e > 1e-17; e = e * e / (2.0 * (1.0 - e))) ++steps;
+    newton_polar_lanes(x, steps);
+    for (int l = 0; l < lanes; ++l) {
+      double* block = s + 9 * (a0 + l);
+      Eigen::Map<Eigen::Matrix3d> G(block);
+      if (newton[l]) {
+        if (trace) {
+          double t = 0.0;
+          for (int i = 0; i < 9; ++i) t += x[i][l] * block[i];
+          trace[a0 + l] = t;
+        }
+        for (int i = 0; i < 9; ++i) block[i] = x[i][l];
+      } else {
+        const Eigen::Matrix3d R = fit_rotation(G);
+        if (trace) trace[a0 + l] = R.cwiseProduct(G).sum();
+        G = R;
+      }
+    }
+  }
+}
+
 Eigen::Matrix3d fit_rotation_planar(const Eigen::Matrix3d& G, const Eigen::Vector3d& n) {
   // t₁ ⟂ n from the axis n is least aligned with, t₂ = n × t₁.
   Eigen::Index axis = 0;

@@ -77,6 +77,7 @@ class ScaledRotationProjection final : public ClusterProjection {
       : g_(std::move(geometry)), gamma_(gamma), psi_max_(psi_max) {
     denominator_ = g_.stiffness;
     proximal_.setZero(g_.d);
+    trace_.setZero(g_.d);
     if (gamma_ > 0.0)
       for (Index a = 0; a < g_.d; ++a)
         for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
@@ -94,15 +95,18 @@ class ScaledRotationProjection final : public ClusterProjection {
     return update(g, y, first, last);
   }
 
+  // Each block to its nearest rotation t (fit_rotations: extrapolated
+  // rotations are nearly conformal, four at a time), then to the nearest ψ·t
+  // in Frobenius norm: ψ = tr(tᵀs)/3, clamped (scaled rotations only).
   void retract(Eigen::Ref<Eigen::VectorXd> y) const override {
+    if (psi_max_ <= 1.0) {
+      fit_rotations(y.data(), g_.d);
+      return;
+    }
+    fit_rotations(y.data(), g_.d, trace_.data());
     for (Index a = 0; a < g_.d; ++a) {
-      Eigen::Map<Eigen::Matrix3d> s(y.data() + 9 * a);
-      const Eigen::Matrix3d t = fit_rotation(s);
-      double psi = 1.0;
-      // Nearest ψ·t in Frobenius norm: ψ = tr(tᵀs)/3, clamped.
-      if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)])
-        psi = std::clamp(t.cwiseProduct(s).sum() / 3.0, 1.0 / psi_max_, psi_max_);
-      s = psi * t;
+      if (g_.rigid[static_cast<size_t>(a)]) continue;
+      Eigen::Map<Eigen::Matrix3d>(y.data() + 9 * a) *= std::clamp(trace_(a) / 3.0, 1.0 / psi_max_, psi_max_);
     }
   }
 
@@ -193,6 +197,7 @@ class ScaledRotationProjection final : public ClusterProjection {
   double psi_max_;
   Eigen::VectorXd denominator_;  // C_a + 6γ·Σ_b W_ab
   Eigen::VectorXd proximal_;     // w_a of set_proximal_weights (d): ½w_a‖s_a‖² = (3/2)·w_a·ψ_a²
+  mutable Eigen::VectorXd trace_;  // retract's scratch: tr(tᵀs) per cluster (d)
 };
 
 class ArapFamilyModel final : public DeformationModel {

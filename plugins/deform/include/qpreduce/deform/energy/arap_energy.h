@@ -148,6 +148,18 @@ double arap_energy(const Vertices& V, const RotationElements& elements, const Ve
 // reflected (paper Phase 2, Eq. 19).
 Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G);
 
+// fit_rotation of d 3×3 blocks in place: s holds 9·d entries, block a
+// column-major in s[9a, 9a + 9), and each becomes its nearest rotation (the
+// same as fit_rotation's to round-off). For the retraction of extrapolated
+// rotations: nearly conformal blocks (det > 0 and ‖GᵀG·3/‖G‖² − I‖_F < 0.1,
+// fit_rotation's Newton path) take Newton's X ← ½(X + X⁻ᵀ) four at a time in
+// SIMD lanes, as many steps as the worst block of the four needs (a step
+// more leaves a rotation unchanged to round-off); every other block goes to
+// fit_rotation. trace (optional, d entries): tr(RᵀG) of each block, its sum
+// of singular values, for the nearest scaled rotation ψR (ψ = trace / 3).
+// No heap allocation.
+void fit_rotations(double* s, Index d, double* trace = nullptr);
+
 // The same rotation when G·n = 0 for a unit vector n, as for the covariance
 // G = Σ c e′eᵀ of an element whose rest edges e all lie in the plane n⊥
 // (flat parts of a surface), where fit_rotation has to take the SVD path.
