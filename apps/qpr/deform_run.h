@@ -63,6 +63,7 @@ void write_pose(const std::string& path, const qpreduce::deform::Vertices& V,
 // deformer's clusters and rotations (for comparisons).
 struct RunOutputs {
   qpreduce::deform::Vertices last;
+  qpreduce::deform::Vertices settled;      // RunSettings::settle or refine: the last frame's fixed point
   std::vector<int> clusters;               // per rotation element
   Eigen::VectorXd rotations;               // S, 9d
   Eigen::Matrix3d global_rotation = Eigen::Matrix3d::Identity();  // r₀ of the last frame
@@ -84,6 +85,12 @@ struct RunSettings {
   // Set: refine the last frame's pose in full space (refine_run.h); the
   // mesh written and arap_energy are then the refined pose's.
   std::optional<qpreduce::deform::RefineOptions> refine;
+  // Set, or with refine: after the last frame the hands stop, and the reduced
+  // rounds (microseconds each) run on at its targets to their fixed point
+  // (settle_last_frame) before any refine starts from there; the report's
+  // "settle" says how many rounds and how far. The frames, their timings
+  // and their residuals are those of the frames themselves.
+  bool settle = false;
   nlohmann::json preflight;  // set: the report's "preflight" (LoadedScenario::preflight)
 };
 

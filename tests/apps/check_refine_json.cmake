@@ -1,6 +1,9 @@
-# cmake -DJSON=<file> -P check_refine_json.cmake
+# cmake -DJSON=<file> [-DSETTLE=1] -P check_refine_json.cmake
 # Checks a `qpr deform --refine` report: the refine.* keys are there, the
-# refine converged, lowered the energy, and arap_energy is the refined pose's.
+# refine converged, lowered the energy, and arap_energy is the refined pose's;
+# with SETTLE (`qpr deform --refine`), the reduced rounds settled first
+# (settle.*) and came closer to their fixed point than the last frame's
+# rounds had.
 if(NOT EXISTS "${JSON}")
   message(FATAL_ERROR "no report at ${JSON}")
 endif()
@@ -30,6 +33,21 @@ if(NOT shown EQUAL arap_energy)
 endif()
 if(max_from_reduced LESS rms_from_reduced OR NOT rms_from_reduced GREATER 0)
   message(FATAL_ERROR "distances from the reduced pose: RMS ${rms_from_reduced}, max ${max_from_reduced}")
+endif()
+if(SETTLE)
+  foreach(key rounds fixed_point_residual status)
+    string(JSON settle_${key} ERROR_VARIABLE err GET "${doc}" settle ${key})
+    if(err)
+      message(FATAL_ERROR "settle.${key} missing: ${err}")
+    endif()
+  endforeach()
+  string(JSON frame_residual GET "${doc}" fixed_point_residual)
+  if(NOT settle_status STREQUAL "success" OR NOT settle_rounds GREATER 0)
+    message(FATAL_ERROR "settle: status ${settle_status}, ${settle_rounds} rounds")
+  endif()
+  if(NOT settle_fixed_point_residual LESS frame_residual)
+    message(FATAL_ERROR "settle left the residual at ${settle_fixed_point_residual}, the last frame's was ${frame_residual}")
+  endif()
 endif()
 message(STATUS "refine report OK: ${rounds} rounds, ${seconds} s, energy ${initial_arap_energy} -> ${arap_energy}, "
                "RMS ${rms_from_reduced} / max ${max_from_reduced} from the reduced pose")
