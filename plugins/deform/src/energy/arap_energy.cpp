@@ -660,6 +660,24 @@ Eigen::Matrix3d fit_rotation_svd(const Eigen::Matrix3d& G) {
 
 }  // namespace
 
+namespace {
+
+// fit_rotation's paths, shared with fit_rotations: the SVD below this
+// det G / ‖G‖³, Newton steps on X = G·√3/‖G‖ when e² = ‖XᵀX − I‖²_F is
+// below kNewtonE2, as many as newton_polar_steps says.
+constexpr double kSingularDet = 1e-6;
+constexpr double kNewtonE2 = 0.01;
+
+// Newton steps until the a-priori bound e ← e²/(2(1 − e)) on the polar error
+// of X (comment in fit_rotation) is below 1e-17, from e = √e².
+int newton_polar_steps(double e2) {
+  int steps = 0;
+  for (double e = std::sqrt(e2); e > 1e-17; e = e * e / (2.0 * (1.0 - e))) ++steps;
+  return steps;
+}
+
+}  // namespace
+
 Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   // det G > 0: the orthogonal polar factor of G is a rotation and maximises
   // tr(RᵀG). Well-conditioned G (λ_min(GᵀG) > 1e-4·λ_max, i.e. cond G < 100,
@@ -687,16 +705,12 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   // the same test the bound.
   const double norm = G.norm();
   const double det = G.determinant();
-  if (!(det > 1e-6 * norm * norm * norm)) return fit_rotation_svd(G);
+  if (!(det > kSingularDet * norm * norm * norm)) return fit_rotation_svd(G);
   const Eigen::Matrix3d M = G.transpose() * G;
   const double e2 = (M * (3.0 / (norm * norm)) - Eigen::Matrix3d::Identity()).squaredNorm();
-  if (e2 < 0.01) {
-    double e = std::sqrt(e2);
+  if (e2 < kNewtonE2) {
     Eigen::Matrix3d X = G * (std::sqrt(3.0) / norm);
-    while (e > 1e-17) {
-      X = 0.5 * (X + X.inverse().transpose());
-      e = e * e / (2.0 * (1.0 - e));
-    }
+    for (int step = newton_polar_steps(e2); step > 0; --step) X = 0.5 * (X + X.inverse().transpose());
     return X;
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
@@ -795,7 +809,7 @@ void fit_rotations(double* s, Index d, double* trace) {
     double worst = 0.0;  // the largest e² of the lanes taking Newton steps
     for (int l = 0; l < kLanes; ++l) {
       const double norm = std::sqrt(norm2[l]);
-      newton[l] = det[l] > 1e-6 * norm * norm * norm && e2[l] < 0.01;
+      newton[l] = det[l] > kSingularDet * norm * norm * norm && e2[l] < kNewtonE2;
       if (!newton[l]) {  // fit_rotation below; the identity meanwhile
         for (int i = 0; i < 9; ++i) x[i][l] = i % 4 == 0 ? 1.0 : 0.0;
         continue;
@@ -804,11 +818,8 @@ void fit_rotations(double* s, Index d, double* trace) {
       const double scale = std::sqrt(3.0) / norm;
       for (int i = 0; i < 9; ++i) x[i][l] *= scale;
     }
-    // fit_rotation's a-priori bound on the polar error, for the worst lane
-    // (the bound grows with e, so no lane needs more steps).
-    int steps = 0;
-    for (double e = std::sqrt(worst); e > 1e-17; e = e * e / (2.0 * (1.0 - e))) ++steps;
-    newton_polar_lanes(x, steps);
+    // The worst lane's steps: the bound grows with e, so no lane needs more.
+    newton_polar_lanes(x, newton_polar_steps(worst));
     for (int l = 0; l < lanes; ++l) {
       double* block = s + 9 * (a0 + l);
       Eigen::Map<Eigen::Matrix3d> G(block);
