@@ -164,8 +164,19 @@ Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   mem.reset();
   // Untimed sessions may come from a cache (QPREDUCE_BENCH_CACHE_DIR, for
   // profiling the per-frame parts without paying for precompute each run).
+  // The folder is made when missing; one that cannot be made means no cache.
   const char* cache_dir = std::getenv("QPREDUCE_BENCH_CACHE_DIR");
-  const std::string cache = cache_dir ? std::string(cache_dir) + "/" + spec.name + ".qpr" : "";
+  std::string cache;
+  if (cache_dir != nullptr && *cache_dir != '\0') {
+    std::error_code ec;
+    std::filesystem::create_directories(cache_dir, ec);
+    if (ec) {
+      fmt::print(stderr, "bench_deform: QPREDUCE_BENCH_CACHE_DIR={}: {}; precomputing without a cache\n", cache_dir,
+                 ec.message());
+    } else {
+      cache = std::string(cache_dir) + "/" + spec.name + ".qpr";
+    }
+  }
   if (timed) {
     for (auto _ : *timed) s->pre = s->deformer.precompute(s->model, s->options);
   } else {

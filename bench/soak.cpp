@@ -6,7 +6,7 @@
 //   soak [--model cactus|bumpy_plane|builtin|PATH.off] [--frames N]
 //        [--set-every K] [--seed S] [--warmup-sets W] [--energy-bound F]
 //        [--energy-every E] [--rss-limit-kib L] [--json PATH] [--verbose 1]
-//        [--hostile 1] [--anderson W] [--rounds R] [--trace-set N]
+//        [--hostile 1] [--anderson W] [--rounds R] [--cold-start-rounds C] [--trace-set N]
 //        [--first-set N]
 //
 // One precompute (DeformerOptions defaults: 33 linear proxies, 27 clusters,
@@ -88,6 +88,7 @@ struct Args {
   bool verbose = false;  // a line per handle set
   bool hostile = false;  // also over-determined sets (docs/robustness.md, "Soak")
   int anderson = -1;     // DeformerOptions::anderson_window (−1: the default)
+  int cold_start = -1;   // DeformerOptions::cold_start_rounds (−1: the default)
   int rounds = -1;       // DeformerOptions::iterations (−1: the default)
   long trace_set = -1;   // print every frame of this handle set (E′, classic energy, residual)
   long first_set = 0;    // draw the handle sets before this one but do not run their frames
@@ -108,6 +109,7 @@ constexpr long kInvalidEvery = 10;
                "soak: %s\nusage: soak [--model cactus|bumpy_plane|builtin|PATH.off] [--frames N] [--set-every K]\n"
                "            [--seed S] [--warmup-sets W] [--energy-bound F] [--energy-every E]\n"
                "            [--rss-limit-kib L] [--json PATH] [--verbose 1] [--hostile 1] [--anderson W] [--rounds R]\n"
+               "            [--cold-start-rounds C]\n"
                "            [--trace-set N] [--first-set N]\n",
                problem.c_str());
   std::exit(2);
@@ -132,6 +134,7 @@ Args parse(int argc, char** argv) {
       else if (key == "--verbose") a.verbose = value != "0";
       else if (key == "--hostile") a.hostile = value != "0";
       else if (key == "--anderson") a.anderson = std::stoi(value);
+      else if (key == "--cold-start-rounds") a.cold_start = std::stoi(value);
       else if (key == "--rounds") a.rounds = std::stoi(value);
       else if (key == "--trace-set") a.trace_set = std::stol(value);
       else if (key == "--first-set") a.first_set = std::stol(value);
@@ -437,7 +440,8 @@ int run(const Args& a) {
   model.F = mesh.F;
   Deformer deformer;
   DeformerOptions options;
-  if (a.anderson >= 0) options.anderson_window = a.anderson;  // 0: plain rounds, for an A/B
+  if (a.anderson >= 0) options.anderson_window = a.anderson;
+  if (a.cold_start >= 0) options.cold_start_rounds = a.cold_start;  // 0: plain rounds, for an A/B
   if (a.rounds >= 1) options.iterations = a.rounds;
   const PrecomputeSummary pre = deformer.precompute(model, options);
   if (!pre.ok()) {

@@ -15,6 +15,19 @@ if(NOT DEFINED Python3_EXECUTABLE)
   if(QPREDUCE_PYTHON3)
     set(Python3_EXECUTABLE "${QPREDUCE_PYTHON3}")
   endif()
+  # Say so loudly when the first python3 on PATH is not the one: a user who
+  # types `python3` gets an interpreter the package was not built for.
+  find_program(QPREDUCE_FIRST_PYTHON3 NAMES python3 NAMES_PER_DIR NO_CACHE)
+  if(QPREDUCE_FIRST_PYTHON3 AND NOT QPREDUCE_FIRST_PYTHON3 STREQUAL QPREDUCE_PYTHON3)
+    if(QPREDUCE_PYTHON3)
+      message(NOTICE "qpreduce: the Python package is built for ${QPREDUCE_PYTHON3}, not for the first python3 on "
+                     "PATH (${QPREDUCE_FIRST_PYTHON3}), which cannot import numpy and scipy; run Python through "
+                     "build/bin/qpreduce-python (that interpreter, the build's package on its path)")
+    else()
+      message(NOTICE "qpreduce: no python3 on PATH can import numpy and scipy (${QPREDUCE_FIRST_PYTHON3} cannot): "
+                     "the Python package is not built; scripts/install-deps.sh installs python3-numpy and python3-scipy")
+    endif()
+  endif()
 endif()
 if(DEFINED Python3_EXECUTABLE)
   find_package(Python3 COMPONENTS Interpreter Development.Module)

@@ -115,7 +115,7 @@ int run_check(const CheckArgs& a) {
     nlohmann::json report = check_json(s, a.strict);
     report["mesh"] = in.name;
     report["anchors"] = in.anchors;
-    write_json(a.report, report);
+    write_json(run_files().stage(a.report), report);
   }
   const std::string status = check_status(s, a.strict);
   return status == "errors" ? kCheckErrors : status == "warnings" ? kCheckWarnings : 0;
@@ -137,7 +137,7 @@ void register_check(CLI::App& app) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--report", a->report, "JSON report");
   cmd->add_flag("--strict", a->strict, "Warnings are errors (exit 2)");
-  cmd->callback([a = a]() { run_guarded("check", [&] { return run_check(*a); }); });
+  cmd->callback([a = a]() { run_guarded("check", [&] { return run_check(*a); }, {1, 2}); });
 }
 
 }  // namespace qpr

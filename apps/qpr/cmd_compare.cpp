@@ -93,7 +93,7 @@ nlohmann::json reference_json(const std::string& which, const DeformableMesh& mo
     return r;
   }
   const std::string file = path("reference_" + which);
-  write_pose(file, sol.V, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr);
+  write_pose(run_files().stage(file), sol.V, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr);
   r["mesh"] = file;
   r.update(deviation(reduced.last, sol.V, diag));
   return r;
@@ -128,7 +128,7 @@ int run_compare(const CompareArgs& a) {
   if (!a.report.empty()) qpreduce::check_destination(a.report, "report");
   LoadedScenario ls = load_scenario(a);
   const OutputPaths path{a.out_dir, ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off"};
-  std::filesystem::create_directories(a.out_dir);
+  run_files().create_directories(a.out_dir);
 
   // The reduced run (every frame, as `qpr deform`), keeping the last pose.
   RunSettings settings;
@@ -175,17 +175,20 @@ int run_compare(const CompareArgs& a) {
   report["references"] = refs;
   if (a.convergence) {
     // Full-space classic ARAP from the reduced pose and from rest, plain and accelerated.
+    // Each run to the relative energy change or fixed-point residual
+    // --convergence-tolerance (no distance test: these runs measure it).
     RefineArgs ra;
-    ra.tolerance = a.convergence_tolerance;
     ra.anderson_window = a.anderson_window;
     RefineOptions o = refine_options(ra);
+    o.distance_tolerance = 0.0;
+    o.tolerance = a.convergence_tolerance;
     o.max_iterations = a.reference_iterations;
     // From the reduced rounds' fixed point at the last frame (the hands stop), as `qpr deform --refine`.
     report["convergence"] = convergence_study(sc, reduced.settled, o, a.gap);
     report["convergence"]["settle"] = rep["settle"];
   }
   if (a.reference == "none") {
-    if (!a.report.empty()) write_json(a.report, report);
+    if (!a.report.empty()) write_json(run_files().stage(a.report), report);
     return 0;
   }
   if (primary.empty()) throw std::runtime_error("no reference succeeded");
@@ -198,7 +201,7 @@ int run_compare(const CompareArgs& a) {
   report["speedup"] = ref["solve_ms"].get<double>() / report["reduced"]["frame_ms"].get<double>();
 
   print_comparison(a, primary, report, refs, rep["iterations"].get<int>());
-  if (!a.report.empty()) write_json(a.report, report);
+  if (!a.report.empty()) write_json(run_files().stage(a.report), report);
   return 0;
 }
 
@@ -218,12 +221,14 @@ void register_compare(CLI::App& app) {
                 "plain and Anderson-accelerated (the report's \"convergence\")");
   cmd->add_option("--convergence-tolerance", a->convergence_tolerance,
                   "--convergence: stop each run at this relative energy change or fixed-point residual (default "
-                  "1e-10; at most --reference-iterations rounds)");
+                  "1e-10; at most --reference-iterations rounds)")
+      ->check(number_between(0.0, 1.0));
   cmd->add_option("--gap", a->gap,
                   "--convergence: also time each run to this relative energy gap to the lowest energy reached "
                   "(default 1e-4)")
-      ->check(CLI::PositiveNumber);
-  cmd->add_option("--refine-anderson", a->anderson_window, "--convergence: Anderson window, 1-16 (default 5)");
+      ->check(number_above(0.0, 1.0));
+  cmd->add_option("--refine-anderson", a->anderson_window, "--convergence: Anderson window, 1-16 (default 5)")
+      ->check(whole_number_between(1, 16));
   cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
   cmd->add_option("--report", a->report, "JSON report");
   cmd->callback([a = a]() { run_guarded("compare", [&] { return run_compare(*a); }); });

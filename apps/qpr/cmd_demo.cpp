@@ -62,7 +62,7 @@ int run_demo(const DemoArgs& a) {
     targets.patch_transforms = {T};
     sc.frames.push_back(targets);
   }
-  std::filesystem::create_directories(a.out_dir);
+  run_files().create_directories(a.out_dir);
   RunSettings settings;
   settings.name = "demo (built-in capped cylinder, bend 90° + twist 90°)";
   settings.options.iterations = a.iterations;
@@ -74,7 +74,7 @@ int run_demo(const DemoArgs& a) {
   settings.write_frames.push_back(a.frames - 1);
   settings.report_path = a.report.empty() ? a.out_dir + "/report.json" : a.report;
   check_outputs(settings);
-  write_triangle_mesh(a.out_dir + "/cylinder_rest.off", mesh);
+  write_triangle_mesh(run_files().stage(a.out_dir + "/cylinder_rest.off"), mesh);
   run_scenario(sc, &mesh, nullptr, settings);
   fmt::print("  meshes and report.json written to {}/\n", a.out_dir);
   return 0;

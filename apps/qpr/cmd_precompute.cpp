@@ -9,6 +9,7 @@
 #include "deform_run.h"
 #include "guard.h"
 #include "mpi_session.h"
+#include "validators.h"
 
 #include <qpreduce/distributed/mumps_subspace.h>
 #include <qpreduce/problems/families.h>
@@ -193,7 +194,7 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   trace("saving", 1.0);
   // The cache, written by rank 0 with every rank's rows of the float basis.
   if (mpi.rank == 0) {
-    deformer.save(a.cache, receive_basis_rows(deformer, mpi.size, pre.reduced_size));
+    deformer.save(run_files().stage(a.cache), receive_basis_rows(deformer, mpi.size, pre.reduced_size));
   } else {
     send_basis_rows(deformer);
   }
@@ -299,6 +300,7 @@ void register_precompute(CLI::App& app) {
   cmd->add_option("--backend", a->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
   cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve")
+      ->check(whole_number_between(1, 4096))
       ->capture_default_str();
   cmd->add_option("--out-of-core", a->out_of_core,
                   "Directory (on every rank, e.g. a local disk) where MUMPS keeps its factor instead of memory")
@@ -310,11 +312,17 @@ void register_precompute(CLI::App& app) {
 
   auto [gmrf, g] = add_command<GmrfArgs>(
       app, "precompute-gmrf", "Subspace build of the seeded GMRF grid family, for scaling runs (mpirun -np K …)");
-  gmrf->add_option("--side", g->side, "grid vertices per side; n = side²")->capture_default_str();
-  gmrf->add_option("--candidates", g->candidates, "candidate sites d")->capture_default_str();
+  gmrf->add_option("--side", g->side, "grid vertices per side; n = side²")
+      ->check(whole_number_between(2, 100000))
+      ->capture_default_str();
+  gmrf->add_option("--candidates", g->candidates, "candidate sites d")
+      ->check(whole_number_between(1, 1000000))
+      ->capture_default_str();
   gmrf->add_option("--backend", g->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
-  gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")->capture_default_str();
+  gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")
+      ->check(whole_number_between(1, 4096))
+      ->capture_default_str();
   gmrf->callback(
       [g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
 }

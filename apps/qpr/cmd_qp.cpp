@@ -508,7 +508,7 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
   r["constraint_residual"] = (d.A.transpose() * ws.X - d.b).norm() / std::max(1.0, d.b.norm());
   if (opt.check_full) check_full(d, q, p, s, ws, r, row, tally);
   if (opt.baseline) run_baseline(d, q, p, s, ws, r, row);
-  if (!opt.out.empty()) qpreduce::write_market((fs::path(opt.out) / ("X_" + d.name + ".mtx")).string(), ws.X);
+  if (!opt.out.empty()) qpreduce::write_market(qpr::run_files().stage((fs::path(opt.out) / ("X_" + d.name + ".mtx")).string()), ws.X);
   auto cell = [](double v, const char* spec) { return std::isnan(v) ? std::string("-") : fmt::format(spec, v); };
   fmt::print("{:<12} {:>5} {:>12.3f} {:>12} {:>12} {:>12} {:>12}\n", d.name, d.A.cols(), 1e3 * row.reduced,
              cell(1e3 * row.full_s, "{:.3f}"), cell(1e3 * row.base_s, "{:.3f}"), cell(row.err, "{:.3e}"),
@@ -544,7 +544,7 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
 int run_qp(const Options& opt) {
   if (!opt.report.empty()) qpreduce::check_destination(opt.report, "report");
   if (!opt.out.empty()) {
-    fs::create_directories(opt.out);
+    qpr::run_files().create_directories(opt.out);
     qpreduce::check_destination((fs::path(opt.out) / "X_.mtx").string(), "solutions (--out)");
   }
   Problem p;
@@ -606,7 +606,7 @@ int run_qp(const Options& opt) {
              "baseline ms", "d_H error", "bound");
   for (const Demand& d : p.demands) records.push_back(run_demand(d, opt, p, s, ws, tally));
 
-  if (!opt.report.empty()) write_json(opt.report, report_json(opt, p, s, pre, tally, records));
+  if (!opt.report.empty()) write_json(qpr::run_files().stage(opt.report), report_json(opt, p, s, pre, tally, records));
   if (tally.violations > 0) {
     fmt::print(stderr, "qpr qp: Theorem 4.10 bound violated on {} demand(s)\n", tally.violations);
     return 1;
@@ -631,7 +631,9 @@ void register_qp(CLI::App& app) {
   cmd->add_flag("--baseline", opt->baseline, "also time a cached Cholesky of H plus a Schur complement per demand");
   cmd->add_flag("--no-augment", opt->no_augment,
                 "H is positive definite: factor H itself instead of H + ρCCᵀ (for C with long columns)");
-  cmd->add_option("--theorem-max-n", opt->theorem_max_n, "largest n for the (dense) Theorem 4.10 analysis")
+  cmd->add_option("--theorem-max-n", opt->theorem_max_n,
+                  "largest n for the (dense) Theorem 4.10 analysis of --check-full (0: never)")
+      ->check(whole_number_between(0, 100000))
       ->capture_default_str();
   cmd->add_flag("--strict", opt->strict,
                 "a demand whose constraints hold only in the least-squares sense is a failure (exit 3), not a warning");
@@ -643,9 +645,9 @@ void register_qp(CLI::App& app) {
       ->check(CLI::IsMember({"auto", "mumps"}))
       ->capture_default_str();
   cmd->callback([opt = opt] {
-    if (opt->backend != "mumps") return run_guarded("qp", [&] { return run_qp(*opt); });
+    if (opt->backend != "mumps") return run_guarded("qp", [&] { return run_qp(*opt); }, {1});
 #ifdef QPREDUCE_HAVE_MPI
-    run_with_mpi("qp", [&](const MpiSession&) { return run_qp(*opt); });
+    run_with_mpi("qp", [&](const MpiSession&) { return run_qp(*opt); }, {1});
 #else
     run_guarded("qp", [&]() -> int {
       throw std::invalid_argument("--backend mumps: this qpr was built without MPI and MUMPS (QPREDUCE_WITH_MPI)");

@@ -139,9 +139,9 @@ nlohmann::json stats_json(const Stats& s) {
 
 bool write_text(const std::string& path, const std::string& text) {
   try {
-    qpreduce::write_file_atomically(path, text);
+    qpreduce::write_file_atomically(run_files().stage(path), text);
   } catch (const qpreduce::FileError& e) {
-    fmt::print(stderr, "qpr theorem: error: {}\n", e.what());
+    fmt::print(stderr, "qpr theorem: error: {}\n", run_files().plain(e.what()));
     return false;
   }
   return true;
@@ -305,7 +305,7 @@ void register_theorem(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--json", opt->json, "write the summary (overall and per family) as JSON");
   cmd->add_option("--csv", opt->csv, "write one row per trial as CSV (scripts/theorem_figure.py plots it)");
-  cmd->callback([opt = opt] { run_guarded("theorem", [&] { return run_theorem(*opt); }); });
+  cmd->callback([opt = opt] { run_guarded("theorem", [&] { return run_theorem(*opt); }, {1}); });
 }
 
 }  // namespace qpr

@@ -1,5 +1,6 @@
 #include "deform_run.h"
 #include "refine_run.h"
+#include "run_files.h"
 
 #include "app_support.h"
 #include "preflight.h"
@@ -91,6 +92,10 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
                   "Stop a frame's rounds once the relative fixed-point residual |ΔS|/|S| is at most this (0: always "
                   "--iterations rounds)")
       ->check(number_between(0.0, 1.0));
+  cmd->add_option("--cold-start-rounds", a->cold_start_rounds,
+                  "The first frame after the handles are set runs to a fixed-point residual of 1e-6 within this "
+                  "many rounds (default 500; 0: like the other frames)")
+      ->check(whole_number_between(0, 100000));
   cmd->add_option("--rotation-step", a->rotation_step,
                   "Phase 2 rotation fit: exact (the cluster's covariance with the Q-corrections: block-coordinate "
                   "descent on E') or paper (Eq. 19, Q dropped)")
@@ -176,6 +181,7 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
   options.iterations = a.iterations;
   options.tolerance = a.tolerance;
+  if (a.cold_start_rounds) options.cold_start_rounds = *a.cold_start_rounds;
   options.rotation_fit = a.rotation_step == "paper" ? ClusterRotationFit::PaperPhase2 : ClusterRotationFit::Exact;
   if (a.anderson_window) {
     if (*a.anderson_window > 0 && options.rotation_fit != ClusterRotationFit::Exact)
@@ -279,7 +285,7 @@ PrecomputeSummary precompute_or_load(Deformer* deformer, const Scenario& scenari
   if (!*cache_loaded) {
     pre = deformer->precompute(scenario.model, options, progress);
     if (!pre.ok()) throw std::runtime_error("precompute failed: " + pre.message);
-    if (!settings.cache_path.empty()) deformer->save(settings.cache_path);
+    if (!settings.cache_path.empty()) deformer->save(run_files().stage(settings.cache_path));
   }
   return pre;
 }
@@ -292,6 +298,9 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
   Vertices& out = s.out;
   for (int f = 0; f < frames; ++f) {
     const FrameSummary fs = deformer.frame(scenario.frames[f], &out);
+    if (!usable(fs.status)) {  // a failed frame is a failed run: nothing is written (run_files.h)
+      throw std::runtime_error(fmt::format("frame {}: {}: {}", f, to_string(fs.status), fs.message));
+    }
     s.iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
     s.recon_ms.push_back(1e3 * fs.reconstruct_seconds);
     s.frame_ms.push_back(1e3 * fs.total_seconds);
@@ -303,7 +312,8 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
                        (f == frames - 1 && std::find(settings.write_frames.begin(), settings.write_frames.end(), -1) !=
                                                settings.write_frames.end());
     if (write && !settings.out_path.empty())
-      write_pose(frame_path(settings.out_path, f, settings.write_frames.size() > 1), out, surface, solid);
+      write_pose(run_files().stage(frame_path(settings.out_path, f, settings.write_frames.size() > 1)), out, surface,
+                 solid);
   }
   return s;
 }
@@ -428,7 +438,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
     const bool wrote_last =
         std::find(wf.begin(), wf.end(), last) != wf.end() || std::find(wf.begin(), wf.end(), -1) != wf.end();
     if (wrote_last && !settings.out_path.empty())  // the refined pose replaces the reduced one
-      write_pose(frame_path(settings.out_path, last, wf.size() > 1), shown, surface, solid);
+      write_pose(run_files().stage(frame_path(settings.out_path, last, wf.size() > 1)), shown, surface, solid);
   }
   const double energy = arap_energy(scenario.model.V, deformer.elements(), settings.refine ? shown : s.out);
   if (outputs) {
@@ -475,7 +485,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
                "settle (reduced)", 1e3 * settle["seconds"].get<double>(), settle["rounds"].get<int>(),
                settle["fixed_point_residual"].get<double>());
   if (settings.refine) print_refine_line(refined);
-  if (!settings.report_path.empty()) write_json(settings.report_path, report);
+  if (!settings.report_path.empty()) write_json(run_files().stage(settings.report_path), report);
   return report;
 }
 

@@ -32,6 +32,7 @@ struct ScenarioArgs {
   std::string model;  // "", "arap" or "conformal"
   std::string rotation_step = "exact";  // "exact" or "paper"
   double tolerance = 0.0;
+  std::optional<int> cold_start_rounds;  // unset: DeformerOptions' default
   std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
   bool no_second_order = false;        // DeformerOptions::second_order = false
   bool exact_unreachable = false;      // DeformerOptions::soften_unreachable_handles = false

@@ -1,9 +1,15 @@
 // qpr — add a subcommand with its options, and run a subcommand body,
 // turning failures into a message on stderr and an exit code
-// (CLI::RuntimeError), never an uncaught exception.
+// (CLI::RuntimeError), never an uncaught exception, and committing the run's
+// outputs only when it succeeded (run_files.h).
 #pragma once
 
+#include "run_files.h"
+
 #include <CLI/CLI.hpp>
+
+#include <algorithm>
+#include <initializer_list>
 
 #include <cstdio>
 #include <exception>
@@ -15,24 +21,40 @@
 
 namespace qpr {
 
-// body returns the exit code; 0 returns normally. Exceptions other than
-// CLI11's own print "qpr <name>: error: <what>" and exit with code 2; running
-// out of memory says so in words ("out of memory …") instead of
-// "std::bad_alloc". Every subcommand's callback goes through here.
-inline void run_guarded(const char* name, const std::function<int()>& body) {
+// body returns the exit code; 0 returns normally. The outputs the body
+// staged (run_files()) are put in place when it returns 0 or one of the
+// command's `verdicts` (exit codes that report a finding, not a failure:
+// qpr check's 1 and 2, a violated bound's 1), and removed otherwise: a
+// failing run writes nothing. Exceptions other than CLI11's own print
+// "qpr <name>: error: <what>" and exit with code 2; running out of memory
+// says so in words ("out of memory …") instead of "std::bad_alloc". Every
+// subcommand's callback goes through here.
+inline void run_guarded(const char* name, const std::function<int()>& body, std::initializer_list<int> verdicts = {}) {
+  RunFiles& outputs = run_files();
+  outputs.discard();  // nothing staged by an earlier run of this process
   int code = 0;
   try {
     code = body();
+    if (code == 0 || std::find(verdicts.begin(), verdicts.end(), code) != verdicts.end()) {
+      outputs.commit();
+    } else {
+      outputs.discard();
+    }
   } catch (const CLI::Error&) {
+    outputs.discard();
     throw;
   } catch (const std::bad_alloc&) {
+    outputs.discard();
     std::fprintf(stderr, "qpr %s: error: out of memory (the inputs or options ask for more than this machine has)\n",
                  name);
     throw CLI::RuntimeError(2);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "qpr %s: error: %s\n", name, e.what());
+    const std::string what = outputs.plain(e.what());
+    outputs.discard();
+    std::fprintf(stderr, "qpr %s: error: %s\n", name, what.c_str());
     throw CLI::RuntimeError(2);
   } catch (...) {
+    outputs.discard();
     std::fprintf(stderr, "qpr %s: error: unknown exception\n", name);
     throw CLI::RuntimeError(2);
   }

@@ -35,11 +35,12 @@ inline void sum_over_ranks(qpreduce::Matrix<double>* M) {
 // run_guarded with MPI up. A rank that failed alone would leave the others
 // waiting in a collective, so a failure with more than one rank ends the
 // whole job (MPI_Abort, after the message).
-inline void run_with_mpi(const char* name, const std::function<int(const MpiSession&)>& body) {
+inline void run_with_mpi(const char* name, const std::function<int(const MpiSession&)>& body,
+                         std::initializer_list<int> verdicts = {}) {
   const MpiSession mpi;
   int code = 0;
   try {
-    run_guarded(name, [&] { return body(mpi); });
+    run_guarded(name, [&] { return body(mpi); }, verdicts);
   } catch (const CLI::RuntimeError& e) {
     code = e.get_exit_code();
   }

@@ -1,5 +1,7 @@
 // qpr — `--refine` and `--convergence` (refine_run.h).
 #include "refine_run.h"
+#include "app_support.h"
+#include "validators.h"
 
 #include <qpreduce/anderson.h>
 #include <qpreduce/deform/mesh/geometry.h>
@@ -23,29 +25,33 @@ void add_refine_options(CLI::App* cmd, RefineArgs* a) {
          "--refine",
          [a](const std::string& v) {
            if (v.empty()) {
-             a->tolerance = RefineArgs::kDefaultTolerance;
+             a->tolerance = RefineOptions{}.distance_tolerance;
              return;
            }
            double tol = 0.0;
-           if (!CLI::detail::lexical_cast(v, tol))
-             throw CLI::ValidationError("--refine", "TOL must be a number, got '" + v + "'");
+           if (!CLI::detail::lexical_cast(v, tol) || !std::isfinite(tol) || tol < 0.0)
+             throw CLI::ValidationError("--refine", "D must be a finite number ≥ 0, got '" + v + "'");
            a->tolerance = tol;
          },
          fmt::format("Refine the last frame's pose in full space (classic ARAP, local-global warm-started from the "
-                     "reduced pose) until the relative energy change or fixed-point residual is at most TOL (default "
-                     "{:g}; give TOL as --refine=TOL)",
-                     RefineArgs::kDefaultTolerance))
+                     "reduced pose) until it is estimated to be within D of the converged shape (RMS over the "
+                     "vertices, / the bounding-box diagonal; default {:g}; give D as --refine=D; 0: to the "
+                     "reference test)",
+                     RefineOptions{}.distance_tolerance))
       ->expected(0, 1)
-      ->type_name("[TOL]");
-  cmd->add_option("--refine-anderson", a->anderson_window, "Anderson window of the refine, 1-16 (default 5)");
+      ->type_name("[D]");
+  cmd->add_option("--refine-anderson", a->anderson_window, "Anderson window of the refine, 1-16 (default 5)")
+      ->check(whole_number_between(1, 16));
   cmd->add_flag("--refine-plain", a->plain, "Refine with plain local-global (no Anderson acceleration)");
 }
 
 RefineOptions refine_options(const RefineArgs& a) {
   RefineOptions o;
-  o.tolerance = a.tolerance.value_or(RefineArgs::kDefaultTolerance);
-  if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
-    throw std::invalid_argument(fmt::format("--refine: the tolerance must be finite and ≥ 0, got {}", o.tolerance));
+  o.distance_tolerance = a.tolerance.value_or(o.distance_tolerance);
+  if (!(o.distance_tolerance >= 0.0) || !std::isfinite(o.distance_tolerance)) {
+    throw std::invalid_argument(
+        fmt::format("--refine: the distance must be finite and ≥ 0, got {}", o.distance_tolerance));
+  }
   if (a.anderson_window < 1 || a.anderson_window > AndersonAcceleration::kMaxWindow) {
     throw std::invalid_argument(
         fmt::format("--refine-anderson must be in [1, {}], got {} (use --refine-plain for no acceleration)",
@@ -67,7 +73,8 @@ nlohmann::json summary_json(const RefineSummary& s) {
           {"rejected_steps", s.rejected_steps},
           {"arap_energy", s.arap_energy},
           {"initial_arap_energy", s.initial_energy},
-          {"fixed_point_residual", s.fixed_point_residual}};
+          {"fixed_point_residual", s.fixed_point_residual},
+          {"estimated_distance", finite_or_null(s.estimated_distance)}};
 }
 
 // The first round whose energy is within `gap` of `best` (relative): rounds
@@ -91,6 +98,7 @@ nlohmann::json refine_last_frame(const Scenario& scenario, const Vertices& reduc
   const RefineSummary s = refiner.refine(scenario.handles, scenario.frames.back(), reduced, refined);
   if (!s.usable()) throw std::runtime_error("refine: " + s.message);
   nlohmann::json r = summary_json(s);
+  r["distance_tolerance"] = options.distance_tolerance;
   r["tolerance"] = options.tolerance;
   r["anderson_window"] = options.anderson_window;
   r["rms_from_reduced"] = s.rms_from_input;
@@ -102,11 +110,13 @@ void print_refine_line(const nlohmann::json& r) {
   const int window = r["anderson_window"].get<int>();
   fmt::print(
       "  {:<28}{:>12.3f} ms   ({} rounds{}, ARAP energy {:.5g} -> {:.5g}; from the reduced pose RMS {:.2e}, max {:.2e} "
-      "of the diagonal{})\n",
+      "of the diagonal; estimated {:.1e} from converged{})\n",
       "refine (full space)", 1e3 * r["seconds"].get<double>(), r["rounds"].get<int>(),
       window > 0 ? fmt::format(", Anderson {}", window) : std::string(", plain"),
       r["initial_arap_energy"].get<double>(), r["arap_energy"].get<double>(), r["rms_from_reduced"].get<double>(),
-      r["max_from_reduced"].get<double>(), r["converged"].get<bool>() ? "" : "; not converged");
+      r["max_from_reduced"].get<double>(),
+      r["estimated_distance"].is_null() ? std::numeric_limits<double>::infinity() : r["estimated_distance"].get<double>(),
+      r["converged"].get<bool>() ? "" : "; not converged");
 }
 
 nlohmann::json convergence_study(const Scenario& scenario, const Vertices& reduced, const RefineOptions& options,

@@ -16,12 +16,12 @@ class App;
 
 namespace qpr {
 
-// --refine[=TOL] and the Anderson settings of the refine.
+// --refine[=D] and the Anderson settings of the refine.
 struct RefineArgs {
-  std::optional<double> tolerance;  // set: refine (the flag alone gives kDefaultTolerance)
+  // Set: refine, to RefineOptions::distance_tolerance D (the flag alone: its default).
+  std::optional<double> tolerance;
   int anderson_window = 5;
   bool plain = false;  // --refine-plain: no Anderson acceleration
-  static constexpr double kDefaultTolerance = 1e-6;
 };
 
 // Registers --refine, --refine-anderson and --refine-plain on `cmd`.

@@ -30,6 +30,14 @@ std::string parse_finite(const std::string& s, double* value) {
   return "";
 }
 
+// The range in interval notation, shown in --help after the option's type
+// ("FLOAT:[0, 1]"), which tests/apps/option_ranges.py reads.
+std::string interval(double lo, double hi, bool open_below) {
+  const auto bound = [](double v) { return std::isinf(v) ? std::string(v < 0 ? "-inf" : "inf") : fmt::format("{:g}", v); };
+  return fmt::format("{}{}, {}{}", open_below || std::isinf(lo) ? "(" : "[", bound(lo), bound(hi),
+                     std::isinf(hi) ? ")" : "]");
+}
+
 CLI::Validator number_check(const std::string& description, double lo, double hi, bool open_below) {
   return CLI::Validator(
       [=](std::string& s) -> std::string {
@@ -40,7 +48,7 @@ CLI::Validator number_check(const std::string& description, double lo, double hi
         if (below || !(v <= hi)) return fmt::format("must be {}, got {}", description, shown(s));
         return "";
       },
-      "");
+      interval(lo, hi, open_below));
 }
 
 }  // namespace
@@ -69,7 +77,7 @@ CLI::Validator whole_number_between(long long lo, long long hi) {
         if (errno == ERANGE || v < lo || v > hi) return rule + ", got " + shown(s);
         return "";
       },
-      "");
+      fmt::format("[{}, {}]", lo, hi));
 }
 
 CLI::Validator unsigned_whole_number() {
@@ -82,7 +90,7 @@ CLI::Validator unsigned_whole_number() {
         if (errno == ERANGE) return rule + ", got " + shown(s);
         return "";
       },
-      "");
+      "[0, 18446744073709551615]");
 }
 
 }  // namespace qpr

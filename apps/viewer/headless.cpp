@@ -1,6 +1,7 @@
 #include "modes.h"
 
 #include "app_support.h"
+#include "run_files.h"
 #include "context.h"
 #include "view_support.h"
 
@@ -91,7 +92,9 @@ nlohmann::json refine_shown_pose(Session& session, MeshRenderer& renderer, const
           {"seconds", r.seconds},
           {"setup_seconds", r.setup_seconds},
           {"converged", r.converged},
+          {"distance_tolerance", options.distance_tolerance},
           {"tolerance", options.tolerance},
+          {"estimated_distance", qpr::finite_or_null(r.estimated_distance)},
           {"anderson_window", options.anderson_window},
           {"initial_arap_energy", r.initial_energy},
           {"arap_energy", r.arap_energy},
@@ -115,11 +118,11 @@ void write_last_frame(Session& session, MeshRenderer& renderer, RenderTarget& ta
   target.bind();
   renderer.draw(camera, o.width, o.height, style);
   target.resolve();
-  write_png(o.screenshot, target.read_rgb());
+  write_png(qpr::run_files().stage(o.screenshot), target.read_rgb());
   if (!o.out_mesh.empty()) {
     Vertices V;
     session.positions(renderer, &V);
-    save_mesh(o.out_mesh, V);
+    save_mesh(qpr::run_files().stage(o.out_mesh), V);
   }
 }
 
@@ -188,7 +191,7 @@ int run_headless(Session& session, const ViewerOptions& o, const SaveMeshFn& sav
   print_summary(session, context, run, o, refine);
   if (!o.stats_json.empty()) {
     if (!o.refine) session.positions(renderer, &shown);
-    write_json(o.stats_json, stats_json(session, context, run, o, refine, session.arap_energy(shown)), "stats");
+    write_json(qpr::run_files().stage(o.stats_json), stats_json(session, context, run, o, refine, session.arap_energy(shown)), "stats");
   }
   return 0;
 }

@@ -3,6 +3,7 @@
 #include "interactive.h"
 #include "modes.h"
 #include "view_support.h"
+#include "run_files.h"
 
 #include "app_support.h"
 
@@ -128,7 +129,8 @@ int Interactive::run() {
     // replay starts then), so that a test sees all of it on any machine.
     const bool counting = o_.replay.empty() || ready_;
     const bool last = o_.max_frames > 0 && counting && ++frame >= o_.max_frames;
-    if (last && !o_.window_screenshot.empty()) write_png(o_.window_screenshot, read_window(fb_w_, fb_h_));
+    if (last && !o_.window_screenshot.empty())
+      write_png(qpr::run_files().stage(o_.window_screenshot), read_window(fb_w_, fb_h_));
     glfwSwapBuffers(context_.window());
     if (frame_log_ != nullptr) frame_log_->refined_shown = showing_refined_;
     if (last) break;
@@ -154,7 +156,7 @@ void Interactive::write_window_log() const {
     }
     frames.push_back(std::move(j));
   }
-  write_json(o_.window_log,
+  write_json(qpr::run_files().stage(o_.window_log),
              {{"format", "qpr-window-log"},
               {"version", 1},
               {"refine_after_still_s", o_.refine_after_still_s},

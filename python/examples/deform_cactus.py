@@ -26,7 +26,9 @@ import numpy as np  # noqa: E402
 from qpreduce import deform  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data", "meshes", "botsch-sorkine")
+# The shared test data beside the checkout, or where $QPREDUCE_SHARED_DATA says.
+SHARED = os.path.join(os.environ.get("QPREDUCE_SHARED_DATA", os.path.join(os.path.dirname(ROOT), "shared", "data")),
+                      "meshes", "botsch-sorkine")
 
 
 def axis_angle(R):

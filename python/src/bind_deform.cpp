@@ -106,8 +106,11 @@ void bind_deformer_options(py::module_& m) {
       .rw("anderson_window", &DeformerOptions::anderson_window, "Anderson acceleration window (0 off, 1–16).")
       .rw("second_order", &DeformerOptions::second_order,
           "Newton steps on stiff point-handle sets instead of rounds (default True).")
-      .rw("settle_iterations", &DeformerOptions::settle_iterations,
-          "Least steps of the first frame after set_handles on a stiff set (0 off; default 16).")
+      .rw("cold_start_rounds", &DeformerOptions::cold_start_rounds,
+          "The first frame after set_handles runs to cold_start_tolerance within this many rounds (a "
+          "second-order step counts 10; 0: like the others). Default 500.")
+      .rw("cold_start_tolerance", &DeformerOptions::cold_start_tolerance,
+          "The first frame's fixed-point residual target. Default 1e-6.")
       .rw("soften_unreachable_handles", &DeformerOptions::soften_unreachable_handles,
           "Handle sets the subspace cannot meet reliably (rank below the full space's, or condition above 1e5) "
           "are met as soft constraints, with the reason in set_handles' message (default True).")
@@ -147,6 +150,8 @@ void bind_deformer_options(py::module_& m) {
       .ro("model_energy", &FrameSummary::model_energy, "E′ of the reduced model (accelerated rounds), else NaN.")
       .ro("rejected_steps", &FrameSummary::rejected_steps, "Extrapolations the Anderson safeguard rejected.")
       .ro("second_order", &FrameSummary::second_order, "This frame took Newton steps instead of rounds.")
+      .ro("cold_start", &FrameSummary::cold_start,
+          "The first frame after set_handles: it ran to cold_start_tolerance (DeformerOptions.cold_start_rounds).")
       .ro("solve_seconds", &FrameSummary::solve_seconds, "")
       .ro("reconstruct_seconds", &FrameSummary::reconstruct_seconds, "")
       .ro("total_seconds", &FrameSummary::total_seconds, "")

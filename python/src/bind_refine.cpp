@@ -36,9 +36,12 @@ struct PyRefiner {
 void bind_refine_options(py::module_& m) {
   py::class_<RefineOptions> options(m, "RefineOptions", "Options of Refiner (refine.h); keyword construction.");
   Fields(options, "RefineOptions")
+      .rw("distance_tolerance", &RefineOptions::distance_tolerance,
+          "Stop once the pose is estimated within this of the converged shape (RMS over the vertices / the "
+          "bounding-box diagonal; RefineSummary.estimated_distance); finite, ≥ 0. Default 1e-4.")
       .rw("tolerance", &RefineOptions::tolerance,
-          "Stop at this relative energy change or fixed-point residual; finite, ≥ 0 (0: to the reference "
-          "test). Default 1e-6.")
+          "Also stop at this relative energy change or fixed-point residual (can fire in a flat valley); "
+          "finite, ≥ 0; 0 (default): not used.")
       .rw("anderson_window", &RefineOptions::anderson_window, "In [0, 16]; 0 = plain local-global. Default 5.")
       .rw("max_iterations", &RefineOptions::max_iterations, "Round limit. Default 20000.")
       .rw("energy", &RefineOptions::energy, "ReferenceEnergy.ClassicArap (default) or ModifiedArap (E′).")
@@ -68,6 +71,8 @@ void bind_refine_options(py::module_& m) {
       .ro("energy", &RefineSummary::energy, "Refined energy (classic or E′) of the result.")
       .ro("arap_energy", &RefineSummary::arap_energy, "Classic ARAP energy (Eq. 6) of the result.")
       .ro("fixed_point_residual", &RefineSummary::fixed_point_residual, "‖G(z) − z‖ / ‖z‖ of the last round.")
+      .ro("estimated_distance", &RefineSummary::estimated_distance,
+          "How far the result is estimated from the converged shape (RMS / rest diagonal; inf before 2 rounds).")
       .ro("handle_residual", &RefineSummary::handle_residual, "Largest constraint violation.")
       .ro("rms_from_input", &RefineSummary::rms_from_input, "RMS input→result distance / rest diagonal.")
       .ro("max_from_input", &RefineSummary::max_from_input, "Largest input→result distance / rest diagonal.")
@@ -105,7 +110,7 @@ void bind_refiner_class(py::module_& m) {
             self.refiner.set_options(options);
           },
           py::arg("options"),
-          "set_options(options)\n\nReplaces tolerance, anderson_window and max_iterations (the energy,\n"
+          "set_options(options)\n\nReplaces distance_tolerance, tolerance, anderson_window and max_iterations (the energy,\n"
           "parameters and backend stay those of the constructor). ValueError on invalid options.")
       .def_property_readonly(
           "options",

@@ -130,6 +130,18 @@ case("options", "deform --linear-proxies 0", deform("--linear-proxies", "0"), OP
 case("options", "deform --soft nan", deform("--soft", "nan"), OPT, ["--soft", "NaN"])
 case("options", "demo --frames 0", ["demo", "--frames", "0"], OPT, ["--frames", "from 1 to 10000"])
 case("options", "demo --iterations 1001", ["demo", "--iterations", "1001"], OPT, ["--iterations", "from 1 to 1000"])
+case("options", "qp --theorem-max-n -5 (was accepted silently)", qp("--theorem-max-n", "-5"), OPT,
+     ["--theorem-max-n", "whole number from 0 to 100000", "got '-5'"])
+case("options", "deform --refine-anderson 99 without --refine (was accepted)", deform("--refine-anderson", "99"), OPT,
+     ["--refine-anderson", "whole number from 1 to 16", "got '99'"])
+case("options", "compare --refine-anderson 0", ["compare", "{W}/tube.off", "--refine-anderson", "0"], OPT,
+     ["--refine-anderson", "whole number from 1 to 16"])
+case("options", "compare --convergence-tolerance -1 (was accepted)", ["compare", "{W}/tube.off",
+     "--convergence-tolerance", "-1"], OPT, ["--convergence-tolerance", "between 0 and 1"])
+case("options", "deform --refine=-1", deform("--refine=-1"), OPT, ["--refine", "D must be a finite number ≥ 0"])
+case("options", "deform --refine=nan", deform("--refine=nan"), OPT, ["--refine", "D must be a finite number ≥ 0"])
+case("options", "deform --cold-start-rounds -1", deform("--cold-start-rounds", "-1"), OPT,
+     ["--cold-start-rounds", "whole number from 0 to 100000"])
 case("options", "deform --rotational-proxies 1e3x", deform("--rotational-proxies", "1e3x"), OPT,
      ["--rotational-proxies", "got '1e3x'"])
 
@@ -556,6 +568,28 @@ CASES.append(dict(group="writers", name="compare --out-dir meshes under a file-s
                   files={"cmp/reduced.off": EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[], fsize=16,
                   intact="cmp/reduced.off"))
 
+# A failing run writes nothing (docs/robustness.md, "What a failing run
+# writes"): its outputs are staged and put in place only when it succeeds,
+# so a failure after some of them were written leaves every earlier file as
+# it was, and the folders it made for them are removed.
+CASES.append(dict(group="writers", name="qp --check-full: a failed full solve (exit 3) keeps the earlier X and report",
+                  args=qp("--check-full", "--out", "{W}/sol", "--report", "{W}/r.json"), code=3,
+                  words=["demand 'd0'", "full solve failed"],
+                  files=dict(INCONSISTENT, **{"sol/X_d0.mtx": EARLIER, "r.json": EARLIER}), max_seconds=None,
+                  stdout_words=[], intact=["sol/X_d0.mtx", "r.json"]))
+CASES.append(dict(group="writers", name="deform: a failure after the precompute keeps the earlier --cache",
+                  args=deform("--cache", "{W}/c.qpr", "--report", "{W}/r.json", "--out", "{W}/pose.xyz"), code=RUN,
+                  words=["pose.xyz", "unsupported"], files={"c.qpr": EARLIER, "r.json": EARLIER}, max_seconds=None,
+                  stdout_words=[], intact=["c.qpr", "r.json"]))
+CASES.append(dict(group="writers", name="demo: a failing run removes the --out folder it made",
+                  args=["demo", "--frames", "1", "--out", "{W}/new/demo", "--report", "{W}/missing/r.json"],
+                  code=RUN, words=["missing/r.json", "does not exist"], files={}, max_seconds=None, stdout_words=[],
+                  absent=["new"]))
+CASES.append(dict(group="writers", name="theorem: --csv failing keeps the earlier --json",
+                  args=["theorem", "--trials", "10", "--json", "{W}/t.json", "--csv", "{W}/full.csv"], code=3,
+                  words=["full.csv", "No space left on device"], files={"t.json": EARLIER}, max_seconds=None,
+                  stdout_words=[], links={"full.csv": "/dev/full"}, intact=["t.json"]))
+
 # ---------------------------------------------------------------- view
 # The viewer's writers, headless (--screenshot renders the last frame, then
 # writes the PNG, the --out mesh and the --stats JSON in that order) and in the
@@ -600,7 +634,8 @@ CASES.append(dict(group="view", name="view: --out on /dev/full keeps the earlier
 def temporaries(root):
     found = []
     for d, _, names in os.walk(root):
-        found += [os.path.join(d, n) for n in names if re.match(r"^\..*\.tmp\.\d+\.\d+$", n) or n.endswith(".tmp")]
+        found += [os.path.join(d, n) for n in names
+                  if re.match(r"^\..*\.tmp\.\d+\.\d+$", n) or n.endswith(".tmp") or n.startswith(".qpr-run.")]
     return found
 
 
@@ -643,10 +678,14 @@ def run_case(qpr, c):
             problems.append("stderr is %d characters long" % len(err))
         if c["max_seconds"] and seconds > c["max_seconds"]:
             problems.append("took %.1f s (at most %g)" % (seconds, c["max_seconds"]))
-        if c.get("intact"):
-            with open(os.path.join(work, c["intact"]), encoding="utf-8") as f:
-                if f.read() != files[c["intact"]]:
-                    problems.append("the earlier %s was changed" % c["intact"])
+        intact = c.get("intact") or []
+        for rel in [intact] if isinstance(intact, str) else intact:
+            with open(os.path.join(work, rel), encoding="utf-8") as f:
+                if f.read() != files[rel]:
+                    problems.append("the earlier %s was changed" % rel)
+        for rel in c.get("absent", []):
+            if os.path.exists(os.path.join(work, rel)):
+                problems.append("%s was left behind" % rel)
         left = temporaries(work)
         if left:
             problems.append("temporary files left: %s" % ", ".join(os.path.relpath(t, work) for t in left))

@@ -8,6 +8,8 @@
 // Skipped with a message when ../shared is absent.
 #include <catch2/catch.hpp>
 
+#include "../shared_data.h"
+
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/scenario.h"
@@ -31,11 +33,8 @@ double relative_difference(const MatD& A, const MatD& B) {
 }  // namespace
 
 TEST_CASE("MUMPS subspace of the cactus matches CHOLMOD's", "[distributed][data]") {
-  const std::string dir = std::string(QPREDUCE_SHARED_DIR) + "/data/meshes/botsch-sorkine";
-  if (!std::filesystem::exists(dir + "/cactus.off")) {
-    WARN("shared data not found (" << dir << "/cactus.off); skipped");
-    return;
-  }
+  REQUIRE_SHARED_DATA(data);
+  const std::string dir = data + "/meshes/botsch-sorkine";
   const deform::TriangleMesh mesh = deform::read_off(dir + "/cactus.off");
   deform::Scenario scenario = deform::scenario_from_sel_def(mesh.V, deform::read_sel(dir + "/cactus.sel"),
                                                             deform::read_def(dir + "/cactus.def"));

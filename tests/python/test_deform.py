@@ -159,7 +159,10 @@ def test_frames_hold_the_handles_and_report_the_quality_readout():
         V = deformer.frame(targets)
         summary = deformer.last_frame
         assert summary.ok()
-        assert 1 <= summary.iterations == summary.rounds <= deformer.options.iterations
+        # The first frame after set_handles runs to the cold-start tolerance; the others `iterations` rounds.
+        cap = deformer.options.cold_start_rounds if summary.cold_start else deformer.options.iterations
+        assert summary.cold_start == (targets is scenario.frames[0])
+        assert 1 <= summary.iterations == summary.rounds <= cap
         assert summary.fixed_point_residual >= 0 and math.isfinite(summary.fixed_point_residual)
         # Accelerated rounds by default: E′ of the pose and the safeguard's count.
         assert deformer.options.anderson_window > 0
@@ -186,14 +189,26 @@ def test_accelerated_rounds_report_the_model_energy():
 
 def test_newton_options_are_exposed_and_checked():
     opts = deform.DeformerOptions(**OPTIONS)
-    assert opts.second_order is True and opts.settle_iterations == 16
-    deformer, scenario = make_deformer(second_order=False, settle_iterations=0)
-    assert deformer.options.second_order is False and deformer.options.settle_iterations == 0
+    assert opts.second_order is True and opts.cold_start_rounds == 500 and opts.cold_start_tolerance == 1e-6
+    deformer, scenario = make_deformer(second_order=False, cold_start_rounds=0)
+    assert deformer.options.second_order is False and deformer.options.cold_start_rounds == 0
     deformer.frame(scenario.frames[-1])
     assert deformer.last_frame.second_order is False  # patch handles: rounds, never Newton steps
+    assert deformer.last_frame.cold_start is False  # cold_start_rounds 0: the first frame runs like the others
     V, F, _ = small_cylinder()
-    with pytest.raises(ValueError, match="settle_iterations must be in"):
-        deform.Deformer(V, F, deform.DeformerOptions(**{**OPTIONS, "settle_iterations": -1})).precompute()
+    with pytest.raises(ValueError, match="cold_start_rounds must be in"):
+        deform.Deformer(V, F, deform.DeformerOptions(**{**OPTIONS, "cold_start_rounds": -1})).precompute()
+
+
+def test_the_first_frame_after_set_handles_runs_to_the_cold_start_tolerance():
+    deformer, scenario = make_deformer(cold_start_tolerance=1e-8, cold_start_rounds=2000)
+    deformer.frame(scenario.frames[-1])
+    first = deformer.last_frame
+    deformer.frame(scenario.frames[-1])
+    second = deformer.last_frame
+    assert first.cold_start and not second.cold_start
+    assert first.fixed_point_residual <= 1e-8 and first.iterations > deformer.options.iterations
+    assert second.iterations <= deformer.options.iterations
 
 
 def test_point_handles_from_vertex_indices_and_weighted_groups():

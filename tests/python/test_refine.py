@@ -24,7 +24,7 @@ def posed():
 
 def test_refine_from_the_reduced_pose_and_from_rest_reach_the_same_arap_energy(posed):
     _, scenario, reduced = posed
-    refiner = deform.Refiner(scenario.model, deform.RefineOptions(tolerance=1e-10))
+    refiner = deform.Refiner(scenario.model, deform.RefineOptions(distance_tolerance=0.0, tolerance=1e-10))
     targets = scenario.frames[-1]
     V_red, from_reduced = refiner.refine(scenario.handles, targets, reduced)
     V_rest, from_rest = refiner.refine(scenario.handles, targets)
@@ -50,6 +50,28 @@ def test_refine_from_the_reduced_pose_and_from_rest_reach_the_same_arap_energy(p
     assert from_reduced.rounds < from_rest.rounds
 
 
+def test_the_default_stop_is_within_its_estimate_of_the_converged_shape(posed):
+    # The default refine stops once it estimates the pose within
+    # distance_tolerance (RMS / diagonal) of the converged shape; the shape
+    # it returns is that close to a run to the reference test, and the
+    # estimate does not claim less than the distance is.
+    _, scenario, reduced = posed
+    targets = scenario.frames[-1]
+    refiner = deform.Refiner(scenario.model)
+    assert refiner.options.distance_tolerance == 1e-4 and refiner.options.tolerance == 0.0
+    V, summary = refiner.refine(scenario.handles, targets, reduced)
+    assert summary.converged and summary.estimated_distance <= 1e-4
+    refiner.set_options(deform.RefineOptions(distance_tolerance=0.0, tolerance=0.0))
+    tight, exact = refiner.refine(scenario.handles, targets, V)
+    assert exact.converged
+    diagonal = np.linalg.norm(scenario.model.V.max(axis=0) - scenario.model.V.min(axis=0))
+    rms = np.sqrt(np.mean(np.sum((V - tight) ** 2, axis=1))) / diagonal
+    assert rms <= 1e-4
+    assert summary.estimated_distance >= 0.5 * rms
+    with pytest.raises(ValueError, match="distance_tolerance"):
+        deform.RefineOptions(distance_tolerance=-1.0).validate()
+
+
 def test_refine_writes_the_callers_array(posed):
     _, scenario, reduced = posed
     refiner = deform.Refiner(scenario.model)
@@ -67,13 +89,14 @@ def test_cancel_from_another_thread_leaves_a_valid_pose():
     # machine sometimes before the first cancel() 50 ms later.)
     V0, F, sel = small_cylinder(around=60, rings=80)
     scenario = deform.sel_def_scenario(V0, F, sel, bend(math.pi / 3), frames=2)
-    refiner = deform.Refiner(scenario.model, deform.RefineOptions(tolerance=0.0, anderson_window=0,
-                                                                   max_iterations=1))
+    refiner = deform.Refiner(scenario.model, deform.RefineOptions(distance_tolerance=0.0, tolerance=0.0,
+                                                                   anderson_window=0, max_iterations=1))
     # One round first: it factors the global step of this handle set, so the
     # cancelled call below starts its rounds at once.
     _, first = refiner.refine(scenario.handles, scenario.frames[-1])
     assert first.refactored and first.rounds == 1
-    refiner.set_options(deform.RefineOptions(tolerance=0.0, anderson_window=0, max_iterations=1000000))
+    refiner.set_options(deform.RefineOptions(distance_tolerance=0.0, tolerance=0.0, anderson_window=0,
+                                             max_iterations=1000000))
     result = {}
 
     def run():

@@ -264,6 +264,7 @@ TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once
     RoundLatch latch(2);
     RefineOptions options;
     options.tolerance = 0.0;  // to the converged shape: far more than 2 rounds
+    options.distance_tolerance = 0.0;
     RefineWorker worker(s.input().scenario.model, options, latch.hook());
     worker.start(s.handle_set(), s.targets(), reduced);
     REQUIRE(latch.wait_held(worker));

@@ -143,6 +143,7 @@ TEST_CASE("deformer: with a linear proxy at every vertex the reduced Phase 1 is 
   CAPTURE(to_string(fit));
   DeformerOptions opts;
   opts.iterations = 1;
+  opts.cold_start_rounds = 0;  // exactly one round, the first frame too
   opts.global_rotation = false;
   opts.rotation_fit = fit;
   if (fit != ClusterRotationFit::Exact) opts.anderson_window = 0;  // plain rounds for the paper's step

@@ -4,6 +4,8 @@
 
 #include <catch2/catch.hpp>
 
+#include "../../shared_data.h"
+
 #include "qpreduce/deform/mesh/mesh.h"
 
 #include <filesystem>
@@ -65,18 +67,7 @@ void check_malformed(const TempDir& dir, Read read, const std::vector<Malformed>
 }
 
 // ../shared/data, or "" when it is absent (the data tests then skip).
-inline std::string shared_data() {
-  const fs::path p = fs::path(QPREDUCE_SHARED_DIR) / "data";
-  std::error_code ec;
-  return fs::is_directory(p, ec) ? p.lexically_normal().string() : std::string();
-}
-
-#define REQUIRE_SHARED_DATA(dir)                                                                   \
-  const std::string dir = io_test::shared_data();                                                  \
-  if (dir.empty()) {                                                                               \
-    WARN("skipped: the shared test data is not at " << QPREDUCE_SHARED_DIR << "/data");            \
-    return;                                                                                        \
-  }
+inline std::string shared_data() { return qpreduce_test::shared_data(); }
 
 // A closed octahedron (outward, counter-clockwise faces) with coordinates
 // that do not print exactly in few digits.

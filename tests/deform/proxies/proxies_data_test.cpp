@@ -3,6 +3,7 @@
 #include <catch2/catch.hpp>
 
 #include "proxies_test_util.h"
+#include "../../shared_data.h"
 
 #include <chrono>
 
@@ -11,12 +12,9 @@ using namespace qpreduce::deform;
 using namespace proxies_test;
 
 TEST_CASE("shared data: bunny spectral clusters and the paper's cactus .id file", "[clusters][data]") {
-  const std::string dir = shared_dir();
+  REQUIRE_SHARED_DATA(dir);
   Surface bunny;
-  if (dir.empty() || !read_off(dir + "/data/meshes/bunny.off", &bunny)) {
-    WARN("shared data not found; skipped");
-    return;
-  }
+  REQUIRE(read_off(dir + "/meshes/bunny.off", &bunny));
   ClusterOptions o;
   Clustering c;
   const ClusterSummary summary = compute_rotation_clusters(bunny.V, bunny.F, ClusterElement::Vertex, 27, o, &c);
@@ -34,14 +32,14 @@ TEST_CASE("shared data: bunny spectral clusters and the paper's cactus .id file"
   CHECK(proxies_cover_components(fps, comps, &why));
 
   Surface cactus;
-  REQUIRE(read_off(dir + "/data/meshes/botsch-sorkine/cactus.off", &cactus));
+  REQUIRE(read_off(dir + "/meshes/botsch-sorkine/cactus.off", &cactus));
   const IdClustering ids =
-      clusters_from_ids(read_ids(dir + "/data/paper-examples/cactus/cactus_rotation25.id"), cactus.V.rows());
+      clusters_from_ids(read_ids(dir + "/paper-examples/cactus/cactus_rotation25.id"), cactus.V.rows());
   CHECK(ids.count == 27);
   CHECK(ids.painted == 2);
   check_partition(ids.labels, ids.count);
   const LinearProxies groups =
-      linear_proxies_from_ids(read_ids(dir + "/data/paper-examples/cactus/cactus_cluster27.id"), cactus.V.rows());
+      linear_proxies_from_ids(read_ids(dir + "/paper-examples/cactus/cactus_cluster27.id"), cactus.V.rows());
   CHECK(groups.count() == 27);
   check_rows_sum_to_one(groups);
   CHECK(proxies_cover_components(groups, connected_components(cactus.V.rows(), cactus.F), &why));
@@ -49,11 +47,9 @@ TEST_CASE("shared data: bunny spectral clusters and the paper's cactus .id file"
 
 // Timing of the 40k-vertex case (hidden: run with `deform_proxies_tests "[perf]" -d yes`).
 TEST_CASE("perf: bumpy plane (40k vertices) into 27 rotation clusters", "[.][perf]") {
+  REQUIRE_SHARED_DATA(dir);
   Surface plane;
-  if (!read_off(shared_dir() + "/data/meshes/botsch-sorkine/bumpy_plane.off", &plane)) {
-    WARN("shared data not found; skipped");
-    return;
-  }
+  REQUIRE(read_off(dir + "/meshes/botsch-sorkine/bumpy_plane.off", &plane));
   ClusterOptions o;
   Clustering c;
   const auto start = std::chrono::steady_clock::now();

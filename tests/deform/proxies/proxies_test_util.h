@@ -244,12 +244,4 @@ inline std::vector<int> read_ids(const std::string& path) {
   return ids;
 }
 
-inline std::string shared_dir() {
-#ifdef QPREDUCE_SHARED_DIR
-  return QPREDUCE_SHARED_DIR;
-#else
-  return "";
-#endif
-}
-
 }  // namespace proxies_test

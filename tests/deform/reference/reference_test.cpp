@@ -407,6 +407,7 @@ TEST_CASE("Anderson-accelerated rounds: same fixed point, fewer rounds, energy n
     Deformer deformer;
     options.global_rotation = false;
     options.float_rounds = false;
+    options.cold_start_rounds = 0;  // k rounds from rest, not to the cold-start tolerance
     REQUIRE(deformer.precompute(c.model, options).ok());
     REQUIRE(deformer.set_handles(c.handles).ok());
     double previous = std::numeric_limits<double>::infinity();
@@ -480,7 +481,7 @@ TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton 
     options.model = kind;
     options.global_rotation = false;
     options.float_rounds = false;
-    options.settle_iterations = 0;  // k steps on every frame below
+    options.cold_start_rounds = 0;  // k steps on every frame below
     Converged newton;
     for (const bool second_order : {false, true}) {
       CAPTURE(second_order);
@@ -503,17 +504,28 @@ TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton 
         previous = fs.model_energy;
       }
       if (second_order) newton = converge_reduced(c, options);
-      // settle_iterations: the first frame after set_handles on a stiff set
-      // takes at least that many steps, the next ones `iterations`.
-      DeformerOptions settle = options;
-      settle.settle_iterations = 16;
+      // cold_start_rounds: the first frame after set_handles runs to
+      // cold_start_tolerance (a cold start: the targets jump from rest),
+      // the next ones `iterations` rounds or steps.
+      DeformerOptions cold = options;
+      cold.cold_start_rounds = 4000;
+      cold.cold_start_tolerance = 1e-9;
       Deformer d2;
-      REQUIRE(d2.precompute(c.model, settle).ok());
+      REQUIRE(d2.precompute(c.model, cold).ok());
       REQUIRE(d2.set_handles(c.handles).ok());
-      const FrameSummary first = d2.frame(c.targets, nullptr), second = d2.frame(c.targets, nullptr);
+      Vertices first_pose;
+      const FrameSummary first = d2.frame(c.targets, &first_pose), second = d2.frame(c.targets, nullptr);
       const bool stiff = second_order && kind == ModelKind::Arap;
-      CHECK(first.iterations == (stiff ? 16 : settle.iterations));
-      CHECK(second.iterations == settle.iterations);
+      CAPTURE(first.iterations, first.fixed_point_residual);
+      CHECK(first.cold_start);
+      CHECK_FALSE(second.cold_start);
+      CHECK(first.second_order == stiff);
+      CHECK(first.iterations > cold.iterations);
+      CHECK(first.fixed_point_residual <= 1e-9);
+      CHECK(second.iterations == cold.iterations);
+      // The first frame ends at the reduced fixed point: the converged pose.
+      const Converged converged = converge_reduced(c, options);
+      CHECK(max_distance(first_pose, converged.V) < 1e-6 * diag);
     }
     options.second_order = false;
     options.anderson_window = 0;
@@ -545,7 +557,7 @@ TEST_CASE("a stiff point-handle set with more than 28 clusters takes Newton step
   options.rotational_proxies = 32;
   options.global_rotation = false;
   options.float_rounds = false;
-  options.settle_iterations = 0;
+  options.cold_start_rounds = 0;
   Deformer deformer;
   const PrecomputeSummary ps = deformer.precompute(c.model, options);
   REQUIRE(ps.ok());
@@ -584,8 +596,11 @@ TEST_CASE("bad acceleration settings give clear errors", "[reference][anderson]"
   options.tolerance = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("tolerance"));
   options = DeformerOptions{};
-  options.settle_iterations = -1;
-  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("settle_iterations must be in [0, 10000]"));
+  options.cold_start_rounds = -1;
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("cold_start_rounds must be in [0, 100000]"));
+  options = DeformerOptions{};
+  options.cold_start_tolerance = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("cold_start_tolerance must be finite"));
   AlternatingOptions ao;
   ao.anderson_window = 0;
   CHECK(ao.is_valid(nullptr));

@@ -40,10 +40,12 @@ Vertices reduced_pose(const Case& c) {
   return V;
 }
 
-// A Refiner on c's model with this tolerance and Anderson window.
+// A Refiner on c's model with this tolerance (relative energy change or
+// fixed-point residual; no distance test) and Anderson window.
 Refiner make_refiner(const Case& c, double tolerance, int window) {
   RefineOptions options;
   options.tolerance = tolerance;
+  options.distance_tolerance = 0.0;
   options.anderson_window = window;
   Refiner refiner;
   refiner.precompute(c.model, options);
@@ -111,6 +113,46 @@ TEST_CASE("refine: from the reduced pose and from rest the same classic ARAP ene
   REQUIRE(rs.converged);
   CHECK(std::abs(a.arap_energy - rs.energy) <= 1e-6 * rs.energy);
   CHECK(max_distance(from_reduced, converged.V) < 1e-3 * diag);
+}
+
+TEST_CASE("refine: the default stop is within its estimate of the converged shape", "[reference][refine]") {
+  // The stop rule does not fire in a flat valley: the estimate divides the
+  // step by the gap 1 − ρ of the slowest contraction seen, so the pose it
+  // stops at is as close to the converged one as it says, from the reduced
+  // pose and from rest, plain and accelerated, surfaces and tets.
+  const bool tet = GENERATE(false, true);
+  const int window = GENERATE(0, 5);
+  CAPTURE(tet, window);
+  const Case c = bend_case(tet, 0.9);
+  const Vertices reduced = reduced_pose(c);
+  const double diag = bounding_box_diagonal(c.model.V);
+  RefineOptions options;
+  options.anderson_window = window;
+  CHECK(options.distance_tolerance == 1e-4);
+  CHECK(options.tolerance == 0.0);
+  Refiner refiner;
+  refiner.precompute(c.model, options);
+  Vertices converged;
+  RefineOptions tight = options;
+  tight.distance_tolerance = 0.0;  // to the reference test
+  refiner.set_options(tight);
+  REQUIRE(refiner.refine(c.handles, c.targets, reduced, &converged).converged);
+  refiner.set_options(options);
+  for (const bool from_rest : {false, true}) {
+    CAPTURE(from_rest);
+    Vertices out;
+    const RefineSummary s = refiner.refine(c.handles, c.targets, from_rest ? Vertices() : reduced, &out);
+    REQUIRE(s.ok());
+    CAPTURE(s.rounds, s.estimated_distance);
+    CHECK(s.converged);
+    CHECK(s.estimated_distance <= options.distance_tolerance);
+    const double rms = rms_distance(out, converged) / diag;
+    CAPTURE(rms);
+    CHECK(rms <= options.distance_tolerance);
+    CHECK(s.estimated_distance >= 0.5 * rms);  // the estimate does not claim much less than the distance
+  }
+  options.distance_tolerance = -1.0;
+  CHECK_THROWS_WITH(refiner.set_options(options), Catch::Contains("distance_tolerance must be finite and ≥ 0"));
 }
 
 TEST_CASE("refine: Anderson never raises the energy and reaches the plain fixed point in fewer rounds",
@@ -308,12 +350,23 @@ TEST_CASE("refine: converged shapes agree with the shared CGAL and libigl refere
     const TriangleMesh ref = read_triangle_mesh(data + "/references/" + r.reference);
     const Index ns = ref.V.rows();  // the tet reference holds the surface nodes only
     REQUIRE(ns <= c.model.V.rows());
+    // The default stop (an estimated 1e-4 of the diagonal from converged),
+    // from rest: within 0.1 % of the reference.
+    Refiner refiner;
+    refiner.precompute(c.model);
+    Vertices out;
+    const RefineSummary d = refiner.refine(c.handles, c.targets, {}, &out);
+    CAPTURE(d.rounds, d.estimated_distance);
+    REQUIRE(d.ok());
+    CHECK(d.converged);
+    CHECK(d.estimated_distance <= RefineOptions{}.distance_tolerance);
+    CHECK(rms_distance(out.topRows(ns), ref.V) / bounding_box_diagonal(c.model.V) <= 1e-3);
+    // Then tightly (no distance test, energy change 1e-9) for the energy.
     RefineOptions options;
     options.tolerance = 1e-9;
-    Refiner refiner;
-    refiner.precompute(c.model, options);
-    Vertices out;
-    const RefineSummary s = refiner.refine(c.handles, c.targets, {}, &out);
+    options.distance_tolerance = 0.0;
+    refiner.set_options(options);
+    const RefineSummary s = refiner.refine(c.handles, c.targets, out, &out);
     CAPTURE(s.rounds, s.seconds, s.arap_energy, s.rejected_steps);
     REQUIRE(s.ok());
     CHECK(s.converged);

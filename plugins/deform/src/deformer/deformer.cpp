@@ -29,8 +29,11 @@ bool DeformerOptions::is_valid(std::string* why) const {
   if (rotational_proxies < 1) return fail(fmt::format("rotational_proxies must be ≥ 1, got {}", rotational_proxies));
   if (linear_proxies < 0) return fail(fmt::format("linear_proxies must be ≥ 0, got {}", linear_proxies));
   if (iterations < 1) return fail(fmt::format("iterations must be ≥ 1, got {}", iterations));
-  if (settle_iterations < 0 || settle_iterations > 10000)
-    return fail(fmt::format("settle_iterations must be in [0, 10000] (0: off), got {}", settle_iterations));
+  if (cold_start_rounds < 0 || cold_start_rounds > 100000)
+    return fail(fmt::format("cold_start_rounds must be in [0, 100000] (0: off), got {}", cold_start_rounds));
+  if (!(cold_start_tolerance >= 0.0) || !std::isfinite(cold_start_tolerance)) {
+    return fail(fmt::format("cold_start_tolerance must be finite and ≥ 0, got {}", cold_start_tolerance));
+  }
   if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
     return fail(fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance));
   }

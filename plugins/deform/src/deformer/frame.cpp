@@ -85,6 +85,17 @@ void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& f
   }
 }
 
+// The first frame after set_handles runs to DeformerOptions::
+// cold_start_tolerance, within cold_start_rounds rounds (second-order steps
+// count kRoundsPerSecondOrderStep each).
+void cold_start(const detail_deformer::Settings& settings, bool second_order, AlternatingOptions* opts) {
+  const int cap = second_order ? std::max(1, settings.cold_start_rounds / DeformerOptions::kRoundsPerSecondOrderStep)
+                               : settings.cold_start_rounds;
+  opts->iterations = std::max(opts->iterations, cap);
+  const double tol = settings.cold_start_tolerance;
+  opts->tolerance = opts->tolerance > 0.0 ? std::min(opts->tolerance, tol) : tol;
+}
+
 }  // namespace
 
 FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
@@ -105,14 +116,20 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   work.r0_before = pose.r0;
   pose.r0 = global_rotation_of(model, pose.S, st.settings.global_rotation);
   const Eigen::Matrix3d r0t = pose.r0.transpose();
-  fill_targets(model, targets, r0t, &work.b);
+  if (onsite.target_projection.size() == 0) {
+    fill_targets(model, targets, r0t, &work.b);
+  } else {  // a dependent set: its targets projected onto its independent rows
+    fill_targets(model, targets, r0t, &work.b_targets);
+    work.b.noalias() = onsite.target_projection * work.b_targets;
+  }
   rotate_clusters(model.d, r0t, pose.S, &work.s_local);
   Timer t;
   AlternatingOptions opts = st.settings.alternating;
-  // A stiff set's first frame is a cold start (DeformerOptions::settle_iterations).
-  if (!onsite.settled && onsite.fused.second_order(*model.projection, opts))
-    opts.iterations = std::max(opts.iterations, st.settings.settle_iterations);
-  st.onsite.settled = true;
+  if (!onsite.warm && st.settings.cold_start_rounds > 0) {
+    cold_start(st.settings, onsite.fused.second_order(*model.projection, opts), &opts);
+    summary.cold_start = true;
+  }
+  st.onsite.warm = true;
   const bool tied = !onsite.tied_patches.empty();
   if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
@@ -172,6 +189,7 @@ void Deformer::reset_pose() {
   for (Index i = 0; i < state_->model.d; ++i) Eigen::Map<Eigen::Matrix3d>(pose.S.data() + 9 * i).setIdentity();
   pose.r0.setIdentity();
   pose.x.setZero();
+  state_->onsite.warm = false;  // the next frame starts from rest: a cold start
 }
 
 void Deformer::set_round_threads(int threads) {

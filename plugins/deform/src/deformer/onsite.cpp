@@ -7,6 +7,8 @@
 #include "handle_checks.h"
 #include "state.h"
 
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
 #include <Eigen/OrderingMethods>
 #include <Eigen/SparseQR>
 #include <fmt/format.h>
@@ -117,39 +119,74 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
   }
 }
 
-// Rank of the handle set's rows in the full space: of A (control rows ×
-// cols) by a sparse QR (COLAMD), pivots above 10⁻¹⁰ of the largest column
-// norm. A row that is an exact combination of others (a vertex held twice, a
-// group over handled vertices) leaves a pivot of round-off size; rows of
-// distinct vertices are orthogonal, so the factorization stays as sparse as
-// A even for thousands of handles. Only called for sets the subspace solved
-// in the least-squares sense.
-Index full_space_rank(const ConstraintLayout& layout) {
-  if (layout.cols == 0) return 0;
+// The handle set's rows in the full space, A (control rows × cols), and
+// their rank by a sparse QR (COLAMD), pivots above 10⁻¹⁰ of the largest
+// column norm. A row that is an exact combination of others (a vertex held
+// twice, a group over handled vertices) leaves a pivot of round-off size;
+// rows of distinct vertices are orthogonal, so the factorization stays as
+// sparse as A even for thousands of handles. `independent`, when given,
+// receives `rank` columns of A that span the others (ascending). Only
+// called for sets the subspace solved in the least-squares sense.
+struct FullSpaceRows {
+  SparseMatrix<double> A;
+  Index rank = 0;
+};
+FullSpaceRows full_space_rows(const ConstraintLayout& layout, std::vector<Index>* independent = nullptr) {
+  FullSpaceRows out;
+  if (layout.cols == 0) return out;
   Index rows = 0;
   for (const auto& e : layout.a) rows = std::max<Index>(rows, e.row() + 1);
-  SparseMatrix<double> A(rows, layout.cols);
-  A.setFromTriplets(layout.a.begin(), layout.a.end());  // repeated entries add up, as in reduced_constraints
-  A.makeCompressed();
+  out.A.resize(rows, layout.cols);
+  out.A.setFromTriplets(layout.a.begin(), layout.a.end());  // repeated entries add up, as in reduced_constraints
+  out.A.makeCompressed();
   double top = 0.0;
-  for (Index j = 0; j < A.cols(); ++j) top = std::max(top, A.col(j).norm());
-  if (!(top > 0.0)) return 0;
+  for (Index j = 0; j < out.A.cols(); ++j) top = std::max(top, out.A.col(j).norm());
+  if (!(top > 0.0)) return out;
   Eigen::SparseQR<SparseMatrix<double>, Eigen::COLAMDOrdering<int>> qr;
   qr.setPivotThreshold(1e-10 * top);
-  qr.compute(A);
-  return qr.info() == Eigen::Success ? qr.rank() : 0;
+  qr.compute(out.A);
+  if (qr.info() != Eigen::Success) return out;
+  out.rank = qr.rank();
+  if (independent) {
+    independent->clear();
+    for (Index i = 0; i < out.rank; ++i) independent->push_back(qr.colsPermutation().indices()(i));
+    std::sort(independent->begin(), independent->end());
+  }
+  return out;
+}
+
+// A dependent set (its rank below its row count, the same in the full space
+// and the subspace): A = A_I·E with A_I the independent columns, so AᵀX = b
+// holds in the least-squares sense exactly when A_IᵀX = c with c = P·b,
+// P = (E·Eᵀ)⁻¹·E (rank × cols; for a vertex held twice, the mean of its two
+// targets). Returns P.
+Matrix<double> target_projection(const SparseMatrix<double>& A, const std::vector<Index>& independent) {
+  const Index r = static_cast<Index>(independent.size());
+  SparseMatrix<double> select(A.cols(), r);  // A_I = A·select, sparse as A
+  for (Index i = 0; i < r; ++i) select.insert(independent[static_cast<size_t>(i)], i) = 1.0;
+  const SparseMatrix<double> AI = A * select;
+  const SparseMatrix<double> AIt = AI.transpose();
+  const Matrix<double> G = Matrix<double>(AIt * AI);                 // r × r, SPD (independent columns)
+  const Matrix<double> E = G.ldlt().solve(Matrix<double>(AIt * A));  // r × cols
+  return (E * E.transpose()).ldlt().solve(E);
 }
 
 // Why a hard set's exact answer cannot be trusted (DeformerOptions::
 // soften_unreachable_handles), or "": its rank in the subspace (of A_z) is
-// below its rank in the full space, or its condition there is above
-// kSoftCondition (the float basis's round-off, 6·10⁻⁸ relative, times the
-// condition then passes 1 %).
+// below its rank in the full space, or its condition there (over the rank
+// it has, for a dependent set too) is above kSoftCondition (the float
+// basis's round-off, 6·10⁻⁸ relative, times the condition then passes 1 %).
 constexpr double kSoftCondition = 1e5;
 
 std::string unreachable_reason(const ConstraintLayout& layout, const ConstraintSummary& cs) {
   if (cs.status == Status::ConstraintsLeastSquares) {
-    const Index full_rank = full_space_rank(layout);
+    const Index full_rank = full_space_rows(layout).rank;
+    if (cs.rank >= full_rank && cs.condition > kSoftCondition) {  // dependent, and ill-conditioned in the subspace
+      return fmt::format(
+          "their {} constraint rows (rank {}, as in the full space) have condition {:.3g} in the subspace, above "
+          "{:.0e}: the float basis's round-off (6·10⁻⁸) alone can move the least-squares answer by more than 1 %",
+          cs.m, cs.rank, cs.condition, kSoftCondition);
+    }
     if (cs.rank >= full_rank) return {};  // merely dependent rows: the subspace meets what the full space can
     return fmt::format(
         "their {} constraint rows have rank {} in the full space but {} in the subspace (more point handles than the "
@@ -193,6 +230,39 @@ void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* o
 
 }  // namespace detail_deformer
 
+// A dependent set that the subspace meets as well as the full space does (a
+// vertex held twice, a group over held vertices; no ties, hard constraints):
+// its independent rows, solved exactly, with the targets projected onto them
+// each frame (target_projection). The rounds then step on E′ as for any
+// exact set, where the least-squares form runs uncorrected rounds that need
+// not converge. Returns false (and changes nothing) when it does not apply.
+bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, const RowMatrixD& Ar,
+                           const ConstraintOptions& options, OnSite* onsite, ConstraintSummary* cs) {
+  if (cs->status != Status::ConstraintsLeastSquares || options.soft || !layout.tied.empty()) return false;
+  std::vector<Index> independent;
+  const FullSpaceRows full = full_space_rows(layout, &independent);
+  if (full.rank == 0 || full.rank >= layout.cols || cs->rank < full.rank) return false;
+  RowMatrixD ArI(full.rank, Ar.cols());
+  for (Index i = 0; i < full.rank; ++i) ArI.row(i) = Ar.row(independent[static_cast<size_t>(i)]);
+  const ConstraintSummary reduced = onsite->phase1.set_reduced_constraints(
+      model.solver, ArI.leftCols(model.nx), ArI.rightCols(9 * model.d), options);
+  if (reduced.status != Status::Success) {  // back to the least-squares form
+    onsite->phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+    return false;
+  }
+  onsite->target_projection = target_projection(full.A, independent);
+  ConstraintSummary out = reduced;
+  out.status = Status::ConstraintsLeastSquares;
+  out.m = layout.cols;
+  out.message = fmt::format(
+      "{} hard constraints have rank {} (dependent rows: a vertex held twice, or a group over held vertices): "
+      "they hold in the least-squares sense, their targets projected onto {} independent rows each frame, which "
+      "hold exactly (condition {:.3g})",
+      layout.cols, full.rank, full.rank, reduced.condition);
+  *cs = out;
+  return true;
+}
+
 ConstraintSummary Deformer::set_handles(const Handles& handles, const ConstraintOptions& options) {
   State& st = *state_;
   if (!st.ready) throw std::invalid_argument("Deformer::set_handles: call precompute first");
@@ -211,6 +281,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   const RowMatrixD Ar = reduced_constraints(model, layout);
   ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+  onsite.target_projection.resize(0, 0);
   bool softened = false;
   // (Not with ties: a free Rigid patch's tie to its cluster must hold exactly.)
   if (st.settings.soften_unreachable_handles && !options.soft && layout.tied.empty()) {
@@ -219,8 +290,21 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
       ConstraintOptions soft = options;
       soft.soft = true;
+      // More rows than the subspace has coordinates: the soft term
+      // δ‖A_r·x − b‖² is δ‖R·x − Qᵀb‖² plus a constant (A_r = Q·R, thin),
+      // so the set is solved on the p rows of R with the targets projected by
+      // Qᵀ each frame (OnSite::target_projection): the same minimiser, and
+      // few enough rows for the energy terms (the rounds then step on E′).
+      RowMatrixD Rsoft;
+      if (Ar.rows() > Ar.cols()) {
+        const Eigen::HouseholderQR<Matrix<double>> qr(Ar);
+        const Index p = Ar.cols();
+        Rsoft = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+        onsite.target_projection = (qr.householderQ() * Matrix<double>::Identity(Ar.rows(), p)).transpose();
+      }
+      const RowMatrixD& As = Rsoft.size() > 0 ? Rsoft : Ar;
       ConstraintSummary ss =
-          onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), soft);
+          onsite.phase1.set_reduced_constraints(model.solver, As.leftCols(model.nx), As.rightCols(9 * model.d), soft);
       if (ss.ok()) {
         ss.status = Status::ConstraintsLeastSquares;
         ss.message = fmt::format(
@@ -230,17 +314,18 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
         cs = ss;
         softened = true;
       } else {  // keep the exact form, as before
+        onsite.target_projection.resize(0, 0);
         cs = onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d),
                                                    options);
       }
     }
   }
+  const bool reduced = !softened && reduce_dependent_rows(model, layout, Ar, options, &onsite, &cs);
   make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
-  // A softened set gets Phase 1's energy terms (its rounds then step on E′)
-  // only with at most as many rows as the subspace has coordinates: the
-  // soft terms hold an m × m matrix (Λ_b), O(m²) memory and work per round.
-  onsite.constraints_ok = cs.ok() || (softened && Ar.rows() <= Ar.cols());
+  // A softened set has at most as many rows as the subspace has coordinates
+  // (compressed above): it gets Phase 1's energy terms too.
+  onsite.constraints_ok = cs.ok() || reduced || softened;
   // The energy terms first: the fused rounds read them for point handles,
   // whose rows involve the cluster rotations (alternating.h, "Constraints on y").
   detail_deformer::prepare_energy_terms(model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, &onsite);
@@ -248,8 +333,9 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   onsite.tie_row0 = layout.tie_row0;
   onsite.handles = handles;
   onsite.rows = layout.cols;
-  onsite.settled = false;
-  st.work.b.setZero(layout.cols);
+  onsite.warm = false;
+  st.work.b_targets.setZero(layout.cols);
+  st.work.b.setZero(onsite.target_projection.size() > 0 ? onsite.target_projection.rows() : layout.cols);
   return cs;
 }
 

@@ -293,7 +293,8 @@ void Deformer::State::finish(const DeformerOptions& options) {
   settings.alternating.tolerance = options.tolerance;
   settings.alternating.anderson_window = options.anderson_window;
   settings.alternating.second_order = options.second_order;
-  settings.settle_iterations = options.settle_iterations;
+  settings.cold_start_rounds = options.cold_start_rounds;
+  settings.cold_start_tolerance = options.cold_start_tolerance;
   settings.soften_unreachable_handles = options.soften_unreachable_handles;
   settings.alternating.float_products = options.float_rounds;
   settings.alternating.threads = options.round_threads;

@@ -155,7 +155,7 @@ struct OnSite {
   FixedCoordinateSolver<double> phase1;
   FusedAlternation<double> fused;
   bool fused_inputs_plain = false;  // fused was last set with G_z = MN, G_y = MU (MN, MU never change after precompute)
-  bool settled = false;             // a frame ran since set_handles (DeformerOptions::settle_iterations)
+  bool warm = false;                // a frame ran since set_handles (DeformerOptions::cold_start_rounds)
   Handles handles;
   Index rows = 0;  // constraint rows
   // Ties of the current handle set: free Rigid patches, their rows start at
@@ -170,6 +170,11 @@ struct OnSite {
   // not solved exactly, or a projection without quadratic_term.
   std::string plain_reason;
   bool constraints_ok = false;  // Success, or softened (DeformerOptions::soften_unreachable_handles)
+  // A dependent set solved on its independent rows (onsite.cpp,
+  // reduce_dependent_rows), or a softened set with more rows than the
+  // subspace has coordinates, on the rows of its R factor: b = P·(the set's
+  // targets), P (fewer rows) × rows; empty otherwise (b is the targets).
+  Matrix<double> target_projection;
 };
 
 // Sets onsite->plain_reason for the current handle set (why its rounds
@@ -189,7 +194,8 @@ struct Pose {
 
 // Per-frame scratch (sized once by finish).
 struct Workspace {
-  Eigen::VectorXd b;        // handle targets in the frame of r₀ (OnSite::rows)
+  Eigen::VectorXd b;          // Phase 1's right-hand side: b_targets, or P·b_targets (OnSite::target_projection)
+  Eigen::VectorXd b_targets;  // handle targets in the frame of r₀ (OnSite::rows)
   Eigen::VectorXd s_local;  // 9d: S in the frame of r₀
   // The last good pose's x and r₀, put back when a frame's rounds fail
   // (NaN): the pose stays the last good one and the next frame starts there.
@@ -202,7 +208,8 @@ struct Workspace {
 struct Settings {
   AlternatingOptions alternating;
   bool global_rotation = true;
-  int settle_iterations = 16;
+  int cold_start_rounds = 500;        // DeformerOptions::cold_start_rounds
+  double cold_start_tolerance = 1e-6;  // DeformerOptions::cold_start_tolerance
   bool soften_unreachable_handles = true;  // DeformerOptions::soften_unreachable_handles
 };
 

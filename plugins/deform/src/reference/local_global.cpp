@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -575,6 +576,75 @@ HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
   return summary;
 }
 
+namespace {
+
+// ReferenceSummary::estimated_distance. For a map G with Jacobian J near
+// its fixed point z*, the residual r = G(z) − z = (J − I)(z − z*), so
+// ‖z − z*‖ ≤ ‖r‖ / σ, σ the smallest singular value of I − J: small where
+// local-global is slow (the smooth modes of a flat valley), which is where a
+// small step says little. σ is estimated on the span of the last kWindow
+// steps Δz_j = z_j − z_{j−1}, for which (I − J)Δz_j ≈ −Δr_j: σ² ≈ the least
+// μ with ΔRᵀΔR·c = μ·ΔZᵀΔZ·c (a Rayleigh–Ritz value; the span of the recent
+// steps is a Krylov space of J, whose extreme modes it finds within a few
+// steps). Vertex parts only, RMS over the vertices, over the diagonal; the
+// steps kept in float (2·kWindow·3n numbers), their products summed in double.
+class DistanceEstimate {
+ public:
+  static constexpr int kWindow = 16;
+  DistanceEstimate(Index nx, Index n, double diagonal)
+      : nx_(nx), scale_(1.0 / (std::sqrt(static_cast<double>(std::max<Index>(n, 1))) * diagonal)) {}
+  double update(const Eigen::VectorXd& z, const Eigen::VectorXd& gz) {
+    if (z_.size() == 0) {  // the first round: sized once
+      z_ = z.head(nx_);
+      r_ = gz.head(nx_) - z_;
+      dz_.setZero(nx_, kWindow);
+      dr_.setZero(nx_, kWindow);
+      r_new_.resize(nx_);
+      return std::numeric_limits<double>::infinity();
+    }
+    const int c = count_ % kWindow;
+    r_new_ = gz.head(nx_) - z.head(nx_);
+    dz_.col(c) = (z.head(nx_) - z_).cast<float>();
+    dr_.col(c) = (r_new_ - r_).cast<float>();
+    z_ = z.head(nx_);
+    r_.swap(r_new_);
+    ++count_;
+    const int m = std::min(count_, kWindow);
+    for (int j = 0; j < m; ++j) {  // the new Gram column
+      zz_(c, j) = zz_(j, c) = dot(dz_.col(c), dz_.col(j));
+      rr_(c, j) = rr_(j, c) = dot(dr_.col(c), dr_.col(j));
+    }
+    // Scaled to a unit ΔZᵀΔZ diagonal, with a floor for dependent steps.
+    Eigen::MatrixXd B = zz_.topLeftCorner(m, m), A = rr_.topLeftCorner(m, m);
+    const Eigen::VectorXd d = B.diagonal().cwiseMax(std::numeric_limits<double>::min()).cwiseSqrt().cwiseInverse();
+    B = d.asDiagonal() * B * d.asDiagonal();
+    A = d.asDiagonal() * A * d.asDiagonal();
+    B.diagonal().array() += 1e-10;
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> eig(A, B, Eigen::EigenvaluesOnly);
+    const double sigma = eig.info() == Eigen::Success ? std::sqrt(std::max(eig.eigenvalues()(0), 0.0)) : 0.0;
+    const double step = r_.norm() * scale_;
+    return step / std::max(sigma, kMinGap);
+  }
+
+ private:
+  static constexpr double kMinGap = 1e-12;
+  template <typename A, typename B>
+  static double dot(const A& a, const B& b) {
+    double sum = 0.0;
+    for (Index i = 0; i < a.size(); ++i) sum += static_cast<double>(a(i)) * static_cast<double>(b(i));
+    return sum;
+  }
+  Index nx_;
+  double scale_;
+  Eigen::VectorXd z_, r_, r_new_;
+  Eigen::MatrixXf dz_, dr_;  // nx × kWindow, ring buffers of Δz and Δr
+  Eigen::Matrix<double, kWindow, kWindow> zz_ = Eigen::Matrix<double, kWindow, kWindow>::Zero(),
+                                          rr_ = Eigen::Matrix<double, kWindow, kWindow>::Zero();
+  int count_ = 0;
+};
+
+}  // namespace
+
 ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial,
                                         const std::function<bool()>& cancel) {
   const State& st = *state_;
@@ -614,6 +684,9 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
     rounds.Q = v.tail(rounds.Q.size());
   };
   pack(&z);
+  DistanceEstimate distance(nx, st.n, m.diagonal);
+  constexpr int kHoldRounds = 16;
+  int held_from = -1;  // the first round of the current run of estimates within distance_tolerance
   const bool accelerate = st.options.anderson_window > 0;
   AndersonAcceleration anderson;
   if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
@@ -633,6 +706,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
     }
     pack(&gz);
     summary.fixed_point_residual = (gz - z).norm() / std::max(z.norm(), std::numeric_limits<double>::min());
+    summary.estimated_distance = distance.update(z, gz);
     double next = 0.0;
     if (accelerate && anderson.history() > 0) {
       anderson.step(z, gz, za);
@@ -660,7 +734,13 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
         summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
     const bool refine_test = st.options.tolerance > 0 &&
                              (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
-    if (reference_test || refine_test) {
+    // The distance test holds once the estimate has stayed within the
+    // tolerance for half the rounds so far (at least kHoldRounds): early on
+    // the fast modes' progress can hide a slow one from the estimate.
+    held_from = summary.estimated_distance <= st.options.distance_tolerance ? (held_from < 0 ? it : held_from) : -1;
+    const bool distance_test = st.options.distance_tolerance > 0 && held_from >= 0 &&
+                               it - held_from + 1 >= std::max(kHoldRounds, (it + 1) / 2);
+    if (reference_test || refine_test || distance_test) {
       summary.converged = true;
       ++it;
       break;
@@ -700,6 +780,7 @@ void LocalGlobalArap::set_iteration_options(const ReferenceOptions& options) {
   st.options.step_tolerance = options.step_tolerance;
   st.options.energy_tolerance = options.energy_tolerance;
   st.options.tolerance = options.tolerance;
+  st.options.distance_tolerance = options.distance_tolerance;
   st.options.anderson_window = options.anderson_window;
   st.options.threads = options.threads;
 }

@@ -38,7 +38,8 @@ bool ReferenceOptions::is_valid(std::string* why) const {
                                 {"function_tolerance", function_tolerance},
                                 {"gradient_tolerance", gradient_tolerance},
                                 {"parameter_tolerance", parameter_tolerance},
-                                {"tolerance", tolerance}}) {
+                                {"tolerance", tolerance},
+                                {"distance_tolerance", distance_tolerance}}) {
     if (!(v >= 0.0) || !std::isfinite(v)) return fail(fmt::format("{} must be finite and ≥ 0, got {}", name, v));
   }
   if (!frame.allFinite() || (frame.transpose() * frame - Eigen::Matrix3d::Identity()).norm() > 1e-9 ||

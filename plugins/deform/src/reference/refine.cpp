@@ -22,6 +22,7 @@ ReferenceOptions reference_options(const RefineOptions& o) {
   ro.parameters = o.parameters;
   ro.backend = o.backend;
   ro.tolerance = o.tolerance;
+  ro.distance_tolerance = o.distance_tolerance;
   ro.anderson_window = o.anderson_window;
   ro.max_iterations = o.max_iterations;
   ro.threads = o.threads > 0 ? o.threads : std::max(1, omp_get_max_threads());
@@ -82,6 +83,7 @@ void Refiner::set_options(const RefineOptions& options) {
   if (st.rest.rows() == 0) throw std::invalid_argument("Refiner::set_options: call precompute first");
   check_options(options);
   st.options.tolerance = options.tolerance;
+  st.options.distance_tolerance = options.distance_tolerance;
   st.options.anderson_window = options.anderson_window;
   st.options.max_iterations = options.max_iterations;
   st.options.threads = options.threads;
@@ -131,6 +133,7 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
   summary.initial_energy = rs.initial_energy;
   summary.energy = rs.energy;
   summary.fixed_point_residual = rs.fixed_point_residual;
+  summary.estimated_distance = rs.estimated_distance;
   summary.handle_residual = rs.handle_residual;
   summary.round_energy = rs.round_energy;
   summary.round_seconds = rs.round_seconds;

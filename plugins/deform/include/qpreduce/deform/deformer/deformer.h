@@ -80,26 +80,33 @@ struct DeformerOptions {
   // a dozen rounds). false: rounds always (they then crawl on such sets:
   // docs/robustness.md, "Soak").
   bool second_order = true;
-  // On such a set the first frame after set_handles takes at least this many
-  // steps (0: `iterations`): new handles whose targets jump away from the
-  // pose are a cold start, which 8 steps leave up to 40× the settled energy
-  // on the stiffest soak sets (docs/robustness.md, "Soak").
-  int settle_iterations = 16;
+  // The first frame after set_handles is a cold start: new handles whose
+  // targets may lie far from the pose. It runs until its fixed-point
+  // residual is at most cold_start_tolerance (or `tolerance` when that is
+  // smaller and > 0), for at most cold_start_rounds rounds; a second-order
+  // step counts as kRoundsPerSecondOrderStep rounds. The frames after it run
+  // as `iterations` and `tolerance` say. cold_start_rounds 0: the first
+  // frame runs like the others.
+  int cold_start_rounds = 500;
+  double cold_start_tolerance = 1e-6;
+  static constexpr int kRoundsPerSecondOrderStep = 10;
   // A hard handle set the subspace cannot meet reliably: its rows have lower
   // rank in the subspace than in the full space (more point handles than the
   // proxies can follow, e.g. every vertex of a region as its own handle), or
-  // condition above 10⁵ there (the float basis's round-off, 6·10⁻⁸, can then
-  // move the exact answer by more than 1 %). Its exact (least-squares) answer
-  // is ill-posed: the singular values decay to round-off without a gap, and
-  // fitting targets along them blows the pose up (docs/robustness.md, "Soak",
-  // hostile sets). true: set_handles solves such a set as soft constraints
-  // (Eq. 18, ConstraintOptions::delta), bounded, and returns
-  // ConstraintsLeastSquares with the reason; with at most as many rows as
-  // the subspace has coordinates its rounds step on E′ (energy terms), with
-  // more they run plain (the terms would be m × m). Sets that are merely dependent
-  // (a vertex held twice, a group over handled vertices) have the same rank
-  // in both spaces and stay exact; so do sets that tie a free Rigid patch.
-  // false: the exact (least-squares) form always.
+  // condition above 10⁵ there over the rank it has (the float basis's
+  // round-off, 6·10⁻⁸, can then move the exact answer by more than 1 %). Its
+  // exact (least-squares) answer is ill-posed: the singular values decay to
+  // round-off without a gap, and fitting targets along them blows the pose
+  // up (docs/robustness.md, "Soak", hostile sets). true: set_handles solves
+  // such a set as soft constraints (Eq. 18, ConstraintOptions::delta),
+  // bounded, and returns ConstraintsLeastSquares with the reason; a set with
+  // more rows than the subspace has coordinates is compressed to as many
+  // (the same soft minimiser), so the rounds step on E′. Sets that are merely
+  // dependent (a vertex held twice, a group over held vertices) have the
+  // same rank in both spaces and stay exact: their targets are projected
+  // onto their independent rows (the least-squares answer), which hold
+  // exactly; so do sets that tie a free Rigid patch. false: the exact
+  // (least-squares) form always.
   bool soften_unreachable_handles = true;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
@@ -152,6 +159,9 @@ struct FrameSummary : Outcome {  // Success after a frame
   // This frame took second-order steps (DeformerOptions::second_order on a
   // stiff point-handle set) instead of rounds: `iterations` counts steps.
   bool second_order = false;
+  // The first frame after set_handles (DeformerOptions::cold_start_rounds):
+  // it ran to cold_start_tolerance instead of `iterations` rounds.
+  bool cold_start = false;
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
@@ -282,7 +292,8 @@ class Deformer {
   // std::invalid_argument when `out` does not have n rows.
   FrameSummary frame(const HandleTargets& targets, Eigen::Map<Vertices> out);
 
-  // Back to the rest rotations (S = identity, r₀ = identity).
+  // Back to the rest rotations (S = identity, r₀ = identity); the next frame
+  // is a cold start (DeformerOptions::cold_start_rounds).
   void reset_pose();
   // Changes DeformerOptions::round_threads for the following frames (≥ 0).
   void set_round_threads(int threads);

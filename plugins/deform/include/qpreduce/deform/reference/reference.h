@@ -47,6 +47,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -84,6 +85,11 @@ struct ReferenceOptions {
   // 0 (the default) leaves only the step/energy test above, which is meant
   // for converged references; a refine uses e.g. 1e-6. Finite and ≥ 0.
   double tolerance = 0.0;
+  // Local-global: also stop once the estimated distance of the pose to the
+  // fixed point the rounds converge to, RMS over the vertices and divided by
+  // the bounding-box diagonal (ReferenceSummary::estimated_distance), is ≤
+  // distance_tolerance. 0 (the default): no such test. Finite and ≥ 0.
+  double distance_tolerance = 0.0;
   // Local-global: Anderson acceleration (anderson.h) of the rounds with this
   // window, in [0, 16]; 0 = the plain alternation. An accelerated pose is
   // kept only when it does not raise the energy, otherwise the plain round
@@ -113,6 +119,13 @@ struct ReferenceSummary : Outcome {
   double handle_residual = 0.0;  // largest constraint violation (absolute distance)
   double last_step = 0.0;    // local-global: largest vertex move of the last round
   double fixed_point_residual = 0.0;  // local-global: ‖G(z) − z‖ / ‖z‖ of the last round
+  // Local-global: how far the pose is estimated to be from the converged
+  // one, RMS over the vertices / the bounding-box diagonal: the round's step
+  // δ = RMS(G(z) − z) over 1 − ρ, ρ the largest contraction ‖G(z) − G(z′)‖ /
+  // ‖z − z′‖ between consecutive iterates over the last rounds (the rate of
+  // the slow modes a flat valley leaves; docs/deform.md, "The refine's stop
+  // rule"). Infinite until two rounds have run.
+  double estimated_distance = std::numeric_limits<double>::infinity();
   int rejected_steps = 0;             // local-global: accelerated poses refused by the energy safeguard
   bool cancelled = false;             // local-global: the cancel hook stopped it (the pose is the last accepted one)
   // Local-global: after each round, the energy of the accepted pose and the
