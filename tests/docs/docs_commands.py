@@ -18,10 +18,14 @@ allowed) changes that:
                                              (smaller inputs, fewer rounds)
     <!-- docs-test: set NAME=VALUE ... -->   run with these variables
                                              exported first (sh blocks)
+    <!-- docs-test: needs-data -->           reads the shared test data
+                                             without naming ../shared (a
+                                             script's default)
 
 `smoke` and `set` may share one comment, separated by " | "; an
 illustration's reason is the rest of its comment. A block that
-reads ../shared is skipped with a message when the shared data is absent
+reads ../shared (in its text, its substitutions or its variables) or is
+marked needs-data is skipped with a message when the shared data is absent
 ($QPREDUCE_SHARED_DATA, when set, names its folder: tests/shared_data.h).
 Exit status: 0 when every runnable block passed (or was skipped), 1 otherwise.
 """
@@ -45,6 +49,7 @@ class Block:
         self.illustration = None
         self.substitutions = []
         self.variables = []
+        self.needs_data = False
         if directive.startswith("illustration:"):  # the rest of the comment is the reason
             self.illustration = directive[len("illustration:"):].strip()
             if not self.illustration:
@@ -58,6 +63,8 @@ class Block:
                             raise ValueError(f"{self.where()}: smoke substitution without '=>': {pair!r}")
                         old, new = (x.strip() for x in pair.split("=>", 1))
                         self.substitutions.append((old, new))
+            elif part == "needs-data":
+                self.needs_data = True
             elif part.startswith("set "):
                 self.variables.extend("export " + v for v in part[4:].split())
             else:
@@ -130,7 +137,7 @@ def scratch_checkout(source, build, data):
 
 
 def run(block, root, build, data_present):
-    if "../shared" in block.text and not data_present:
+    if (block.needs_data or "../shared" in block.script()) and not data_present:
         return "skipped", "the shared test data is absent"
     env = dict(os.environ)
     env.pop("QPREDUCE_SHARED_DATA", None)  # the scratch tree's ../shared/data is what the block reads
