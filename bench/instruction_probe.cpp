@@ -18,16 +18,30 @@
 //         --toggle-collect=qpreduce_probe_frame build/bin/instruction_probe Cactus
 // and callgrind_annotate --inclusive=yes gives each function's count. Run it
 // on one thread (OMP_NUM_THREADS=1, OPENBLAS_NUM_THREADS=1) so that the
-// counts do not depend on the machine's cores.
+// counts do not depend on the machine's cores. Built with valgrind's
+// callgrind.h, it starts callgrind's instrumentation itself after loading
+// the model (its summary line says so), so that valgrind's
+// --instr-atstart=no runs the load at a fraction of the instrumented cost.
 #include "deform_models.h"
 
 #include <fmt/format.h>
+
+#if __has_include(<valgrind/callgrind.h>)
+#include <valgrind/callgrind.h>
+#define QPREDUCE_PROBE_CLIENT_REQUESTS 1
+#endif
 
 #include <exception>
 #include <string>
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
+
+#ifdef QPREDUCE_PROBE_CLIENT_REQUESTS
+constexpr bool kClientRequests = true;
+#else
+constexpr bool kClientRequests = false;
+#endif
 
 // Not inlined and not static: callgrind's --toggle-collect finds them by name.
 extern "C" __attribute__((noinline)) void qpreduce_probe_op(Deformer* deformer, const Handles* handles,
@@ -59,6 +73,9 @@ int main(int argc, char** argv) {
     const double diagonal = bounding_box_diagonal(model.V);
 
     ConstraintSummary cs;
+#ifdef QPREDUCE_PROBE_CLIENT_REQUESTS
+    CALLGRIND_START_INSTRUMENTATION;
+#endif
     qpreduce_probe_op(&deformer, &handles, &cs);
     if (!cs.usable()) throw std::runtime_error("handles: " + cs.message);
     Vertices vertices;
@@ -68,9 +85,9 @@ int main(int argc, char** argv) {
     targets = bench::moved_targets(rest, diagonal, 1);
     FrameSummary frame;
     qpreduce_probe_frame(&deformer, &targets, &vertices, &frame);
-    fmt::print("{}: vertices {}, reduced {}, OP: {} (fast path {}), first frame {} rounds, frame {} rounds\n",
+    fmt::print("{}: vertices {}, reduced {}, OP: {} (fast path {}), first frame {} rounds, frame {} rounds{}\n",
                spec.name, pre.vertices, pre.reduced_size, cs.message, cs.fast_path ? 1 : 0, first.iterations,
-               frame.iterations);
+               frame.iterations, kClientRequests ? " (callgrind client requests)" : "");
   } catch (const std::exception& e) {
     fmt::print(stderr, "instruction_probe: {}\n", e.what());
     return 1;
