@@ -59,6 +59,7 @@
 // ../shared/data; missing models are skipped with a message.
 // bench/table1.py turns the JSON output into docs/performance.md's table.
 #include "bench_util.h"
+#include "deform_models.h"
 
 #include <qpreduce/deform/deformer/deformer.h>
 #include <qpreduce/deform/mesh/geometry.h>
@@ -93,26 +94,9 @@ namespace {
 using namespace qpreduce;
 using namespace qpreduce::deform;
 
-struct ModelSpec {
-  const char* name;
-  const char* path;  // under the shared data folder
-  Index linear, rotational;
-};
+using bench::kModels;
+using bench::ModelSpec;
 
-// Table 1 of the paper: the models we have, with its proxy counts.
-const ModelSpec kModels[] = {
-    {"Cylinder", "meshes/botsch-sorkine/cylinder.off", 33, 12},
-    {"Cactus", "meshes/botsch-sorkine/cactus.off", 33, 27},
-    {"Bar", "meshes/botsch-sorkine/bar.off", 33, 52},
-    {"BumpyPlane", "meshes/botsch-sorkine/bumpy_plane.off", 33, 27},
-    {"SolidCylinder", "tets/solid_cylinder.node", 33, 52},
-    {"Tree", "paper-examples/tree/tree.off", 60, 60},
-    {"Fertility", "tets/solid_fertility.node", 29, 26},
-    {"Dinosaur", "paper-examples/dinosaur/dinosaur.off", 46, 34},
-    {"Dragon", "paper-examples/dragon/dragon.off", 20, 20},
-};
-
-constexpr Index kHandles = 8;
 // Fresh precomputes per model (the Bumpy Plane's took 9.0–10.3 s over one
 // session's single runs: quote the median, and the spread beside it).
 constexpr int kPrecomputeRepetitions = 3;
@@ -135,11 +119,6 @@ std::map<std::string, std::unique_ptr<Session>>& sessions() {
   return s;
 }
 
-std::string data_dir() {
-  if (const char* env = std::getenv("QPREDUCE_SHARED_DATA")) return env;
-  return std::string(QPREDUCE_SHARED_DIR) + "/data";
-}
-
 // Loads the model and precomputes (timed by the caller when it wants).
 Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   auto& all = sessions();
@@ -147,64 +126,20 @@ Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   if (it != all.end() && timed == nullptr) return *it->second;
   all.clear();  // one model in memory at a time: its peak is its own
   auto s = std::make_unique<Session>();
-  const std::string path = data_dir() + "/" + spec.path;
-  const bool tet = path.size() > 5 && (path.substr(path.size() - 5) == ".node" || path.substr(path.size() - 5) == ".mesh");
-  if (tet) {
-    const TetMesh m = read_tet_mesh(path);
-    s->model.V = m.V;
-    s->model.T = m.T;
-  } else {
-    const TriangleMesh m = read_triangle_mesh(path);
-    s->model.V = m.V;
-    s->model.F = m.F;
-  }
-  s->options.linear_proxies = spec.linear;
-  s->options.rotational_proxies = spec.rotational;
+  s->model = bench::read_model(spec, &s->options);
   bench::PeakMemory mem;
   mem.reset();
-  // Untimed sessions may come from a cache (QPREDUCE_BENCH_CACHE_DIR, for
-  // profiling the per-frame parts without paying for precompute each run).
-  // The folder is made when missing; one that cannot be made means no cache.
-  const char* cache_dir = std::getenv("QPREDUCE_BENCH_CACHE_DIR");
-  std::string cache;
-  if (cache_dir != nullptr && *cache_dir != '\0') {
-    std::error_code ec;
-    std::filesystem::create_directories(cache_dir, ec);
-    if (ec) {
-      fmt::print(stderr, "bench_deform: QPREDUCE_BENCH_CACHE_DIR={}: {}; precomputing without a cache\n", cache_dir,
-                 ec.message());
-    } else {
-      cache = std::string(cache_dir) + "/" + spec.name + ".qpr";
-    }
-  }
   if (timed) {
     for (auto _ : *timed) s->pre = s->deformer.precompute(s->model, s->options);
+    if (!s->pre.ok()) throw std::runtime_error(spec.name + std::string(": ") + s->pre.message);
   } else {
-    bool loaded = false;
-    if (!cache.empty() && std::filesystem::exists(cache)) {
-      try {
-        s->pre = s->deformer.load(cache, s->model, s->options);
-        loaded = true;
-      } catch (const std::exception& e) {  // e.g. a cache of an older format version: made again
-        fmt::print(stderr, "bench_deform: cache not loaded: {}\n", e.what());
-      }
-    }
-    if (!loaded) {
-      s->pre = s->deformer.precompute(s->model, s->options);
-      if (!cache.empty() && s->pre.ok()) s->deformer.save(cache);
-    }
+    // Untimed sessions may come from a cache (QPREDUCE_BENCH_CACHE_DIR, for
+    // profiling the per-frame parts without paying for precompute each run).
+    s->pre = bench::load_or_precompute(spec, s->model, s->options, bench::cache_path(spec), &s->deformer);
   }
   s->peak_mib = mem.peak_mb();
   s->extra_mib = s->peak_mib - mem.baseline_mb();
-  if (!s->pre.ok()) throw std::runtime_error(spec.name + std::string(": ") + s->pre.message);
-  // 8 well-spread point handles.
-  const LinearProxies fps = s->model.is_tet() ? linear_proxies_fps(s->model.V, ElementsRef(s->model.T), kHandles)
-                                              : linear_proxies_fps(s->model.V, ElementsRef(s->model.F), kHandles);
-  s->rest_targets.resize(fps.count(), 3);
-  for (Index h = 0; h < fps.count(); ++h) {
-    s->handles.points.push_back({{fps.groups[h].front()}, {}});
-    s->rest_targets.row(h) = s->model.V.row(fps.groups[h].front());
-  }
+  s->handles = bench::spread_handles(s->model, &s->rest_targets);
   s->diagonal = bounding_box_diagonal(s->model.V);
   const ConstraintSummary cs = s->deformer.set_handles(s->handles);
   if (!cs.usable()) throw std::runtime_error(spec.name + std::string(": handles: ") + cs.message);
@@ -213,14 +148,7 @@ Session& session(const ModelSpec& spec, benchmark::State* timed = nullptr) {
   return ref;
 }
 
-HandleTargets next_targets(Session& s) {
-  HandleTargets t;
-  t.points = s.rest_targets;
-  const double a = 0.3 * static_cast<double>(s.frame++ % 21);
-  t.points(0, 0) += 0.1 * s.diagonal * std::sin(a);
-  t.points(0, 1) += 0.1 * s.diagonal * (1.0 - std::cos(a));
-  return t;
-}
+HandleTargets next_targets(Session& s) { return bench::moved_targets(s.rest_targets, s.diagonal, s.frame++); }
 
 void set_sizes(benchmark::State& state, const Session& s) {
   state.counters["vertices"] = static_cast<double>(s.pre.vertices);
@@ -456,7 +384,7 @@ void BM_RefineRound(benchmark::State& state, const ModelSpec* spec, Backend back
 
 int main(int argc, char** argv) {
   benchmark::Initialize(&argc, argv);
-  const std::string dir = data_dir();
+  const std::string dir = bench::shared_data_dir();
   int found = 0;
   for (const ModelSpec& spec : kModels) {
     if (!std::filesystem::exists(dir + "/" + spec.path)) {

@@ -9,6 +9,7 @@ packages=(
   libimgui-dev libstb-dev libglfw3-dev libgl-dev libgl1-mesa-dri xvfb xauth mesa-utils
   pybind11-dev python3-dev python3-numpy python3-scipy python3-pytest python3-matplotlib
   clang-14 libclang-rt-14-dev
+  valgrind
   libopenmpi-dev openmpi-bin libmumps-dev libmumps-ptscotch-dev
 )
 missing=()

@@ -17,6 +17,9 @@ extern "C" void sgemm_(const char* transa, const char* transb, const int* m, con
                        const float* alpha, const float* a, const int* lda, const float* b, const int* ldb,
                        const float* beta, float* c, const int* ldc);
 
+extern "C" void dtrsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m,
+                       const int* n, const double* alpha, const double* a, const int* lda, double* b, const int* ldb);
+
 namespace qpreduce::detail {
 
 // C = alpha·op(A)·op(B) + beta·C for column-major double (dgemm) or float
@@ -48,6 +51,22 @@ void blas_gemm(bool transpose_a, bool transpose_b, double alpha, const MA& A, co
     const float a = static_cast<float>(alpha), b = static_cast<float>(beta);
     sgemm_(&ta, &tb, &m, &n, &k, &a, A.data(), &lda, B.data(), &ldb, &b, C.data(), &ldc);
   }
+}
+
+// B ← L⁻¹·B with L the lower triangle of `L` (k × k, its diagonal nonzero;
+// the strict upper triangle is not read) and B k × n, column-major double
+// with unit inner stride (dtrsm).
+template <typename ML, typename MB>
+void blas_lower_solve(const ML& L, MB&& B) {
+  const int k = static_cast<int>(B.rows()), n = static_cast<int>(B.cols());
+  assert(L.rows() == k && L.cols() == k && L.innerStride() == 1 && B.innerStride() == 1);
+  static_assert(std::is_same_v<typename ML::Scalar, double> &&
+                    std::is_same_v<typename std::decay_t<MB>::Scalar, double>,
+                "blas_lower_solve: double");
+  if (k == 0 || n == 0) return;
+  const double one = 1.0;
+  const int lda = static_cast<int>(L.outerStride()), ldb = static_cast<int>(B.outerStride());
+  dtrsm_("L", "L", "N", "N", &k, &n, &one, L.data(), &lda, B.data(), &ldb);
 }
 
 // Sets the BLAS's own thread count for the scope when it is OpenBLAS (looked

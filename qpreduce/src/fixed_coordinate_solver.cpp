@@ -72,7 +72,7 @@ std::shared_ptr<const PhaseOneOperator> fast_phase_one(const std::shared_ptr<con
   blas_gemm(false, false, 1.0, Az, prep->P0, 1.0, R.topRows(m));
   R.bottomRows(mu - m) = prep->LtG;
   if (!R.allFinite() || !rso.T.allFinite()) return nullptr;
-  return std::make_shared<FactoredPhaseOne>(prep, std::move(rso.T), std::move(R), m);
+  return std::make_shared<FactoredPhaseOne>(prep, std::move(rso.T), std::move(R), rso.Sinv.topRows(m));
 }
 
 // The null-space method on H_zz (qp_operators.h): M_b = M_c, M_Y = M_g·G − M_c·A_y.
@@ -92,15 +92,16 @@ std::shared_ptr<const PhaseOneOperator> null_space_phase_one(const SubspaceSolve
 
 // The multipliers of Phase 1 as affine maps of (b, y) (alternating.h,
 // form_energy_terms), with z = M_b·b + M_Y·y:
-//   hard  A_zᵀλ = G·y − H_zz·z (z-stationarity) → λ = W·(G·y − H_zz·z),
+//   fast path (hard or soft)  λ = K·(R·y − [b; 0]) (phase_one.h):
+//         Λ_b = −K's first m columns, Λ_y = K·R; O(m·μ·k);
+//   otherwise, hard  A_zᵀλ = G·y − H_zz·z (z-stationarity) → λ = W·(G·y − H_zz·z),
 //         W = (A_zᵀ)⁺: Λ_b = −(W·H_zz)·M_b, Λ_y = W·G − (W·H_zz)·M_Y;
-//   soft  λ = 2δ·(A_z·z + A_y·y − b): Λ_b = 2δ·(A_z·M_b − I), Λ_y = 2δ·(A_z·M_Y + A_y).
+//   otherwise, soft  λ = 2δ·(A_z·z + A_y·y − b): Λ_b = 2δ·(A_z·M_b − I), Λ_y = 2δ·(A_z·M_Y + A_y).
 // (With dependent hard rows λ is not unique, but (b − A_y·y)ᵀλ = (A_z·z)ᵀλ
 // is, so the pseudo-inverse's λ serves.) O(m·d·(d + k)).
 PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const PhaseOneOperator& op,
                                 const Matrix<double>& Az, const Matrix<double>& Ay, const ConstraintOptions& options) {
   const Index m = Az.rows(), d = Az.cols(), k = Ay.cols();
-  const Matrix<double> MY = op.MY();
   PhaseOneEnergy e;
   e.AyLy.resize(2 * m, k);
   if (m == 0) {  // no constraints: E(y) has no constraint term
@@ -109,6 +110,12 @@ PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const Phas
   }
   e.AyLy.topRows(m) = Ay;
   e.ay_zero = Ay.cwiseAbs().maxCoeff() == 0.0;
+  if (const FactoredPhaseOne* fast = op.factored()) {
+    e.Lb = -fast->K().leftCols(m);
+    blas_gemm(false, false, 1.0, fast->K(), fast->R(), 0.0, e.AyLy.bottomRows(m));
+    return e;
+  }
+  const Matrix<double> MY = op.MY();
   if (options.soft) {
     const double two_delta = 2.0 * options.delta;
     e.Lb = two_delta * (Az * op.Mb() - Matrix<double>::Identity(m, m));

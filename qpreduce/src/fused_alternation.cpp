@@ -9,6 +9,7 @@
 
 #include "qpreduce/support.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Spectra/SymEigsSolver.h>
@@ -69,6 +70,12 @@ bool same_matrix(const Matrix<T>& a, const Matrix<T>& b) {
          (a.size() == 0 || std::memcmp(a.data(), b.data(), sizeof(T) * static_cast<size_t>(a.size())) == 0);
 }
 
+// Forgets what was formed from C0 and G_y (F₀ and the curvature test).
+void invalidate_base(FusedModel& M) {
+  M.factored_rounds.base_valid = false;
+  M.curvature = detail::CurvatureTest{};
+}
+
 // Keeps copies of the inputs; a changed input invalidates what was formed from it.
 void keep_inputs(FusedModel& M, const MatD& Gz, const MatD& Gy) {
   M.inputs_ready = false;
@@ -77,7 +84,7 @@ void keep_inputs(FusedModel& M, const MatD& Gz, const MatD& Gy) {
     M.Gz = Gz;
   }
   if (!same_matrix(M.Gy, Gy)) {
-    M.factored_rounds.base_valid = false;
+    invalidate_base(M);
     M.Gy = Gy;
   }
   M.inputs_ready = true;
@@ -87,7 +94,7 @@ void keep_inputs(FusedModel& M, const MatD& Gz, const MatD& Gy) {
 void form_c0(FusedModel& M, const std::shared_ptr<const detail::FixedCoordinatePrep>& prep, const MatD& Gz) {
   if (M.prep == prep) return;
   M.prep.reset();
-  M.factored_rounds.base_valid = false;
+  invalidate_base(M);
   check_finite("FusedAlternation: G_z", Gz);
   M.C0.resize(Gz.rows(), prep->P0.cols());
   detail::blas_gemm(false, false, 1.0, Gz, prep->P0, 0.0, M.C0);
@@ -95,51 +102,137 @@ void form_c0(FusedModel& M, const std::shared_ptr<const detail::FixedCoordinateP
   M.prep = prep;
 }
 
+// F₀ = C0 + G_y for the factored rounds (and its float copy), once per (C0, G_y).
+void form_factored_base(FusedModel& M) {
+  detail::FactoredRounds& fr = M.factored_rounds;
+  if (fr.base_valid) return;
+  check_finite("FusedAlternation::set: G_y", M.Gy);
+  fr.F0 = M.C0 + M.Gy;
+  fr.F0_f = fr.F0.cast<float>();
+  fr.base_valid = true;
+}
+
+// The curvature test's factor L, F₀ + εI = LLᵀ (fused_rounds.h,
+// CurvatureTest), once per (C0, G_y), for q = k; left empty when F₀ is not
+// symmetric or F₀ + εI not positive definite. O(k³).
+void form_curvature_test(FusedModel& M) {
+  detail::CurvatureTest& ct = M.curvature;
+  if (ct.formed) return;
+  ct.formed = true;
+  ct.factor.resize(0, 0);
+  const Index k = M.Gy.cols();
+  if (M.Gy.rows() != k || k == 0 || !M.Gy.allFinite()) return;
+  MatD F0 = M.C0 + M.Gy;
+  const double size = F0.norm();
+  if (!(size > 0.0) || (F0 - F0.transpose()).norm() > detail::CurvatureTest::kSymmetry * size) return;
+  ct.floor = detail::CurvatureTest::kFloor * size;
+  F0.diagonal().array() += ct.floor;
+  Eigen::LLT<MatD> llt(F0);  // reads the lower triangle
+  if (llt.info() != Eigen::Success || !llt.matrixLLT().allFinite()) return;
+  ct.factor = llt.matrixLLT();
+}
+
+// Whether λ_max(Q) ≤ ε for Q = −F₀ + U·R (CurvatureTest); false also when
+// the test does not apply (then Lanczos decides).
+bool curvature_within_floor(const detail::CurvatureTest& ct, const MatD& U, const MatD& R) {
+  const Index mu = R.rows(), k = R.cols();
+  if (mu == 0) return true;
+  // [G, R·U] = R·[Rᵀ, U] (μ × 2μ), G = R·Rᵀ.
+  MatD RtU(k, 2 * mu), GRU(mu, 2 * mu);
+  RtU.leftCols(mu) = R.transpose();
+  RtU.rightCols(mu) = U;
+  detail::blas_gemm(false, false, 1.0, R, RtU, 0.0, GRU);
+  const auto G = GRU.leftCols(mu), RU = GRU.rightCols(mu);
+  // An orthonormal basis R̂ = Pᵀ·R of R's rows from G = Πᵀ·L·D·Lᵀ·Π (pivoted
+  // LDLᵀ, the largest pivot first): Pᵀ = D_r^(−1/2)·(L⁻¹·Π)'s first r rows,
+  // the pivots above kRowRank·D₀.
+  const Eigen::LDLT<MatD> rows(G);
+  const auto& pivots = rows.vectorD();
+  if (!(pivots(0) > 0.0)) return false;
+  Index r = 0;
+  while (r < mu && pivots(r) > detail::CurvatureTest::kRowRank * pivots(0)) ++r;
+  MatD Pt = rows.transpositionsP() * MatD::Identity(mu, mu);
+  rows.matrixL().solveInPlace(Pt);
+  const MatD P = (pivots.head(r).cwiseSqrt().cwiseInverse().asDiagonal() * Pt.topRows(r)).transpose();
+  // U·R = R̂ᵀ·M·R̂ with M = R̂·U·R·R̂ᵀ = (Pᵀ·R·U)·(G·P) (r × r), when U lies in
+  // the span of Rᵀ — ‖U − R̂ᵀR̂·U‖² = ‖U‖² − ‖R̂·U‖² (R̂ᵀR̂ projects) — and M
+  // is symmetric, both to kFactorFit.
+  const MatD PRU = P.transpose() * RU;
+  MatD M = PRU * (G * P);
+  const double fit = detail::CurvatureTest::kFactorFit, u2 = U.squaredNorm();
+  if (!(u2 - PRU.squaredNorm() <= fit * fit * u2) || !((M - M.transpose()).norm() <= fit * M.norm())) return false;
+  M = 0.5 * (M + M.transpose()).eval();
+  // W = R̂·(F₀ + εI)⁻¹·R̂ᵀ = YᵀY with Y = L⁻¹·Rᵀ·P (k × r, the one O(k²·r)
+  // step); W = L_W·L_Wᵀ, and λ_max(Q) ≤ ε ⟺ λ_max(L_Wᵀ·M·L_W) ≤ 1.
+  MatD Y(k, r);
+  detail::blas_gemm(false, false, 1.0, RtU.leftCols(mu), P, 0.0, Y);
+  detail::blas_lower_solve(ct.factor, Y);
+  MatD W(r, r);
+  detail::blas_gemm(true, false, 1.0, Y, Y, 0.0, W);
+  const Eigen::LLT<MatD> w(W);
+  if (w.info() != Eigen::Success) return false;
+  // λ_max(L_Wᵀ·M·L_W) < 1 ⟺ I − L_Wᵀ·M·L_W is positive definite.
+  const MatD LW = w.matrixL();
+  MatD C = -(LW.transpose() * M * LW);
+  C.diagonal().array() += 1.0;
+  return Eigen::LLT<MatD>(C).info() == Eigen::Success;
+}
+
 // G_z's float copy unless it is current (form_c0 empties it).
 void form_gz_float(FusedModel& M, const MatD& Gz) {
   if (M.Gz_f.rows() != Gz.rows() || M.Gz_f.cols() != Gz.cols()) M.Gz_f = Gz.cast<float>();
 }
 
-// G_z·T (q × μ) and F_b = G_z·M_b, its first m columns. In float (into
-// factored_rounds.GzT_f; the returned matrix is then empty) or in double.
-MatD form_gz_t(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gz, bool in_float) {
+// U = G_z·T (q × μ) in double, or in float into factored_rounds.U_f (the
+// returned matrix is then empty), with the multipliers folded in when the
+// rounds correct for constraints on y (E not null): U = G_z·T + A_yᵀ·K
+// (λ = K·(R·y − [b; 0]), phase_one.h), since then
+//     F_y − A_yᵀΛ_y = F₀ − G_z·T·R − A_yᵀ·K·R = F₀ − U·R,
+//     F_b − A_yᵀΛ_b = G_z·M_b + A_yᵀ·(K's first m columns) = U's first m columns.
+// Sets F_b = U's first m columns; *U_float: U in double after a float one
+// with E (for the curvature test).
+MatD form_u(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gz, bool in_float,
+            const detail::PhaseOneEnergy* E, MatD* U_float) {
   const Index q = Gz.rows(), m = phase1.Mb().cols(), mu = phase1.T().cols();
-  MatD GzT;
+  MatD U;
   if (in_float) {
     form_gz_float(M, Gz);
     const MatF Tf = phase1.T().cast<float>();
-    M.factored_rounds.GzT_f.resize(q, mu);
-    detail::blas_gemm(false, false, 1.0, M.Gz_f, Tf, 0.0, M.factored_rounds.GzT_f);
-    M.Fb = M.factored_rounds.GzT_f.leftCols(m).cast<double>();
+    MatF& Uf = M.factored_rounds.U_f;
+    Uf.resize(q, mu);
+    detail::blas_gemm(false, false, 1.0, M.Gz_f, Tf, 0.0, Uf);
+    if (E) {
+      *U_float = Uf.cast<double>();
+      detail::blas_gemm(true, false, 1.0, E->AyLy.topRows(m), phase1.K(), 1.0, *U_float);
+      Uf = U_float->cast<float>();
+      M.Fb = U_float->leftCols(m);
+    } else {
+      M.Fb = Uf.leftCols(m).cast<double>();
+    }
   } else {
-    GzT.resize(q, mu);
-    detail::blas_gemm(false, false, 1.0, Gz, phase1.T(), 0.0, GzT);
-    M.Fb = GzT.leftCols(m);
+    U.resize(q, mu);
+    detail::blas_gemm(false, false, 1.0, Gz, phase1.T(), 0.0, U);
+    if (E) detail::blas_gemm(true, false, 1.0, E->AyLy.topRows(m), phase1.K(), 1.0, U);
+    M.Fb = U.leftCols(m);
   }
-  return GzT;
+  return U;
 }
 
-// Factored form: F₀ = C0 + G_y once per (C0, G_y); G_z·T and R per set.
-void set_factored(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gy, MatD GzT,
-                  FusedPrecision precision) {
+// Factored form: F₀ = C0 + G_y once per (C0, G_y); U and R per set.
+void set_factored(FusedModel& M, const detail::FactoredPhaseOne& phase1, MatD U, FusedPrecision precision) {
   detail::FactoredRounds& fr = M.factored_rounds;
-  if (!fr.base_valid) {
-    check_finite("FusedAlternation::set: G_y", Gy);
-    fr.F0 = M.C0 + Gy;
-    fr.F0_f = fr.F0.cast<float>();
-    fr.base_valid = true;
-  }
-  fr.GzT = std::move(GzT);  // empty after a Float set
-  if (precision == FusedPrecision::Double) fr.GzT_f = fr.GzT.cast<float>();
+  form_factored_base(M);
+  fr.U = std::move(U);  // empty after a Float set
+  if (precision == FusedPrecision::Double) fr.U_f = fr.U.cast<float>();
   M.float_set = precision == FusedPrecision::Float;
   fr.R = phase1.R();
   fr.R_f = fr.R.cast<float>();
   M.factored = true;
 }
 
-// Explicit form from the fast path: F_y = C0 + G_y − (G_z·T)·R, in column
-// blocks that are still in cache for the float copy.
-void set_explicit_fast(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gy, const MatD& GzT) {
+// Explicit form from the fast path: F_y = C0 + G_y − U·R, in column blocks
+// that are still in cache for the float copy.
+void set_explicit_fast(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& Gy, const MatD& U) {
   detail::ExplicitRounds& er = M.explicit_rounds;
   const Index q = Gy.rows(), k = Gy.cols();
   er.F.resize(q, k);
@@ -148,13 +241,15 @@ void set_explicit_fast(FusedModel& M, const detail::FactoredPhaseOne& phase1, co
     const Index w = std::min(kColumnBlock, k - c0);
     if (!Gy.middleCols(c0, w).allFinite()) check_finite("FusedAlternation::set: G_y", Gy);  // throws
     er.F.middleCols(c0, w) = M.C0.middleCols(c0, w) + Gy.middleCols(c0, w);
-    detail::blas_gemm(false, false, -1.0, GzT, phase1.R().middleCols(c0, w), 1.0, er.F.middleCols(c0, w));
+    detail::blas_gemm(false, false, -1.0, U, phase1.R().middleCols(c0, w), 1.0, er.F.middleCols(c0, w));
     er.F_f.middleCols(c0, w) = er.F.middleCols(c0, w).cast<float>();
   }
 }
 
-// Explicit form from Phase 1's null-space method: F_b = G_z·M_b, F_y = G_z·M_Y + G_y.
-void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phase1, const MatD& Gz, const MatD& Gy) {
+// Explicit form from Phase 1's null-space method: F_b = G_z·M_b, F_y = G_z·M_Y + G_y,
+// then F_b ← F_b − A_yᵀΛ_b, F_y ← F_y − A_yᵀΛ_y when E (constraints on y).
+void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phase1, const MatD& Gz, const MatD& Gy,
+                        const detail::PhaseOneEnergy* E) {
   check_finite("FusedAlternation::set: G_z", Gz);
   check_finite("FusedAlternation::set: G_y", Gy);
   detail::ExplicitRounds& er = M.explicit_rounds;
@@ -162,12 +257,18 @@ void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phas
   M.Fb.resize(Gz.rows(), phase1.m());
   detail::blas_gemm(false, false, 1.0, Gz, phase1.Mb(), 0.0, M.Fb);
   detail::blas_gemm(false, false, 1.0, Gz, phase1.MY(), 1.0, er.F);
+  if (E) {
+    const Index m = E->Lb.rows();
+    const auto Ay = E->AyLy.topRows(m), Ly = E->AyLy.bottomRows(m);
+    M.Fb.noalias() -= Ay.transpose() * E->Lb;
+    er.F.noalias() -= Ay.transpose() * Ly;
+  }
   er.F_f = er.F.cast<float>();
 }
 
-// Q·v = −(F_y′·v) for the Lanczos run of correct_for_y: F_y′ = F_y − A_yᵀΛ_y
-// as the rounds now apply it (before L), in double, or in float after a
-// Float set (whose G_z·T exists in float only).
+// Q·v = −(F_y′·v) for the Lanczos run of form_proximal_weights: F_y′ =
+// F_y − A_yᵀΛ_y as the rounds now apply it (before D), in double, or in
+// float after a Float set (whose U exists in float only).
 class NegatedRounds {
  public:
   using Scalar = double;
@@ -230,20 +331,25 @@ Vector<double> block_gershgorin(const MatD& Q, Index s) {
 }
 
 // The proximal weights D ⪰ Q of the corrected rounds: zero when Q ⪯ 0
-// (λ_max ≤ 0: the corrected step descends as it is); else the block
-// Gershgorin weights (explicit form, blocks of M.block) or the scalar λ_max,
+// (λ_max ≤ 0: the corrected step descends as it is), which the curvature
+// test settles when it applies (fast path: U in double, R; λ_max ≤ ε counts
+// as ≤ 0, ε at round-off size); else the block Gershgorin weights (explicit
+// form, blocks of M.block) or the scalar λ_max from a Lanczos run,
 // whichever is smaller in total; a bound on ‖Q‖ when Lanczos fails.
-void form_proximal_weights(FusedModel& M, Index k) {
+void form_proximal_weights(FusedModel& M, Index k, const MatD* U, const MatD* R) {
   const Index s = M.block > 0 && k % M.block == 0 ? M.block : k;
   const Index blocks = k / s;
-  const double lambda = largest_eigenvalue(M, k);
+  if (U != nullptr && R != nullptr) form_curvature_test(M);
+  const bool within_floor =
+      U != nullptr && R != nullptr && M.curvature.usable() && curvature_within_floor(M.curvature, *U, *R);
+  const double lambda = within_floor ? 0.0 : largest_eigenvalue(M, k);
   if (lambda <= 0.0) {
     M.proximal.setZero(blocks);
   } else {
     double scalar = lambda;
     if (!std::isfinite(scalar)) {  // ‖Q‖_F from Q's parts: safe, if slower rounds
       const auto& fr = M.factored_rounds;
-      scalar = M.factored ? static_cast<double>(fr.F0_f.norm()) + static_cast<double>(fr.GzT_f.norm()) * fr.R.norm()
+      scalar = M.factored ? static_cast<double>(fr.F0_f.norm()) + static_cast<double>(fr.U_f.norm()) * fr.R.norm()
                           : M.explicit_rounds.F.norm();
     }
     M.proximal.setConstant(blocks, scalar);
@@ -262,48 +368,54 @@ bool stiff_rotation_set(const FusedModel& M) {
   return M.q() == M.k() && M.k() % 9 == 0 && M.proximal.size() > 0 && M.proximal.maxCoeff() > 0.0;
 }
 
-// Constraints on y (alternating.h): F_b ← F_b − A_yᵀΛ_b, F_y ← F_y − A_yᵀΛ_y
-// + D when Phase 1 has its energy terms, A_y ≠ 0 and q = k.
-void correct_for_y(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
+// Constraints on y (alternating.h): the energy terms the rounds correct
+// for — Phase 1 has them, A_y ≠ 0 and q = k — or null. Resets what the last
+// set's correction left.
+const detail::PhaseOneEnergy* start_correction(FusedModel& M, const FixedCoordinateSolver<double>& phase1) {
   M.energy_seen = phase1.shared_energy_terms();
   M.energy.reset();
   M.proximal.resize(0);
   M.proximal_entries.resize(0);
   M.second_order = false;
   M.factored_rounds.shift.resize(0);
-  if (!M.energy_seen) return;
-  const detail::PhaseOneEnergy& E = *M.energy_seen;
-  const Index m = E.Lb.rows(), k = M.k();
-  const auto Ay = E.AyLy.topRows(m), Ly = E.AyLy.bottomRows(m);
-  if (M.q() != k || E.ay_zero) return;
-  M.Fb.noalias() -= Ay.transpose() * E.Lb;
-  if (M.factored) {
-    detail::FactoredRounds& fr = M.factored_rounds;
-    const Index mu = fr.R.rows();
-    fr.R.conservativeResize(mu + m, Eigen::NoChange);
-    fr.R.bottomRows(m) = Ly;
-    fr.R_f = fr.R.cast<float>();
-    const Index cols = fr.GzT_f.cols();
-    fr.GzT_f.conservativeResize(Eigen::NoChange, cols + m);
-    fr.GzT_f.rightCols(m) = Ay.transpose().cast<float>();
-    if (fr.GzT.size() > 0) {
-      fr.GzT.conservativeResize(Eigen::NoChange, cols + m);
-      fr.GzT.rightCols(m) = Ay.transpose();
-    }
-  } else {
-    M.explicit_rounds.F.noalias() -= Ay.transpose() * Ly;
-  }
-  form_proximal_weights(M, k);
+  if (!M.energy_seen || M.energy_seen->ay_zero || M.Gy.rows() != M.Gy.cols()) return nullptr;
+  return M.energy_seen.get();
+}
+
+// The rounds (already corrected: F_b − A_yᵀΛ_b, F_y − A_yᵀΛ_y) get the
+// proximal weights D: F_y ← F_y + D. U, R: the fast path's factors of the
+// correction (Q = −F₀ + U·R), or null.
+void finish_correction(FusedModel& M, const MatD* U, const MatD* R) {
+  form_proximal_weights(M, M.k(), U, R);
   // Damped rounds (some w_j > 0) crawl on stiff sets: second-order steps
   // there, in the explicit double form, for blocks of 3 × 3.
   M.second_order = !M.factored && !M.float_set && stiff_rotation_set(M);
-  if (M.factored) {
-    if (M.proximal.maxCoeff() > 0.0) M.factored_rounds.shift = M.proximal_entries;
-  } else {
-    M.explicit_rounds.F.diagonal() += M.proximal_entries;
-    M.explicit_rounds.F_f = M.explicit_rounds.F.cast<float>();
+  if (M.proximal.maxCoeff() > 0.0) {
+    if (M.factored) {
+      M.factored_rounds.shift = M.proximal_entries;
+    } else {
+      M.explicit_rounds.F.diagonal() += M.proximal_entries;
+      M.explicit_rounds.F_f = M.explicit_rounds.F.cast<float>();
+    }
   }
   M.energy = M.energy_seen;
+}
+
+// The rounds from the fast path's Phase 1, factored or explicit, corrected
+// for constraints on y when E (start_correction).
+void set_fast_rounds(FusedModel& M, const detail::FactoredPhaseOne& fast, const detail::PhaseOneEnergy* E,
+                     bool factored, FusedPrecision precision) {
+  M.factored = false;
+  M.float_set = false;
+  const bool in_float = factored && precision == FusedPrecision::Float;
+  MatD U_float;
+  MatD U = form_u(M, fast, M.Gz, in_float, E, &U_float);
+  if (factored) {
+    set_factored(M, fast, std::move(U), precision);
+  } else {
+    set_explicit_fast(M, fast, M.Gy, U);
+  }
+  if (E) finish_correction(M, in_float ? &U_float : factored ? &M.factored_rounds.U : &U, &fast.R());
 }
 
 void size_workspace(const FusedModel& M, FusedWorkspace& W) {
@@ -759,32 +871,24 @@ void FusedAlternation<Scalar>::set_impl(const FixedCoordinateSolver<Scalar>& pha
   M.factored = false;
   M.float_set = false;
   if (Gz) keep_inputs(M, *Gz, *Gy);
-  if (const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored()) {
+  const detail::PhaseOneEnergy* E = start_correction(M, phase1);
+  const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored();
+  if (fast) {
     form_c0(M, phase1.preparation(), M.Gz);
     const bool factored =
         form == FusedForm::Factored || (form == FusedForm::Automatic && M.Gz.rows() * M.Gy.cols() > kExplicitMaxEntries);
-    MatD GzT = form_gz_t(M, *fast, M.Gz, factored && precision == FusedPrecision::Float);
-    if (factored) {
-      set_factored(M, *fast, M.Gy, std::move(GzT), precision);
-    } else {
-      set_explicit_fast(M, *fast, M.Gy, GzT);
-    }
+    set_fast_rounds(M, *fast, E, factored, precision);
   } else {
-    set_explicit_plain(M, phase1, M.Gz, M.Gy);
+    set_explicit_plain(M, phase1, M.Gz, M.Gy, E);
+    if (E) finish_correction(M, nullptr, nullptr);
   }
-  correct_for_y(M, phase1);
   // A stiff set takes second-order steps (run_second_order), which read the
   // explicit double F_y: an Automatic set that came out factored but stiff
   // is set again in the explicit form (once per set, O(q·k·μ)), up to
   // kSecondOrderMaxBlocks blocks (a step factors a 3d × 3d matrix).
-  const detail::FactoredPhaseOne* fast = phase1.phase_one_operator()->factored();
   if (M.factored && fast != nullptr && form == FusedForm::Automatic && M.k() / 9 <= kSecondOrderMaxBlocks &&
       stiff_rotation_set(M)) {
-    M.factored = false;
-    M.float_set = false;
-    const MatD GzT = form_gz_t(M, *fast, M.Gz, false);
-    set_explicit_fast(M, *fast, M.Gy, GzT);
-    correct_for_y(M, phase1);
+    set_fast_rounds(M, *fast, start_correction(M, phase1), false, FusedPrecision::Double);
   }
   size_workspace(M, *workspace_);
   M.ready = true;
@@ -808,6 +912,8 @@ void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phas
     const detail::ScopedBlasThreads blas(1);
     form_c0(M, prep, M.Gz);
     if (precision == FusedPrecision::Float) form_gz_float(M, M.Gz);
+    if (M.Gz.rows() * M.Gy.cols() > kExplicitMaxEntries) form_factored_base(M);
+    if (M.Gy.rows() == M.Gy.cols()) form_curvature_test(M);
   }
 }
 

@@ -7,7 +7,9 @@
 //   ExplicitRounds  F_y as a matrix (and its float copy);
 //   FactoredRounds  F₀ = C0 + G_y (q × k, kept while Phase 1's preparation,
 //                   G_z and G_y stay the same) and, per constraint set,
-//                   G_z·T (q × μ) and R (μ × k): F_y·y = F₀·y − (G_z·T)·(R·y).
+//                   U (q × μ) and R (μ × k): F_y·y = F₀·y − U·(R·y), with
+//                   U = G_z·T, or G_z·T + A_yᵀ·K when the rounds correct for
+//                   constraints on y (fused_alternation.cpp, form_u).
 #pragma once
 
 #include "phase_one.h"
@@ -53,32 +55,71 @@ class FactoredRounds final : public RoundOperator {
   Matrix<double> F0;                // C0 + G_y (q × k)
   Matrix<float> F0_f;               // in float
   bool base_valid = false;          // F0 is current for (C0, G_y)
-  Matrix<double> GzT, R;            // G_z·T (q × μ; empty after a Float set), R (μ × k)
-  Matrix<float> GzT_f, R_f;         // in float
+  Matrix<double> U, R;              // U (q × μ; empty after a Float set), R (μ × k)
+  Matrix<float> U_f, R_f;           // in float
   Vector<double> shift;             // diag(D)·y added to the rows (q = k; constraints on y), or empty
 
   void add_rows(const double* y, Index r0, Index r1, double* scratch, double* out) const override {
-    add_rows_of(F0, GzT, R, y, r0, r1, scratch, out);
+    add_rows_of(F0, U, R, y, r0, r1, scratch, out);
   }
   void add_rows(const float* y, Index r0, Index r1, float* scratch, float* out) const override {
-    add_rows_of(F0_f, GzT_f, R_f, y, r0, r1, scratch, out);
+    add_rows_of(F0_f, U_f, R_f, y, r0, r1, scratch, out);
   }
   Index scratch_size() const override { return R.rows(); }
 
  private:
-  // out += F0·y − (G_z·T)·(R·y) + shift∘y on rows [r0, r1); scratch = −R·y (μ).
+  // out += F0·y − U·(R·y) + shift∘y on rows [r0, r1); scratch = −R·y (μ).
   template <typename T>
-  void add_rows_of(const Matrix<T>& F0, const Matrix<T>& GzT, const Matrix<T>& R, const T* y, Index r0, Index r1,
+  void add_rows_of(const Matrix<T>& F0, const Matrix<T>& U, const Matrix<T>& R, const T* y, Index r0, Index r1,
                    T* scratch, T* out) const {
     const Index rows = r1 - r0, mu = R.rows();
     gemv_add(F0.data() + r0, rows, F0.cols(), F0.outerStride(), y, out + r0);
     std::fill(scratch, scratch + mu, T(0));
     gemv_add(R.data(), mu, R.cols(), R.outerStride(), y, scratch);
     for (Index i = 0; i < mu; ++i) scratch[i] = -scratch[i];
-    gemv_add(GzT.data() + r0, rows, mu, GzT.outerStride(), scratch, out + r0);
+    gemv_add(U.data() + r0, rows, mu, U.outerStride(), scratch, out + r0);
     if (shift.size() > 0)
       for (Index r = r0; r < r1; ++r) out[r] += static_cast<T>(shift[r]) * y[r];
   }
+};
+
+// Whether the corrected rounds need proximal weights at all (alternating.h,
+// "Constraints on y"): D = 0 exactly when Q ⪯ 0. On the fast path
+// Q = −F₀ + U·R with F₀ = C0 + G_y the same for every constraint set and
+// U·R = Q + F₀ symmetric, of rank ≤ μ (U = G_z·T + A_yᵀ·K, q × μ; R μ × k).
+// With R̂ (r × k) an orthonormal basis of R's rows, U·R = R̂ᵀ·M·R̂ with
+// M = R̂·U·R·R̂ᵀ symmetric (r × r), and with F₀ + εI = L·Lᵀ positive definite
+// (formed once per F₀), W = R̂·(F₀ + εI)⁻¹·R̂ᵀ = L_W·L_Wᵀ:
+//     λ_max(Q) ≤ ε  ⟺  L⁻¹·R̂ᵀ·M·R̂·L⁻ᵀ ⪯ I  ⟺  λ_max(L_Wᵀ·M·L_W) ≤ 1
+// (the nonzero eigenvalues of X·M·Xᵀ, X = L⁻¹·R̂ᵀ, are those of M·XᵀX). One
+// triangular solve with μ right-hand sides, O(q²·μ/2), and μ × μ algebra
+// per set, where a Lanczos run for λ_max(Q) needs hundreds of products with
+// Q when Q's top eigenvalues are clustered (they are on the Table 1 models:
+// Q's top is F₀'s bottom, where the handles barely reach). When F₀ + εI is
+// not positive definite, F₀ not symmetric, or U·R not of that form, the
+// test does not apply and the Lanczos run decides.
+struct CurvatureTest {
+  // ε = kFloor·‖F₀‖_F: Q is formed in double from sums of at most q ≤ 10³
+  // products, so a λ_max(Q) this small is round-off (a structurally zero
+  // one, a direction the handles leave free, comes out ±10⁻¹⁶‖F₀‖), and
+  // weights of that size would change the rounds by nothing but the switch
+  // to second-order steps, thrown by chance.
+  static constexpr double kFloor = 1e-10;
+  // F₀ is symmetric to round-off (measured ‖F₀ − F₀ᵀ‖_F ≤ 10⁻¹³‖F₀‖_F on
+  // the Table 1 models); a larger asymmetry means a Q of another kind.
+  static constexpr double kSymmetry = 1e-9;
+  // U = R̂ᵀ·R̂·U and M = Mᵀ to kFactorFit (relative, Frobenius): a Float
+  // set's U carries float round-off (6·10⁻⁸ of an entry; measured misfits
+  // 2–6·10⁻⁷ on the Table 1 models, 10⁻¹³ in double), a U·R of another
+  // form misses by the order of U itself.
+  static constexpr double kFactorFit = 1e-5;
+  // R's rows are taken as independent down to this fraction of λ_max(R·Rᵀ)
+  // (round-off of R·Rᵀ in double; the lifted rows LᵀG can be zero).
+  static constexpr double kRowRank = 1e-13;
+  Matrix<double> factor;  // L of F₀ + εI = LLᵀ in the lower triangle (q × q), or empty: no test
+  double floor = 0.0;     // ε
+  bool formed = false;    // for the current F₀
+  bool usable() const { return formed && factor.size() > 0; }
 };
 
 // What FusedAlternation::set and prepare form.
@@ -91,12 +132,14 @@ struct FusedModel {
   std::shared_ptr<const FixedCoordinatePrep> prep;
   Matrix<double> C0;
   Matrix<float> Gz_f;
+  // The curvature test for F₀ = C0 + G_y (q = k), formed with C0 or lazily.
+  CurvatureTest curvature;
   // The current constraint set.
   Matrix<double> Fb;  // F_b = G_z·M_b (q × m)
   ExplicitRounds explicit_rounds;
   FactoredRounds factored_rounds;
   bool factored = false;   // the rounds use factored_rounds
-  bool float_set = false;  // factored_rounds.GzT_f and Fb were formed in float
+  bool float_set = false;  // factored_rounds.U_f and Fb were formed in float
   bool ready = false;
   // Constraints on y (alternating.h, "Constraints on y"): the energy terms
   // the rounds were corrected with (null: not corrected), and the proximal

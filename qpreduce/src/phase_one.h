@@ -8,7 +8,10 @@
 //   FactoredPhaseOne   the range-space fast path on H_zz: M_b = T's first m
 //                      columns and M_Y = P0 − T·R, with T = Y'·Σ⁻¹ (d × μ),
 //                      R = [A_z·P0 + A_y; LᵀG] (μ × k), μ = m + ν, and P0 the
-//                      per-solver part (FixedCoordinatePrep).
+//                      per-solver part (FixedCoordinatePrep). Its multipliers
+//                      (range_space.h, with g = G·y, c = b − A_y·y) are
+//                      λ = K·(R·y − [b; 0]), K = Σ⁻¹'s first m rows (m × μ):
+//                      Λ_y = K·R and Λ_b = −K's first m columns.
 //
 // Both are immutable once made, so FixedCoordinateSolver copies share them.
 #pragma once
@@ -76,9 +79,14 @@ class ExplicitPhaseOne final : public PhaseOneOperator {
 
 class FactoredPhaseOne final : public PhaseOneOperator {
  public:
-  // T: d × μ with M_b its first m columns; R: μ × k.
-  FactoredPhaseOne(std::shared_ptr<const FixedCoordinatePrep> prep, Matrix<double> T, Matrix<double> R, Index m)
-      : PhaseOneOperator(T.leftCols(m)), prep_(std::move(prep)), T_(std::move(T)), R_(std::move(R)) {}
+  // T: d × μ with M_b its first m columns; R: μ × k; K: m × μ.
+  FactoredPhaseOne(std::shared_ptr<const FixedCoordinatePrep> prep, Matrix<double> T, Matrix<double> R,
+                   Matrix<double> K)
+      : PhaseOneOperator(T.leftCols(K.rows())),
+        prep_(std::move(prep)),
+        T_(std::move(T)),
+        R_(std::move(R)),
+        K_(std::move(K)) {}
   Matrix<double> MY() const override;
   void apply(const double* b, const double* Y, double* z, double* scratch) const override;
   const FactoredPhaseOne* factored() const override { return this; }
@@ -87,11 +95,13 @@ class FactoredPhaseOne final : public PhaseOneOperator {
   const FixedCoordinatePrep& prep() const { return *prep_; }
   const Matrix<double>& T() const { return T_; }  // d × μ
   const Matrix<double>& R() const { return R_; }  // μ × k
+  const Matrix<double>& K() const { return K_; }  // m × μ: λ = K·(R·y − [b; 0])
 
  private:
   std::shared_ptr<const FixedCoordinatePrep> prep_;
   Matrix<double> T_;
   Matrix<double> R_;
+  Matrix<double> K_;
 };
 
 }  // namespace qpreduce::detail

@@ -210,7 +210,7 @@ bool bordered_operators(const RangeSpace& rs, const MatD& A, bool soft, double d
   MatD S11(m, m);
   blas_gemm(false, false, 1.0, A, Y.leftCols(m), 0.0, S11);
   if (soft) S11.diagonal().array() += 1.0 / (2.0 * delta);
-  MatD Sinv;
+  MatD& Sinv = out->Sinv;
   if (!bordered_inverse(S11, A * rs.lift_cols, rs.lift_block, &Sinv)) return false;
   MatD& T = out->T;
   T.resize(p, q);

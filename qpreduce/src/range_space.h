@@ -24,7 +24,10 @@
 //     c = 0 (hard) or 1/(2δ) (soft),
 // and, with T = Y'·Σ⁻¹ (p × q),
 //     M_g = M0 − T·Y'ᵀ,      M_c = T's first m columns,
-// so M_g·G = M0·G − T·(Y'ᵀG) for any G (p × k). The answer is accepted only
+// so M_g·G = M0·G − T·(Y'ᵀG) for any G (p × k). The same solve gives the
+// constraints' multipliers λ (H·w + Aᵀλ = g; soft: λ = 2δ·(A·w − c)):
+//     w = M0·g − Y'·s,   s = Σ⁻¹·(Y'ᵀg − [c; 0]),   λ = s's first m entries,
+// i.e. λ = K·(Y'ᵀg − [c; 0]) with K the first m rows of Σ⁻¹ (m × q). The answer is accepted only
 // when λ_max(H̄)·‖D_s⁻¹M_gD_s⁻¹‖_F < 1/rank_tolerance (the condition bound
 // the null-space method tests) and, for hard constraints, when Ā = A·D_s has
 // full row rank m; anything else goes to the null-space method, which decides
@@ -87,8 +90,9 @@ bool bordered_inverse(const Matrix<double>& S11, const Matrix<double>& S12, cons
                       Matrix<double>* Sinv);
 
 struct RangeSpaceOperators {
-  Matrix<double> Y;   // Y' = [M0·Aᵀ, L] (p × q)
-  Matrix<double> T;   // Y'·Σ⁻¹ (p × q); its first m columns are M_c
+  Matrix<double> Y;     // Y' = [M0·Aᵀ, L] (p × q)
+  Matrix<double> Sinv;  // Σ⁻¹ (q × q, symmetric)
+  Matrix<double> T;     // Y'·Σ⁻¹ (p × q); its first m columns are M_c
   Matrix<double> Mg;  // lower triangle of M_g (p × p); the strict upper triangle is M0's
 };
 

@@ -765,6 +765,77 @@ TEST_CASE("accelerated rounds report E(y) whichever form its constraint term tak
   CHECK(sum.energy == Approx(s.energy(y)).epsilon(1e-8));
 }
 
+TEST_CASE("constraints on y: the fast path's multipliers and curvature test give the null-space rounds",
+          "[alternating][constrained_y][fast]") {
+  // On the fast path the multipliers come from Σ⁻¹ (λ = K·(R·y − [b; 0])),
+  // the correction is folded into the rank-μ factor (F_y′ = F₀ − U·R) and
+  // the weights are zero whenever the curvature test finds λ_max(Q) ≤ ε;
+  // the null-space method forms Λ from a pseudo-inverse and asks Lanczos.
+  // Both must give the same weights and rounds, hard or soft, on sets that
+  // need weights and on sets that do not: this model's sets all need them
+  // (F₀ is indefinite), so half the sets run with G_y + c·I, c = ‖G_y‖_F
+  // (Q − c·I: F₀ + c·I positive definite, and Q ⪯ 0 on some sets).
+  SphereModel s;
+  ConstraintOptions o;
+  o.soft = GENERATE(false, true);
+  o.delta = 10.0;
+  CAPTURE(o.soft);
+  int stiff = 0, free = 0;
+  for (std::uint64_t seed = 60; seed < 76; ++seed) {
+    const Matrix<double> Gy =
+        seed % 2 == 0 ? s.Gy : Matrix<double>(s.Gy + s.Gy.norm() * Matrix<double>::Identity(s.k, s.k));
+    const Index m = 2 + static_cast<Index>(seed % 5);
+    std::vector<Index> rows;
+    for (Index v : gen::random_subset(s.n, 3 * m, seed))
+      if (std::find(s.proxies.begin(), s.proxies.end(), v) == s.proxies.end() && static_cast<Index>(rows.size()) < m)
+        rows.push_back(v);
+    const SparseMatrix<double> A = gen::selection(s.n, rows);
+    const Vector<double> b = 3.0 * gen::gaussian_vector(m, seed + 100);
+    CAPTURE(seed, m);
+    FixedCoordinateSolver<double> fast, ref;
+    o.fast_path = true;
+    const ConstraintSummary fs = fast.set_constraints(s.solver, A, o);
+    REQUIRE(fs.fast_path);
+    o.fast_path = false;
+    REQUIRE(ref.set_constraints(s.solver, A, o).ok());
+    fast.form_energy_terms(s.solver);
+    ref.form_energy_terms(s.solver);
+    FusedAlternation<double> f_fast, f_ref;
+    f_fast.set_proximal_block_size(UnitBlocks::kBlock);
+    f_ref.set_proximal_block_size(UnitBlocks::kBlock);
+    f_fast.set(fast, s.Gz, Gy, 1, FusedForm::Explicit);
+    f_ref.set(ref, s.Gz, Gy);
+    REQUIRE(f_fast.constrained_y());
+    REQUIRE(f_ref.constrained_y());
+    const Vector<double>&w_fast = f_fast.proximal_weights(), &w_ref = f_ref.proximal_weights();
+    CHECK((w_fast - w_ref).norm() <= 1e-8 * (1.0 + w_ref.norm()));
+    (w_ref.maxCoeff() > 0.0 ? stiff : free) += 1;
+    // The factored form decides the same (its weight, where there is one,
+    // is the scalar λ_max(Q), not the block bound).
+    FusedAlternation<double> f_factored;
+    f_factored.set_proximal_block_size(UnitBlocks::kBlock);
+    f_factored.set(fast, s.Gz, Gy, 1, FusedForm::Factored);
+    CHECK((f_factored.proximal_weights().maxCoeff() > 0.0) == (w_ref.maxCoeff() > 0.0));
+
+    UnitBlocks proj;
+    AlternatingOptions plain, accelerated;
+    plain.iterations = 5;
+    accelerated.iterations = 5;
+    accelerated.anderson_window = 3;
+    for (const AlternatingOptions& opts : {plain, accelerated}) {
+      Vector<double> z1(s.d), z2(s.d), y1 = s.start(), y2 = y1;
+      const AlternatingSummary r1 = f_fast.run(fast, proj, b, opts, z1, y1);
+      const AlternatingSummary r2 = f_ref.run(ref, proj, b, opts, z2, y2);
+      CHECK((y1 - y2).norm() <= 1e-8 * std::max(1.0, y2.norm()));
+      CHECK((z1 - z2).norm() <= 1e-8 * std::max(1.0, z2.norm()));
+      if (opts.anderson_window > 0) CHECK(r1.energy == Approx(r2.energy).epsilon(1e-8));
+    }
+  }
+  CAPTURE(stiff, free);
+  CHECK(stiff > 0);
+  CHECK(free > 0);
+}
+
 TEST_CASE("constraints on y: misuse is refused with the words", "[alternating][constrained_y][errors]") {
   SphereModel s;
   FixedCoordinateSolver<double> phase1;

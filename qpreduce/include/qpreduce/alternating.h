@@ -86,9 +86,11 @@ class FixedCoordinateSolver {
   //     E(y) = ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀλ                (*)
   // is E′ at the Phase 1 minimiser for this y (docs/engine.md, "The energy
   // of the alternation"; N_S is the plugin's ½yᵀN_S y, g its Phase 2 input).
-  // Hard constraints: λ = W·(G·y − H_zz·z) with W = (A_zᵀ)⁺ (m × d); soft:
-  // λ = 2δ·(A_z·z + A_y·y − b). O(m·d·k) per constraint set; dropped by the
-  // next set_constraints. Precondition: ready(), and `solver` the one the
+  // On the fast path λ = K·(R·y − [b; 0]) with K the first m rows of its
+  // bordered Σ⁻¹ (src/phase_one.h), O(m·μ·k); otherwise, hard constraints:
+  // λ = W·(G·y − H_zz·z) with W = (A_zᵀ)⁺ (m × d), soft: λ = 2δ·(A_z·z +
+  // A_y·y − b), O(m·d·k). Per constraint set; dropped by the next
+  // set_constraints. Precondition: ready(), and `solver` the one the
   // constraints were set for. Throws std::invalid_argument otherwise.
   //
   // FusedAlternation::set reads them too: with them, and A_y ≠ 0, its rounds
@@ -257,11 +259,17 @@ enum class FusedPrecision { Double, Float };
 // with the projection told w (InputProjection::set_proximal_weights), so
 // that E(y) = ½yᵀN_S y − ½g′ᵀy + ½yᵀDy − ½bᵀλ never rises over a plain
 // round and the fixed points are E's stationary points on the manifold. D is
-// λ_max(Q)·I (a Lanczos run, Spectra) or, per block of the projection's
-// proximal_block_size() in the explicit form, the block Gershgorin bound of
-// Q, whichever is smaller in total (it leaves the blocks far from the
-// constraints free). O(k²·m) per constraint set with the correction itself.
-// Nothing changes when A_y = 0.
+// 0 when Q ⪯ 0; else λ_max(Q)·I (a Lanczos run, Spectra) or, per block of
+// the projection's proximal_block_size() in the explicit form, the block
+// Gershgorin bound of Q, whichever is smaller in total (it leaves the blocks
+// far from the constraints free). On Phase 1's fast path Q = −F₀ + U·R with
+// F₀ = C0 + G_y the same for every set and U·R of rank μ, and whether
+// λ_max(Q) ≤ ε (ε = 10⁻¹⁰‖F₀‖_F, round-off; such a set gets D = 0) is
+// decided exactly from a Cholesky factor of F₀ + εI formed once (`prepare`)
+// with one triangular solve of μ columns, O(k²·μ/2); Lanczos runs only when
+// that test fails or does not apply (src/fused_rounds.h, CurvatureTest).
+// The correction itself is folded into that factor, U = G_z·T + A_yᵀ·K:
+// O(q·d·μ) per set, as without it. Nothing changes when A_y = 0.
 template <typename Scalar>
 class FusedAlternation {
   static_assert(std::is_same_v<Scalar, double>, "FusedAlternation is double only");
@@ -298,7 +306,10 @@ class FusedAlternation {
   void set(const FixedCoordinateSolver<Scalar>& phase1, int threads = 1, FusedForm form = FusedForm::Automatic,
            FusedPrecision precision = FusedPrecision::Double);
 
-  // C0 = G_z·P0 (and G_z's float copy for `precision` Float) now, for the
+  // C0 = G_z·P0 (and G_z's float copy for `precision` Float), F₀ = C0 + G_y
+  // when `set` will take the factored form (q·k > kExplicitMaxEntries), and
+  // for q = k the Cholesky factor of F₀ + εI that decides whether a set's
+  // rounds need proximal weights ("Constraints on y"; O(k³)) now, for the
   // preparation of `phase1` (FixedCoordinateSolver::prepare or a fast-path
   // set_constraints), rather than in the first `set`; keeps G_z, G_y as the
   // inputs of set(phase1). Resets ready(): call `set` before `run`.
