@@ -8,7 +8,8 @@ refine's default stop").
 For every model: `qpr deform --frames 8 --refine` (the default stop) and
 `--refine=0` (no distance test: to the reference test, step 1e-10 of the
 diagonal and energy change 1e-13), both from the same settled reduced pose;
-prints the rounds and seconds of each, the default's estimated distance and
+prints the rounds and seconds of each (and the default's Newton steps and
+their CG products), the default's estimated distance and
 its RMS and largest distance to the tight shape, over the bounding-box
 diagonal, as a Markdown table.
 """
@@ -58,8 +59,8 @@ def main():
     a = ap.parse_args()
     work = a.work or tempfile.mkdtemp(prefix="refine_stop_")
     os.makedirs(work, exist_ok=True)
-    print("| model | default: rounds | s | estimated | tight: rounds | s | RMS default→tight | max |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| model | default: rounds | Newton steps / CG products | s | estimated | tight: rounds | s | RMS default→tight | max |")
+    print("|---|---|---|---|---|---|---|---|---|")
     worst = 0.0
     for name in a.models.split(","):
         V, r = run(a.qpr, a.data, work, name, None)
@@ -70,7 +71,8 @@ def main():
         worst = max(worst, rms)
         rd, rt = r["refine"], t["refine"]
         est = rd["estimated_distance"]
-        print(f"| {name} | {rd['rounds']} | {rd['seconds']:.2f} | {est if est is None else f'{est:.1e}'} | "
+        print(f"| {name} | {rd['rounds']} | {rd.get('newton_steps', 0)} / {rd.get('cg_iterations', 0)} | "
+              f"{rd['seconds']:.2f} | {est if est is None else f'{est:.1e}'} | "
               f"{rt['rounds']}{'' if rt['converged'] else ' (limit)'} | {rt['seconds']:.2f} | {100 * rms:.4f} % | "
               f"{100 * max(d):.4f} % |")
         sys.stdout.flush()

@@ -42,7 +42,13 @@ void add_refine_options(CLI::App* cmd, RefineArgs* a) {
       ->type_name("[D]");
   cmd->add_option("--refine-anderson", a->anderson_window, "Anderson window of the refine, 1-16 (default 5)")
       ->check(whole_number_between(1, 16));
-  cmd->add_flag("--refine-plain", a->plain, "Refine with plain local-global (no Anderson acceleration)");
+  cmd->add_flag("--refine-plain", a->plain,
+                "Refine with plain local-global rounds (no Anderson acceleration, no Newton steps)");
+  cmd->add_option("--refine-newton-after", a->newton_after,
+                  fmt::format("Rounds of the refine before Newton steps on the classic energy replace them; 0: rounds "
+                              "only (default {})",
+                              RefineOptions{}.newton_after))
+      ->check(whole_number_between(0, 1000000));
 }
 
 RefineOptions refine_options(const RefineArgs& a) {
@@ -58,6 +64,8 @@ RefineOptions refine_options(const RefineArgs& a) {
                     AndersonAcceleration::kMaxWindow, a.anderson_window));
   }
   o.anderson_window = a.plain ? 0 : a.anderson_window;
+  if (a.newton_after < 0) throw std::invalid_argument(fmt::format("--refine-newton-after must be ≥ 0, got {}", a.newton_after));
+  o.newton_after = a.plain ? 0 : a.newton_after;
   return o;
 }
 
@@ -71,6 +79,8 @@ nlohmann::json summary_json(const RefineSummary& s) {
           {"seconds", s.seconds},
           {"setup_seconds", s.setup_seconds},
           {"rejected_steps", s.rejected_steps},
+          {"newton_steps", s.newton_steps},
+          {"cg_iterations", s.cg_iterations},
           {"arap_energy", s.arap_energy},
           {"initial_arap_energy", s.initial_energy},
           {"fixed_point_residual", s.fixed_point_residual},
@@ -101,6 +111,7 @@ nlohmann::json refine_last_frame(const Scenario& scenario, const Vertices& reduc
   r["distance_tolerance"] = options.distance_tolerance;
   r["tolerance"] = options.tolerance;
   r["anderson_window"] = options.anderson_window;
+  r["newton_after"] = options.newton_after;
   r["rms_from_reduced"] = s.rms_from_input;
   r["max_from_reduced"] = s.max_from_input;
   return r;
@@ -109,10 +120,14 @@ nlohmann::json refine_last_frame(const Scenario& scenario, const Vertices& reduc
 void print_refine_line(const nlohmann::json& r) {
   const int window = r["anderson_window"].get<int>();
   fmt::print(
-      "  {:<28}{:>12.3f} ms   ({} rounds{}, ARAP energy {:.5g} -> {:.5g}; from the reduced pose RMS {:.2e}, max {:.2e} "
+      "  {:<28}{:>12.3f} ms   ({} rounds{}{}, ARAP energy {:.5g} -> {:.5g}; from the reduced pose RMS {:.2e}, max {:.2e} "
       "of the diagonal; estimated {:.1e} from converged{})\n",
       "refine (full space)", 1e3 * r["seconds"].get<double>(), r["rounds"].get<int>(),
       window > 0 ? fmt::format(", Anderson {}", window) : std::string(", plain"),
+      r.value("newton_steps", 0) > 0
+          ? fmt::format(", {} of them Newton steps with {} CG products", r["newton_steps"].get<int>(),
+                        r["cg_iterations"].get<int>())
+          : std::string(),
       r["initial_arap_energy"].get<double>(), r["arap_energy"].get<double>(), r["rms_from_reduced"].get<double>(),
       r["max_from_reduced"].get<double>(),
       r["estimated_distance"].is_null() ? std::numeric_limits<double>::infinity() : r["estimated_distance"].get<double>(),
@@ -127,19 +142,24 @@ nlohmann::json convergence_study(const Scenario& scenario, const Vertices& reduc
     const char* name;
     bool from_rest;
     int window;
+    int newton_after;
     RefineSummary summary;
     Vertices pose;
   };
   const int window = std::max(1, options.anderson_window);
-  std::vector<Run> runs{{"reduced_anderson", false, window, {}, {}},
-                        {"reduced_plain", false, 0, {}, {}},
-                        {"rest_anderson", true, window, {}, {}},
-                        {"rest_plain", true, 0, {}, {}}};
+  const int newton = options.newton_after > 0 ? options.newton_after : RefineOptions{}.newton_after;
+  std::vector<Run> runs{{"reduced_newton", false, window, newton, {}, {}},
+                        {"reduced_anderson", false, window, 0, {}, {}},
+                        {"reduced_plain", false, 0, 0, {}, {}},
+                        {"rest_newton", true, window, newton, {}, {}},
+                        {"rest_anderson", true, window, 0, {}, {}},
+                        {"rest_plain", true, 0, 0, {}, {}}};
   double best = std::numeric_limits<double>::infinity();
   const Run* best_run = nullptr;
   for (Run& run : runs) {
     RefineOptions o = options;
     o.anderson_window = run.window;
+    o.newton_after = run.newton_after;
     refiner.set_options(o);
     run.summary =
         refiner.refine(scenario.handles, scenario.frames.back(), run.from_rest ? Vertices() : reduced, &run.pose);

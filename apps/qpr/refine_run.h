@@ -22,9 +22,10 @@ struct RefineArgs {
   std::optional<double> tolerance;
   int anderson_window = 5;
   bool plain = false;  // --refine-plain: no Anderson acceleration
+  int newton_after = qpreduce::deform::RefineOptions{}.newton_after;  // --refine-newton-after
 };
 
-// Registers --refine, --refine-anderson and --refine-plain on `cmd`.
+// Registers --refine, --refine-anderson, --refine-plain and --refine-newton-after on `cmd`.
 void add_refine_options(CLI::App* cmd, RefineArgs* args);
 
 // The plugin's options for these arguments. Throws std::invalid_argument on

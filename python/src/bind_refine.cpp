@@ -43,6 +43,8 @@ void bind_refine_options(py::module_& m) {
           "Also stop at this relative energy change or fixed-point residual (can fire in a flat valley); "
           "finite, ≥ 0; 0 (default): not used.")
       .rw("anderson_window", &RefineOptions::anderson_window, "In [0, 16]; 0 = plain local-global. Default 5.")
+      .rw("newton_after", &RefineOptions::newton_after,
+          "Rounds before trust-region Newton steps on the classic energy replace them; 0 = rounds only. Default 64.")
       .rw("max_iterations", &RefineOptions::max_iterations, "Round limit. Default 20000.")
       .rw("energy", &RefineOptions::energy, "ReferenceEnergy.ClassicArap (default) or ModifiedArap (E′).")
       .rw("parameters", &RefineOptions::parameters, "EnergyParameters of E′ (ModifiedArap only).")
@@ -65,6 +67,8 @@ void bind_refine_options(py::module_& m) {
       .ro("axis_separable", &RefineSummary::axis_separable,
           "One factor serves x, y and z (classic ARAP with whole vertices and patches held).")
       .ro("rejected_steps", &RefineSummary::rejected_steps, "Anderson steps the energy safeguard refused.")
+      .ro("newton_steps", &RefineSummary::newton_steps, "Newton steps among the rounds.")
+      .ro("cg_iterations", &RefineSummary::cg_iterations, "The Newton steps' Hessian products (one solve each).")
       .ro("seconds", &RefineSummary::seconds, "The rounds' wall time.")
       .ro("setup_seconds", &RefineSummary::setup_seconds, "This call's factorization (0 when reused).")
       .ro("initial_energy", &RefineSummary::initial_energy, "Refined energy of the input pose.")
@@ -110,7 +114,7 @@ void bind_refiner_class(py::module_& m) {
             self.refiner.set_options(options);
           },
           py::arg("options"),
-          "set_options(options)\n\nReplaces distance_tolerance, tolerance, anderson_window and max_iterations (the energy,\n"
+          "set_options(options)\n\nReplaces distance_tolerance, tolerance, anderson_window, newton_after and max_iterations (the energy,\n"
           "parameters and backend stay those of the constructor). ValueError on invalid options.")
       .def_property_readonly(
           "options",

@@ -1,14 +1,15 @@
 # cmake -DJSON=<file> -P check_convergence_json.cmake
-# Checks a `qpr compare --convergence` report: the four runs (from the
-# reduced pose and from rest, plain and Anderson) report rounds and seconds,
-# and every run's energy is at least the lowest energy reported.
+# Checks a `qpr compare --convergence` report: the six runs (from the
+# reduced pose and from rest; plain, Anderson, and Anderson then Newton
+# steps) report rounds and seconds, every run's energy is at least the lowest
+# energy reported, only the Newton runs take Newton steps.
 if(NOT EXISTS "${JSON}")
   message(FATAL_ERROR "no report at ${JSON}")
 endif()
 file(READ "${JSON}" doc)
 string(JSON best GET "${doc}" convergence converged_energy)
-foreach(run reduced_anderson reduced_plain rest_anderson rest_plain)
-  foreach(key rounds seconds arap_energy rejected_steps)
+foreach(run reduced_newton reduced_anderson reduced_plain rest_newton rest_anderson rest_plain)
+  foreach(key rounds seconds arap_energy rejected_steps newton_steps)
     string(JSON ${key} ERROR_VARIABLE err GET "${doc}" convergence ${run} ${key})
     if(err)
       message(FATAL_ERROR "convergence.${run}.${key} missing: ${err}")
@@ -26,6 +27,9 @@ foreach(run reduced_anderson reduced_plain rest_anderson rest_plain)
   endif()
   if(run MATCHES "plain$" AND NOT rejected_steps EQUAL 0)
     message(FATAL_ERROR "${run}: a plain run reports ${rejected_steps} rejected Anderson steps")
+  endif()
+  if(NOT run MATCHES "newton$" AND NOT newton_steps EQUAL 0)
+    message(FATAL_ERROR "${run}: takes ${newton_steps} Newton steps")
   endif()
   message(STATUS "${run}: ${rounds} rounds, ${seconds} s, energy ${arap_energy}, to the gap in ${to_gap} rounds")
 endforeach()

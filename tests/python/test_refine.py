@@ -72,6 +72,27 @@ def test_the_default_stop_is_within_its_estimate_of_the_converged_shape(posed):
         deform.RefineOptions(distance_tolerance=-1.0).validate()
 
 
+def test_newton_steps_reach_the_minimiser_of_the_plain_rounds(posed):
+    # After newton_after rounds, trust-region Newton steps replace them; they
+    # end at the classic minimiser the plain rounds reach, and say how many
+    # steps and Hessian products they took.
+    _, scenario, reduced = posed
+    targets = scenario.frames[-1]
+    assert deform.RefineOptions().newton_after == 64
+    refiner = deform.Refiner(scenario.model, deform.RefineOptions(distance_tolerance=0.0, newton_after=2))
+    V, newton = refiner.refine(scenario.handles, targets, reduced)
+    refiner.set_options(deform.RefineOptions(distance_tolerance=0.0, anderson_window=0, newton_after=0))
+    P, plain = refiner.refine(scenario.handles, targets, reduced)
+    assert newton.converged and plain.converged
+    assert newton.newton_steps > 0 and newton.cg_iterations >= newton.newton_steps and plain.newton_steps == 0
+    assert newton.arap_energy == pytest.approx(plain.arap_energy, rel=1e-8)
+    diagonal = np.linalg.norm(scenario.model.V.max(axis=0) - scenario.model.V.min(axis=0))
+    assert np.sqrt(np.mean(np.sum((V - P) ** 2, axis=1))) / diagonal <= 1e-5
+    assert np.all(np.diff(newton.round_energy) <= 1e-12 * newton.initial_energy)
+    with pytest.raises(ValueError, match="newton_after"):
+        deform.RefineOptions(newton_after=-1).validate()
+
+
 def test_refine_writes_the_callers_array(posed):
     _, scenario, reduced = posed
     refiner = deform.Refiner(scenario.model)

@@ -196,6 +196,67 @@ TEST_CASE("refine: Anderson never raises the energy and reaches the plain fixed 
   CHECK(rejected_total > 0);
 }
 
+TEST_CASE("refine: the Newton finish reaches the plain rounds' minimiser, the energy never rises",
+          "[reference][refine][newton]") {
+  // Trust-region Newton steps after a few rounds (RefineOptions::
+  // newton_after) end at the classic minimiser that plain local-global
+  // reaches when run long, on a surface and on tets; the energy of the
+  // accepted poses never rises; a start already at the minimiser stays there.
+  const bool tet = GENERATE(false, true);
+  CAPTURE(tet);
+  const Case c = bend_case(tet, 1.0);
+  const Vertices reduced = reduced_pose(c);
+  const double diag = bounding_box_diagonal(c.model.V);
+  RefineOptions options;
+  options.distance_tolerance = 0.0;  // to the reference test
+  options.newton_after = 4;
+  Refiner refiner;
+  refiner.precompute(c.model, options);
+  Vertices newton, plain;
+  const RefineSummary sn = refiner.refine(c.handles, c.targets, reduced, &newton);
+  RefineOptions rounds_only = options;
+  rounds_only.newton_after = 0;
+  rounds_only.anderson_window = 0;
+  refiner.set_options(rounds_only);
+  const RefineSummary sp = refiner.refine(c.handles, c.targets, reduced, &plain);
+  INFO(sn.message << " / " << sp.message);
+  CAPTURE(sn.rounds, sn.newton_steps, sn.cg_iterations, sp.rounds);
+  REQUIRE(sn.ok());
+  REQUIRE(sp.ok());
+  CHECK(sn.converged);
+  CHECK(sp.converged);
+  CHECK(sn.newton_steps > 0);
+  CHECK(sn.cg_iterations >= sn.newton_steps);
+  CHECK(sp.newton_steps == 0);
+  CHECK(std::abs(sn.arap_energy - sp.arap_energy) <= 1e-8 * sp.arap_energy);
+  CHECK(rms_distance(newton, plain) <= 1e-5 * diag);
+  CHECK(sn.handle_residual < 1e-9 * diag);
+  for (size_t k = 1; k < sn.round_energy.size(); ++k)
+    CHECK(sn.round_energy[k] <= sn.round_energy[k - 1] * (1 + 1e-12));
+  // From the minimiser: nothing left to correct, and nothing is harmed.
+  options.newton_after = 1;
+  refiner.set_options(options);
+  Vertices again;
+  const RefineSummary sa = refiner.refine(c.handles, c.targets, newton, &again);
+  CAPTURE(sa.rounds, sa.newton_steps);
+  REQUIRE(sa.ok());
+  CHECK(sa.converged);
+  CHECK(sa.arap_energy <= sn.arap_energy * (1 + 1e-12));
+  CHECK(max_distance(again, newton) <= 1e-6 * diag);
+  // The default stop with Newton steps: within its estimate of the minimiser.
+  options.distance_tolerance = 1e-4;
+  options.newton_after = 4;
+  refiner.set_options(options);
+  Vertices stopped;
+  const RefineSummary sd = refiner.refine(c.handles, c.targets, reduced, &stopped);
+  CAPTURE(sd.rounds, sd.newton_steps, sd.estimated_distance);
+  REQUIRE(sd.converged);
+  CHECK(sd.estimated_distance <= 1e-4);
+  CHECK(rms_distance(stopped, plain) / diag <= 1e-4);
+  options.newton_after = -1;
+  CHECK_THROWS_WITH(refiner.set_options(options), Catch::Contains("newton_after must be ≥ 0"));
+}
+
 TEST_CASE("refine: Anderson on E' (z = [V'; Q]) reaches the plain E' minimiser, energy never raised",
           "[reference][refine][anderson]") {
   const bool tet = GENERATE(false, true);

@@ -331,6 +331,7 @@ class Rounds {
         const Eigen::Vector3d normal = st_.plane_normal.col(k);
         const Eigen::Matrix3d Rk = normal.squaredNorm() > 0.0 ? fit_rotation_planar(Gk, normal) : fit_rotation(Gk);
         Eigen::Map<Eigen::Matrix3d>(R.data() + 9 * k) = Rk;
+        if (keep_curvature_) Eigen::Map<Eigen::Matrix3d>(curvature_.data() + 9 * k) = rotation_curvature(Rk, Gk);
         double energy = 0.0;
         for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e) {
           const Eigen::Vector3d re = Rk * st_.rest_edge.col(e);
@@ -386,7 +387,113 @@ class Rounds {
     return step;
   }
 
+  // Newton steps (classic energy, no general rows): from here on every
+  // local step also keeps, per element, the inverse curvature of its
+  // rotation fit (rotation_curvature), which hessian_vector needs.
+  void keep_curvature() {
+    keep_curvature_ = true;
+    curvature_.resize(9 * r_);
+    dx_.resize(3 * n_);
+    dt_.resize(3, st_.rest_edge.cols());
+    dq_.resize(3 * n_);
+  }
+  // The control-row vector u of the last global step (pinned rows at their
+  // targets) and its free part.
+  Eigen::VectorXd free_part() const {
+    Eigen::VectorXd uf(rhs_.rows());
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) uf(st_.free_index[row]) = u_(row);
+    return uf;
+  }
+  // Sets the free rows of u to uf (pinned rows unchanged) and X = P·u; the
+  // rotations are those of the last local step until the next.
+  void set_free_part(const Eigen::VectorXd& uf) {
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) u_(row) = uf(st_.free_index[row]);
+    const Eigen::VectorXd xv = st_.P * u_;
+    X = Eigen::Map<const Vertices>(xv.data(), n_, 3);
+  }
+  // ∇E over the free rows at the pose of the last local step:
+  // g = (H_u·u − Pᵀq(R))_free.
+  void gradient(Eigen::VectorXd* g) {
+    linear_term();
+    qu_ = st_.Hu * u_ - st_.P.transpose() * qV_;
+    g->resize(rhs_.rows());
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) (*g)(st_.free_index[row]) = qu_(row);
+  }
+  // The Hessian of the classic energy E(V) = min_R Σ ½c‖e′ − R e‖² times a
+  // free-row vector v (docs/deform.md, "The Newton finish"):
+  // H·v = H_u·v − Pᵀ·q(dR), dR_k = R_k[ω_k]×, ω_k = M_k⁻¹·axial(R_kᵀdG_k − dG_kᵀR_k),
+  // dG_k = Σ c·(v_i − v_j)eᵀ, at the pose of the last local step.
+  void hessian_vector(const Eigen::VectorXd& vf, Eigen::VectorXd* out) {
+    Eigen::VectorXd vu = Eigen::VectorXd::Zero(st_.nu);
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) vu(row) = vf(st_.free_index[row]);
+    dx_ = st_.P * vu;
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && r_ >= 2048)
+    for (Index k = 0; k < r_; ++k) {
+      Eigen::Matrix3d dG = Eigen::Matrix3d::Zero();
+      for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e)
+        dG.noalias() += (el_.weight[e] * (dx_.segment<3>(3 * el_.edge_i[e]) - dx_.segment<3>(3 * el_.edge_j[e]))) *
+                        st_.rest_edge.col(e).transpose();
+      const Eigen::Map<const Eigen::Matrix3d> Rk(R.data() + 9 * k);
+      const Eigen::Matrix3d W = Rk.transpose() * dG;
+      const Eigen::Vector3d w(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1));
+      const Eigen::Vector3d om = Eigen::Map<const Eigen::Matrix3d>(curvature_.data() + 9 * k) * w;
+      Eigen::Matrix3d skew;
+      skew << 0.0, -om(2), om(1), om(2), 0.0, -om(0), -om(1), om(0), 0.0;
+      const Eigen::Matrix3d dR = Rk * skew;
+      for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e) dt_.col(e) = el_.weight[e] * (dR * st_.rest_edge.col(e));
+    }
+    gather(dt_, &dq_);
+    const Eigen::VectorXd hv = st_.Hu * vu - st_.P.transpose() * dq_;
+    out->resize(vf.size());
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) (*out)(st_.free_index[row]) = hv(row);
+  }
+  // RMS over the vertices of P·v (v over the free rows).
+  double vertex_rms(const Eigen::VectorXd& vf) {
+    Eigen::VectorXd vu = Eigen::VectorXd::Zero(st_.nu);
+    for (Index row = 0; row < st_.nu; ++row)
+      if (st_.free_index[row] >= 0) vu(row) = vf(st_.free_index[row]);
+    dx_ = st_.P * vu;
+    return dx_.norm() / std::sqrt(static_cast<double>(std::max<Index>(n_, 1)));
+  }
+
  private:
+  // M_k⁻¹ for the derivative of the rotation fit R_k = polar(G_k): with
+  // Y = R_kᵀG_k (symmetric at the fit; also for planar elements, whose G_k
+  // has rank 2 and whose fit is the same rotation), M = tr(Y)·I − Y. Eigenvalues
+  // of M at or below 1e-12 of its largest are dropped (a fit with no
+  // curvature there: the step sees no rotation change).
+  static Eigen::Matrix3d rotation_curvature(const Eigen::Matrix3d& Rk, const Eigen::Matrix3d& Gk) {
+    Eigen::Matrix3d Y = Rk.transpose() * Gk;
+    Y = 0.5 * (Y + Y.transpose()).eval();
+    const Eigen::Matrix3d M = Y.trace() * Eigen::Matrix3d::Identity() - Y;
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+    eig.computeDirect(M);
+    const Eigen::Vector3d lam = eig.eigenvalues();
+    const double top = lam.cwiseAbs().maxCoeff();
+    Eigen::Vector3d inv;
+    for (int i = 0; i < 3; ++i) inv(i) = std::abs(lam(i)) > 1e-12 * top ? 1.0 / lam(i) : 0.0;
+    return eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose();
+  }
+  // Σ over the edges at each vertex of ±t_e (+ where it is edge_i).
+  void gather(const Eigen::Matrix<double, 3, Eigen::Dynamic>& t, Eigen::VectorXd* q) const {
+    const std::vector<Index>& offsets = st_.incident_offsets;
+    const std::vector<Index>& edges = st_.incident_edges;
+#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && n_ >= 2048)
+    for (Index v = 0; v < n_; ++v) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (Index a = offsets[v]; a < offsets[v + 1]; ++a) {
+        const Index e = edges[a];
+        if (e > 0) sum += t.col(e - 1);
+        else sum -= t.col(-e - 1);
+      }
+      q->segment<3>(3 * v) = sum;
+    }
+  }
   double energy() const { return modified_arap_energy(m_.V, el_, m_.clusters, m_.parameters, X, Q, R); }
   // q_V: D_s·S (E′), or Σ c·R_k·e per edge end (classic).
   void linear_term() {
@@ -395,18 +502,7 @@ class Rounds {
       return;
     }
     // Gathered per vertex from the t_e of the last local step (which set R).
-    const std::vector<Index>& offsets = st_.incident_offsets;
-    const std::vector<Index>& edges = st_.incident_edges;
-#pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && n_ >= 2048)
-    for (Index v = 0; v < n_; ++v) {
-      Eigen::Vector3d q = Eigen::Vector3d::Zero();
-      for (Index a = offsets[v]; a < offsets[v + 1]; ++a) {
-        const Index s = edges[a];
-        if (s > 0) q += t_.col(s - 1);
-        else q -= t_.col(-s - 1);
-      }
-      qV_.segment<3>(3 * v) = q;
-    }
+    gather(t_, &qV_);
   }
 
   const LocalGlobalState& st_;
@@ -419,6 +515,12 @@ class Rounds {
   // (3 × E) and the element energies (r) of the last local step.
   Eigen::Matrix<double, 3, Eigen::Dynamic> XT_, t_;
   Eigen::VectorXd element_energy_;
+  // Newton (keep_curvature): M_k⁻¹ per element (9r), and hessian_vector's
+  // work: P·v (3n), the t_e of dR (3 × E), their per-vertex sums (3n).
+  bool keep_curvature_ = false;
+  Eigen::VectorXd curvature_, dx_;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> dt_;
+  Eigen::VectorXd dq_;
 
  public:
   Vertices X;         // n × 3
@@ -643,6 +745,121 @@ class DistanceEstimate {
   int count_ = 0;
 };
 
+// One trust-region Newton step on the classic energy over the free rows
+// (docs/deform.md, "The Newton finish"): H·d = −g by Steihaug's conjugate
+// gradients preconditioned with the global step's factor K, stopped at a
+// relative preconditioned residual of kNewtonForcing, at the trust region's
+// boundary (or negative curvature, followed to it) or after kNewtonMaxCg
+// products; the step is kept when the energy falls by more than 1e-4 of
+// the model's prediction, and the radius (in the K-norm) shrinks or grows
+// with that ratio. Needs the rotations and curvatures of the current pose
+// (a local step with keep_curvature).
+struct NewtonStep {
+  bool accepted = false;      // the energy fell by the Armijo amount; else the pose is unchanged
+  bool full = false;          // accepted inside the region, CG converged, the model's prediction met to 10 %
+  bool cancelled = false;     // cancel() held during the solve; the pose is unchanged
+  int cg = 0;                 // products with H (and solves with K)
+  double energy = 0.0;        // of the accepted pose (the old energy if not accepted)
+  double step_rms = 0.0;      // RMS vertex move of the accepted step
+  double solved_rms = std::numeric_limits<double>::infinity();  // RMS of the step when CG converged inside the region, kept or not
+  double max_move = 0.0;      // largest vertex move of the accepted step
+  double gradient_step_rms = 0.0;  // RMS vertex move of the local-global step K⁻¹g at the start
+};
+
+constexpr double kNewtonForcing = 1e-6;
+constexpr int kNewtonMaxCg = 500;
+
+NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy, double* radius,
+                       const std::function<bool()>& cancel) {
+  NewtonStep out;
+  out.energy = energy;
+  Eigen::VectorXd g;
+  rounds.gradient(&g);
+  const Index nf = g.size();
+  const auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
+    Matrix<double> b = r;
+    st.factor->solveInPlace(b, 1);
+    *z = b.col(0);
+  };
+  // Steihaug's truncated CG in the K-norm ‖d‖²_K = dᵀKd (K the
+  // preconditioner, so the first iterate is the local-global step), inside
+  // the trust region ‖d‖_K ≤ radius; dᵀKd, dᵀKp and pᵀKp by recurrence.
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(nf), r = -g, z, p, Hp;
+  precondition(r, &z);
+  out.gradient_step_rms = rounds.vertex_rms(z);
+  p = z;
+  double rz = r.dot(z);
+  const double r0 = std::sqrt(std::max(rz, 0.0));
+  if (!(r0 > 0.0)) return out;
+  if (!std::isfinite(*radius)) *radius = r0;  // the first step: as long as the local-global step
+  double dKd = 0.0, dKp = 0.0, pKp = rz, model = 0.0;  // model: gᵀd + ½dᵀHd
+  bool converged = false, boundary = false;
+  for (int j = 0; j < kNewtonMaxCg; ++j) {
+    if (cancel && cancel()) {
+      out.cancelled = true;
+      return out;
+    }
+    rounds.hessian_vector(p, &Hp);
+    ++out.cg;
+    const double pHp = p.dot(Hp);
+    const double alpha = rz / pHp;
+    if (!(pHp > 0.0) || dKd + 2 * alpha * dKp + alpha * alpha * pKp >= *radius * *radius) {
+      // To the boundary along p: τ ≥ 0 with ‖d + τp‖_K = radius.
+      const double disc = dKp * dKp + pKp * (*radius * *radius - dKd);
+      const double tau = (-dKp + std::sqrt(std::max(disc, 0.0))) / pKp;
+      d += tau * p;
+      model += -tau * rz + 0.5 * tau * tau * pHp;
+      boundary = true;
+      break;
+    }
+    d += alpha * p;
+    model -= 0.5 * alpha * rz;
+    r -= alpha * Hp;
+    precondition(r, &z);
+    const double rz_next = r.dot(z);
+    const double beta = rz_next / rz;
+    dKd += 2 * alpha * dKp + alpha * alpha * pKp;
+    dKp = beta * (dKp + alpha * pKp);
+    pKp = rz_next + beta * beta * pKp;
+    p = z + beta * p;
+    rz = rz_next;
+    if (std::sqrt(std::max(rz, 0.0)) <= kNewtonForcing * r0) {
+      converged = true;
+      break;
+    }
+  }
+  const double step_norm = std::sqrt(std::max(boundary ? *radius * *radius : dKd, 0.0));
+  const double predicted = -model;
+  if (!(predicted > 0.0) || !d.allFinite()) {
+    *radius = 0.25 * step_norm;
+    return out;
+  }
+  if (converged && !boundary) out.solved_rms = rounds.vertex_rms(d);
+  const Eigen::VectorXd u0 = rounds.free_part();
+  const Vertices X0 = rounds.X;
+  rounds.set_free_part(u0 + d);
+  const double next = rounds.local_step();
+  const double ratio = (energy - next) / predicted;
+  if (!(ratio > 1e-4) || !std::isfinite(next) || !rounds.X.allFinite()) {
+    *radius = 0.25 * step_norm;
+    rounds.set_free_part(u0);  // back, with its rotations
+    rounds.local_step();
+    return out;
+  }
+  if (ratio < 0.25) *radius = 0.25 * step_norm;
+  else if (ratio > 0.75 && boundary) *radius *= 2.0;
+  out.accepted = true;
+  // Full: inside the region, the solve converged, and the model predicted
+  // the energy's fall to 10 % (where it does not, the valley curves and
+  // the step says little about the distance left).
+  const double slack = 1e-12 * std::abs(energy);  // round-off of the energies near the minimiser
+  out.full = converged && !boundary && std::abs((energy - next) - predicted) <= 0.1 * predicted + slack;
+  out.energy = next;
+  out.step_rms = rounds.vertex_rms(d);
+  out.max_move = (rounds.X - X0).rowwise().norm().maxCoeff();
+  return out;
+}
+
 }  // namespace
 
 ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial,
@@ -688,6 +905,12 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   constexpr int kHoldRounds = 16;
   int held_from = -1;  // the first round of the current run of estimates within distance_tolerance
   const bool accelerate = st.options.anderson_window > 0;
+  // Newton steps after newton_after rounds: classic energy, no weighted
+  // point rows (their Schur solve is not in the preconditioner).
+  const bool newton_possible = classic && st.options.newton_after > 0 && st.Af.rows() == 0;
+  bool newton_ready = false;
+  double previous_newton_step = std::numeric_limits<double>::infinity();  // RMS of the last full Newton step
+  double trust_radius = std::numeric_limits<double>::infinity();          // of the Newton steps, in the K-norm
   AndersonAcceleration anderson;
   if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
   int it = 0;
@@ -695,6 +918,61 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
     if (cancel && cancel()) {
       summary.cancelled = true;
       break;
+    }
+    if (newton_ready) {
+      const NewtonStep step = newton_step(rounds, st, energy, &trust_radius, cancel);
+      ++summary.newton_steps;
+      summary.cg_iterations += step.cg;
+      if (step.cancelled) {
+        summary.cancelled = true;
+        break;
+      }
+      double next = step.energy;
+      summary.last_step = step.max_move;
+      if (!step.accepted) {  // the plain round, which never raises the energy
+        ++summary.newton_fallbacks;
+        summary.last_step = rounds.global_step(cv);
+        next = rounds.local_step();
+      }
+      summary.fixed_point_residual = step.gradient_step_rms * std::sqrt(static_cast<double>(st.n)) /
+                                     std::max(rounds.X.norm(), std::numeric_limits<double>::min());
+      // The distance left after full steps s_{k−1}, s_k of converged CG
+      // solves that contract, ρ = |s_k| / |s_{k−1}| < 1: |s_k|·ρ / (1 − ρ)
+      // (a linear rate; Newton's is faster). One step alone says nothing:
+      // early in a flat valley CG's residual test is met by the fast modes
+      // while the slow one is still far off.
+      const double ratio = step.step_rms / previous_newton_step;
+      summary.estimated_distance = step.full && std::isfinite(previous_newton_step) && ratio < 1.0
+                                       ? step.step_rms * ratio / (1.0 - ratio) / m.diagonal
+                                       : std::numeric_limits<double>::infinity();
+      previous_newton_step = step.full ? step.step_rms : std::numeric_limits<double>::infinity();
+      const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
+      energy = next;
+      summary.round_energy.push_back(energy);
+      summary.round_seconds.push_back(timer.seconds());
+      const bool reference_test =
+          summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
+      const bool refine_test = st.options.tolerance > 0 &&
+                               (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
+      const bool distance_test =
+          st.options.distance_tolerance > 0 && summary.estimated_distance <= st.options.distance_tolerance;
+      // The reference test (a move below 1e-10 of the diagonal, the energy
+      // still to 1e-13) after a Newton solve that converged: the distance
+      // left is about that solve's step, kept or refused at round-off.
+      if (reference_test && !std::isfinite(summary.estimated_distance))
+        summary.estimated_distance = step.solved_rms / m.diagonal;
+      if (reference_test || refine_test || distance_test) {
+        summary.converged = true;
+        ++it;
+        break;
+      }
+      continue;
+    }
+    if (newton_possible && it >= st.options.newton_after) {
+      // The switch: one plain round, whose local step keeps the curvatures
+      // and whose global step sets the control rows the Newton steps move.
+      rounds.keep_curvature();
+      newton_ready = true;
     }
     summary.last_step = rounds.global_step(cv);  // (V′, Q) = G(z)
     if (!rounds.X.allFinite() || !rounds.Q.allFinite()) {
@@ -708,7 +986,10 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
     summary.fixed_point_residual = (gz - z).norm() / std::max(z.norm(), std::numeric_limits<double>::min());
     summary.estimated_distance = distance.update(z, gz);
     double next = 0.0;
-    if (accelerate && anderson.history() > 0) {
+    if (newton_ready) {  // the switching round: plain
+      next = rounds.local_step();
+      z.swap(gz);
+    } else if (accelerate && anderson.history() > 0) {
       anderson.step(z, gz, za);
       unpack(za);
       next = rounds.local_step();
@@ -765,8 +1046,11 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   }
   summary.solver_report = fmt::format(
       "local-global ({}{}): {} rounds, energy {:.12g} -> {:.12g}, {}", to_string(st.options.energy),
-      accelerate ? fmt::format(", Anderson window {}, {} rejected", st.options.anderson_window, summary.rejected_steps)
-                 : std::string(),
+      (accelerate ? fmt::format(", Anderson window {}, {} rejected", st.options.anderson_window, summary.rejected_steps)
+                  : std::string()) +
+          (summary.newton_steps > 0 ? fmt::format(", {} Newton steps ({} CG products, {} fell back)", summary.newton_steps,
+                                                  summary.cg_iterations, summary.newton_fallbacks)
+                                    : std::string()),
       it, summary.initial_energy, summary.energy, summary.message);
   return summary;
 }
@@ -782,6 +1066,7 @@ void LocalGlobalArap::set_iteration_options(const ReferenceOptions& options) {
   st.options.tolerance = options.tolerance;
   st.options.distance_tolerance = options.distance_tolerance;
   st.options.anderson_window = options.anderson_window;
+  st.options.newton_after = options.newton_after;
   st.options.threads = options.threads;
 }
 

@@ -50,6 +50,7 @@ bool ReferenceOptions::is_valid(std::string* why) const {
     return fail(fmt::format("anderson_window must be in [0, {}] (0 = plain local-global), got {}",
                             AndersonAcceleration::kMaxWindow, anderson_window));
   }
+  if (newton_after < 0) return fail(fmt::format("newton_after must be ≥ 0 (0: rounds only), got {}", newton_after));
   if (threads < 1) return fail(fmt::format("threads must be ≥ 1, got {}", threads));
   return true;
 }

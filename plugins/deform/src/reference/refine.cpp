@@ -24,6 +24,7 @@ ReferenceOptions reference_options(const RefineOptions& o) {
   ro.tolerance = o.tolerance;
   ro.distance_tolerance = o.distance_tolerance;
   ro.anderson_window = o.anderson_window;
+  ro.newton_after = o.newton_after;
   ro.max_iterations = o.max_iterations;
   ro.threads = o.threads > 0 ? o.threads : std::max(1, omp_get_max_threads());
   return ro;
@@ -85,6 +86,7 @@ void Refiner::set_options(const RefineOptions& options) {
   st.options.tolerance = options.tolerance;
   st.options.distance_tolerance = options.distance_tolerance;
   st.options.anderson_window = options.anderson_window;
+  st.options.newton_after = options.newton_after;
   st.options.max_iterations = options.max_iterations;
   st.options.threads = options.threads;
   st.lg.set_iteration_options(reference_options(st.options));
@@ -129,6 +131,8 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
   summary.converged = rs.converged;
   summary.cancelled = rs.cancelled;
   summary.rejected_steps = rs.rejected_steps;
+  summary.newton_steps = rs.newton_steps;
+  summary.cg_iterations = rs.cg_iterations;
   summary.seconds = rs.solve_seconds;
   summary.initial_energy = rs.initial_energy;
   summary.energy = rs.energy;

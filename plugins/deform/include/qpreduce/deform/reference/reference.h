@@ -96,6 +96,13 @@ struct ReferenceOptions {
   // is taken (ReferenceSummary::rejected_steps), so the energy still never
   // rises.
   int anderson_window = 0;
+  // Local-global, classic energy: after this many rounds, Newton steps
+  // (conjugate gradients on the classic energy's Hessian, preconditioned by
+  // the global step's factor, with an energy line search; docs/deform.md,
+  // "The Newton finish") replace the rounds; each step's length then gives
+  // estimated_distance. 0 (the default): rounds only. Not taken with
+  // weighted point handles. ≥ 0.
+  int newton_after = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
   // Factorization of the global step (local-global). Auto: CHOLMOD, or
@@ -127,6 +134,9 @@ struct ReferenceSummary : Outcome {
   // rule"). Infinite until two rounds have run.
   double estimated_distance = std::numeric_limits<double>::infinity();
   int rejected_steps = 0;             // local-global: accelerated poses refused by the energy safeguard
+  int newton_steps = 0;               // local-global: Newton steps taken (ReferenceOptions::newton_after)
+  int cg_iterations = 0;              // local-global: their Hessian products (one solve with K each)
+  int newton_fallbacks = 0;           // local-global: Newton steps that did not lower the energy (a plain round instead)
   bool cancelled = false;             // local-global: the cancel hook stopped it (the pose is the last accepted one)
   // Local-global: after each round, the energy of the accepted pose and the
   // seconds since the rounds began (time-to-accuracy measurements).

@@ -49,6 +49,11 @@ struct RefineOptions {
   // choice of Peng et al. (2018): larger windows cost O(n·m) more per round
   // for little gain on ARAP.
   int anderson_window = 5;
+  // After this many rounds, trust-region Newton steps on the classic energy
+  // replace them (ReferenceOptions::newton_after; docs/deform.md, "The
+  // Newton finish"): they cross the flat valleys where rounds crawl. 0:
+  // rounds only. ≥ 0.
+  int newton_after = 64;
   // Round limit; a refine that reaches it reports converged = false.
   int max_iterations = 20000;
   // The energy refined: classic ARAP, or E′ with these parameters (the
@@ -74,6 +79,8 @@ struct RefineSummary : Outcome {
   bool refactored = false;            // this call factored the global step (new handle set)
   bool axis_separable = false;        // one factor serves x, y and z (HandleSetSummary::axis_separable)
   int rejected_steps = 0;             // Anderson steps refused by the energy safeguard
+  int newton_steps = 0;               // Newton steps among the rounds (RefineOptions::newton_after)
+  int cg_iterations = 0;              // their Hessian products, one solve with the global step's factor each
   double seconds = 0.0;               // the rounds (the time to converge from the input pose)
   double setup_seconds = 0.0;         // the factorization of this call (0 when reused)
   double initial_energy = 0.0;        // the refined energy (classic or E′) of the input pose
@@ -105,7 +112,7 @@ class Refiner {
   // (as LocalGlobalArap::precompute).
   void precompute(const DeformableMesh& model, const RefineOptions& options = {});
 
-  // Replaces tolerance, anderson_window, max_iterations and threads (the energy,
+  // Replaces tolerance, anderson_window, newton_after, max_iterations and threads (the energy,
   // parameters and backend stay those of precompute). Throws
   // std::invalid_argument on invalid options or before precompute.
   void set_options(const RefineOptions& options);
