@@ -96,12 +96,12 @@ struct ReferenceOptions {
   // is taken (ReferenceSummary::rejected_steps), so the energy still never
   // rises.
   int anderson_window = 0;
-  // Local-global, classic energy: after this many rounds, Newton steps
-  // (conjugate gradients on the classic energy's Hessian, preconditioned by
-  // the global step's factor, with an energy line search; docs/deform.md,
-  // "The Newton finish") replace the rounds; each step's length then gives
-  // estimated_distance. 0 (the default): rounds only. Not taken with
-  // weighted point handles. ≥ 0.
+  // Local-global, classic energy: after this many rounds, trust-region
+  // Newton steps (Steihaug conjugate gradients on the classic energy's
+  // Hessian, preconditioned by the global step's factor; docs/deform.md,
+  // "The Newton finish") replace the rounds, and the contraction of their
+  // steps gives estimated_distance. 0 (the default): rounds only. Not taken
+  // with weighted point handles. ≥ 0.
   int newton_after = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
@@ -127,11 +127,11 @@ struct ReferenceSummary : Outcome {
   double last_step = 0.0;    // local-global: largest vertex move of the last round
   double fixed_point_residual = 0.0;  // local-global: ‖G(z) − z‖ / ‖z‖ of the last round
   // Local-global: how far the pose is estimated to be from the converged
-  // one, RMS over the vertices / the bounding-box diagonal: the round's step
-  // δ = RMS(G(z) − z) over 1 − ρ, ρ the largest contraction ‖G(z) − G(z′)‖ /
-  // ‖z − z′‖ between consecutive iterates over the last rounds (the rate of
-  // the slow modes a flat valley leaves; docs/deform.md, "The refine's stop
-  // rule"). Infinite until two rounds have run.
+  // one, RMS over the vertices / the bounding-box diagonal. Rounds: the
+  // residual over σ, the least singular value of I − J estimated on the last
+  // 16 steps (docs/deform.md, "The refine's stop rule"); infinite until two
+  // rounds have run. Newton steps: |s_k|·ρ/(1 − ρ) over two contracting full
+  // steps, ρ = |s_k|/|s_{k−1}| ("The Newton finish"); infinite until then.
   double estimated_distance = std::numeric_limits<double>::infinity();
   int rejected_steps = 0;             // local-global: accelerated poses refused by the energy safeguard
   int newton_steps = 0;               // local-global: Newton steps taken (ReferenceOptions::newton_after)
