@@ -769,7 +769,7 @@ struct NewtonStep {
 constexpr double kNewtonForcing = 1e-6;
 constexpr int kNewtonMaxCg = 500;
 
-NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy, double* radius,
+NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy, double* radius, int max_products,
                        const std::function<bool()>& cancel) {
   NewtonStep out;
   out.energy = energy;
@@ -794,7 +794,7 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
   if (!std::isfinite(*radius)) *radius = r0;  // the first step: as long as the local-global step
   double dKd = 0.0, dKp = 0.0, pKp = rz, model = 0.0;  // model: gᵀd + ½dᵀHd
   bool converged = false, boundary = false;
-  for (int j = 0; j < kNewtonMaxCg; ++j) {
+  for (int j = 0; j < max_products; ++j) {
     if (cancel && cancel()) {
       out.cancelled = true;
       return out;
@@ -920,7 +920,11 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
       break;
     }
     if (newton_ready) {
-      const NewtonStep step = newton_step(rounds, st, energy, &trust_radius, cancel);
+      // max_iterations bounds the work: rounds and Hessian products (each a
+      // solve with K, about a round) together.
+      const int budget = st.options.max_iterations - it - summary.cg_iterations;
+      if (budget <= 0) break;
+      const NewtonStep step = newton_step(rounds, st, energy, &trust_radius, std::min(kNewtonMaxCg, budget), cancel);
       ++summary.newton_steps;
       summary.cg_iterations += step.cg;
       if (step.cancelled) {

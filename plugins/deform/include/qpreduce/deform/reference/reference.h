@@ -100,8 +100,9 @@ struct ReferenceOptions {
   // Newton steps (Steihaug conjugate gradients on the classic energy's
   // Hessian, preconditioned by the global step's factor; docs/deform.md,
   // "The Newton finish") replace the rounds, and the contraction of their
-  // steps gives estimated_distance. 0 (the default): rounds only. Not taken
-  // with weighted point handles. ≥ 0.
+  // steps gives estimated_distance; max_iterations then bounds the rounds
+  // and the steps' Hessian products together. 0 (the default): rounds only.
+  // Not taken with weighted point handles. ≥ 0.
   int newton_after = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
