@@ -14,6 +14,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 namespace qpreduce::deform {
 
@@ -913,6 +914,21 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   double trust_radius = std::numeric_limits<double>::infinity();          // of the Newton steps, in the K-norm
   AndersonAcceleration anderson;
   if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
+  // Records a round's (or Newton step's) energy and time; returns the
+  // reference test (step and energy change) and the refine test (energy
+  // change or fixed-point residual), on summary.last_step and
+  // summary.fixed_point_residual as the caller set them.
+  const auto end_round = [&](double next) {
+    const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
+    energy = next;
+    summary.round_energy.push_back(energy);
+    summary.round_seconds.push_back(timer.seconds());
+    const bool reference_test =
+        summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
+    const bool refine_test = st.options.tolerance > 0 &&
+                             (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
+    return std::pair<bool, bool>{reference_test, refine_test};
+  };
   int it = 0;
   for (; it < st.options.max_iterations; ++it) {
     if (cancel && cancel()) {
@@ -950,14 +966,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
                                        ? step.step_rms * ratio / (1.0 - ratio) / m.diagonal
                                        : std::numeric_limits<double>::infinity();
       previous_newton_step = step.full ? step.step_rms : std::numeric_limits<double>::infinity();
-      const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
-      energy = next;
-      summary.round_energy.push_back(energy);
-      summary.round_seconds.push_back(timer.seconds());
-      const bool reference_test =
-          summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
-      const bool refine_test = st.options.tolerance > 0 &&
-                               (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
+      const auto [reference_test, refine_test] = end_round(next);
       const bool distance_test =
           st.options.distance_tolerance > 0 && summary.estimated_distance <= st.options.distance_tolerance;
       // The reference test (a move below 1e-10 of the diagonal, the energy
@@ -1011,14 +1020,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
       next = rounds.local_step();
       z.swap(gz);
     }
-    const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
-    energy = next;
-    summary.round_energy.push_back(energy);
-    summary.round_seconds.push_back(timer.seconds());
-    const bool reference_test =
-        summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
-    const bool refine_test = st.options.tolerance > 0 &&
-                             (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
+    const auto [reference_test, refine_test] = end_round(next);
     // The distance test holds once the estimate has stayed within the
     // tolerance for half the rounds so far (at least kHoldRounds): early on
     // the fast modes' progress can hide a slow one from the estimate.
