@@ -128,14 +128,14 @@ void register_check(CLI::App& app) {
       app, "check",
       "Pre-flight diagnostics of a mesh: degenerate elements, duplicate and unreferenced vertices, non-manifold "
       "parts, inverted tets, unanchored components, scale (exit 0 clean, 1 warnings, 2 errors)");
-  cmd->add_option("mesh", a->mesh, "Mesh: .obj .off .ply (surface) or .mesh .node/.ele (tets)");
-  cmd->add_option("--sel", a->sel, "Botsch–Sorkine selection: its fixed and handle vertices anchor the components")
+  add_path_option(cmd, PathRole::Input, "mesh", a->mesh, "Mesh: .obj .off .ply (surface) or .mesh .node/.ele (tets)");
+  add_path_option(cmd, PathRole::Input, "--sel", a->sel, "Botsch–Sorkine selection: its fixed and handle vertices anchor the components")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--anim", a->anim, "Recorded handle poses (.anim): the handles' vertices anchor the components")
+  add_path_option(cmd, PathRole::Input, "--anim", a->anim, "Recorded handle poses (.anim): the handles' vertices anchor the components")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--scene", a->scene, "JSON scene: its mesh, and its handles and fixed patches as anchors")
+  add_path_option(cmd, PathRole::Input, "--scene", a->scene, "JSON scene: its mesh, and its handles and fixed patches as anchors")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--report", a->report, "JSON report");
+  add_path_option(cmd, PathRole::Output, "--report", a->report, "JSON report");
   cmd->add_flag("--strict", a->strict, "Warnings are errors (exit 2)");
   cmd->callback([a = a]() { run_guarded("check", [&] { return run_check(*a); }, {1, 2}); });
 }

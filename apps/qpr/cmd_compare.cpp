@@ -229,8 +229,8 @@ void register_compare(CLI::App& app) {
       ->check(number_above(0.0, 1.0));
   cmd->add_option("--refine-anderson", a->anderson_window, "--convergence: Anderson window, 1-16 (default 5)")
       ->check(whole_number_between(1, 16));
-  cmd->add_option("--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
-  cmd->add_option("--report", a->report, "JSON report");
+  add_path_option(cmd, PathRole::OutputDirectory, "--out-dir", a->out_dir, "Directory for the meshes compared (default qpr-compare)");
+  add_path_option(cmd, PathRole::Output, "--report", a->report, "JSON report");
   cmd->callback([a = a]() { run_guarded("compare", [&] { return run_compare(*a); }); });
 }
 

@@ -43,9 +43,9 @@ int run_deform(const DeformArgs& a) {
 void register_deform(CLI::App& app) {
   auto [cmd, a] = add_command<DeformArgs>(app, "deform", "Reduced ARAP deformation of a triangle or tet mesh");
   add_scenario_options(cmd, a.get());
-  cmd->add_option("--out", a->out, "Deformed mesh of the last frame ({frame} in the name writes every frame)");
-  cmd->add_option("--report", a->report, "JSON report");
-  cmd->add_option("--cache", a->cache,
+  add_path_option(cmd, PathRole::Output, "--out", a->out, "Deformed mesh of the last frame ({frame} in the name writes every frame)");
+  add_path_option(cmd, PathRole::Output, "--report", a->report, "JSON report");
+  add_path_option(cmd, PathRole::Cache, "--cache", a->cache,
                   "Precomputed model: loaded when it exists and matches the inputs, else precomputed and written");
   add_refine_options(cmd, &a->refine);
   cmd->add_flag("--strict", a->strict,

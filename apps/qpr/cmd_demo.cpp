@@ -85,8 +85,8 @@ int run_demo(const DemoArgs& a) {
 void register_demo(CLI::App& app) {
   auto [cmd, args] = add_command<DemoArgs>(app, "demo", "Bend and twist a built-in cylinder with reduced ARAP (no files needed)");
   cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(whole_number_between(1, 10000));
-  cmd->add_option("--out", args->out_dir, "Output folder for the meshes and the report");
-  cmd->add_option("--report", args->report, "JSON report path (default OUT/report.json)");
+  add_path_option(cmd, PathRole::OutputDirectory, "--out", args->out_dir, "Output folder for the meshes and the report");
+  add_path_option(cmd, PathRole::Output, "--report", args->report, "JSON report path (default OUT/report.json)");
   cmd->add_option("--iterations", args->iterations, "Phase 1/Phase 2 rounds per frame")
       ->check(whole_number_between(1, 1000));
   cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")

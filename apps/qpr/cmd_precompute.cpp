@@ -296,7 +296,7 @@ void register_precompute(CLI::App& app) {
       app, "precompute",
       "Precompute a deformation model into a cache, on MUMPS over MPI (mpirun -np K qpr precompute …)");
   add_scenario_options(cmd, a.get());
-  cmd->add_option("--cache", a->cache, "Model cache to write (qpr deform --cache loads it)")->required();
+  add_path_option(cmd, PathRole::Cache, "--cache", a->cache, "Model cache to write (qpr deform --cache loads it)")->required();
   cmd->add_option("--backend", a->backend, "mumps (MPI, any number of ranks) or cholmod (one process)")
       ->capture_default_str();
   cmd->add_option("--block", a->block, "Right-hand sides per MUMPS solve")

@@ -618,10 +618,10 @@ int run_qp(const Options& opt) {
 
 void register_qp(CLI::App& app) {
   auto [cmd, opt] = add_command<Options>(app, "qp", kAbout);
-  cmd->add_option("--H", opt->H, "H.mtx: n×n symmetric PSD Hessian")->required();
-  cmd->add_option("--C", opt->C, "C.mtx: n×d constraint design space")->required();
-  cmd->add_option("--D", opt->D, "D.mtx: n×k linear-term design space (optional)");
-  cmd->add_option("--demands", opt->demands,
+  add_path_option(cmd, PathRole::Input, "--H", opt->H, "H.mtx: n×n symmetric PSD Hessian")->required();
+  add_path_option(cmd, PathRole::Input, "--C", opt->C, "C.mtx: n×d constraint design space")->required();
+  add_path_option(cmd, PathRole::Input, "--D", opt->D, "D.mtx: n×k linear-term design space (optional)");
+  add_path_option(cmd, PathRole::Input, "--demands", opt->demands,
                   "directory of A_<name>.mtx, b_<name>.mtx [, q_<name>.mtx | Y_<name>.mtx], or a JSON manifest")
       ->required();
   cmd->add_option("--soft", opt->soft, "soft constraints with weight DELTA (Eq. 18) instead of hard ones")
@@ -637,8 +637,8 @@ void register_qp(CLI::App& app) {
       ->capture_default_str();
   cmd->add_flag("--strict", opt->strict,
                 "a demand whose constraints hold only in the least-squares sense is a failure (exit 3), not a warning");
-  cmd->add_option("--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
-  cmd->add_option("--out", opt->out, "write X_<name>.mtx for every demand into this directory");
+  add_path_option(cmd, PathRole::Output, "--report", opt->report, "write a JSON report (per-demand times, errors, bound terms)");
+  add_path_option(cmd, PathRole::OutputDirectory, "--out", opt->out, "write X_<name>.mtx for every demand into this directory");
   cmd->add_option("--backend", opt->backend,
                   "auto (one process, CHOLMOD or SparseLU) or mumps (MUMPS over MPI: mpirun -np K qpr qp …; "
                   "docs/scaling.md)")

@@ -303,8 +303,8 @@ void register_theorem(CLI::App& app) {
   cmd->add_option("--seed", opt->seed, "base seed of the trials")
       ->check(unsigned_whole_number())
       ->capture_default_str();
-  cmd->add_option("--json", opt->json, "write the summary (overall and per family) as JSON");
-  cmd->add_option("--csv", opt->csv, "write one row per trial as CSV (scripts/theorem_figure.py plots it)");
+  add_path_option(cmd, PathRole::Output, "--json", opt->json, "write the summary (overall and per family) as JSON");
+  add_path_option(cmd, PathRole::Output, "--csv", opt->csv, "write one row per trial as CSV (scripts/theorem_figure.py plots it)");
   cmd->callback([opt = opt] { run_guarded("theorem", [&] { return run_theorem(*opt); }, {1}); });
 }
 

@@ -62,7 +62,7 @@ int run_view(ViewArgs& a) {
 void register_view(CLI::App& app) {
   auto [cmd, a] = add_command<ViewArgs>(app, "view", "Interactive deformation viewer (GLFW + Dear ImGui); --screenshot renders headless");
   add_scenario_options(cmd, a.get());
-  cmd->add_option("--screenshot", a->view.screenshot, "Headless: run the scenario's frames, write this PNG and exit");
+  add_path_option(cmd, PathRole::Output, "--screenshot", a->view.screenshot, "Headless: run the scenario's frames, write this PNG and exit");
   cmd->add_option("--size", a->size, "Window / image size WIDTHxHEIGHT (default 1280x800)");
   cmd->add_option("--samples", a->view.samples, "MSAA samples (default 4)")->check(whole_number_between(0, 16));
   cmd->add_option("--reconstruction", a->reconstruction, "gpu (default; CPU fallback when it does not fit) or cpu")
@@ -78,19 +78,19 @@ void register_view(CLI::App& app) {
   cmd->add_option("--pitch", a->view.pitch_deg, "Camera elevation, degrees (15)")->check(number_between(-89.0, 89.0));
   cmd->add_option("--zoom", a->view.zoom, "Zoom steps, > 0 closer (0)")->check(number_between(-100.0, 100.0));
   cmd->add_flag("!--no-handles", a->view.show_handles, "Do not draw the handle vertices");
-  cmd->add_option("--out", a->view.out_mesh, "Headless: also write the last pose (mesh)");
-  cmd->add_option("--stats", a->view.stats_json, "Headless: JSON with timings, the path used and GPU/CPU agreement");
+  add_path_option(cmd, PathRole::Output, "--out", a->view.out_mesh, "Headless: also write the last pose (mesh)");
+  add_path_option(cmd, PathRole::Output, "--stats", a->view.stats_json, "Headless: JSON with timings, the path used and GPU/CPU agreement");
   // Headless: refine the last frame and report it; interactive: the settings
   // of the refine that starts when the handles are still.
   add_refine_options(cmd, &a->refine);
-  cmd->add_option("--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
+  add_path_option(cmd, PathRole::Input, "--replay", a->view.replay, "Recorded handle motion (JSON, from the viewer's Record) to play")
       ->check(CLI::ExistingFile);
   cmd->add_option("--max-frames", a->view.max_frames,
                   "Interactive: close after N frames (smoke tests; with --replay, N frames after the precompute)")
       ->check(whole_number_between(0, 1000000000));
-  cmd->add_option("--window-screenshot", a->view.window_screenshot,
+  add_path_option(cmd, PathRole::Output, "--window-screenshot", a->view.window_screenshot,
                   "Interactive with --max-frames: save the whole window (panels too) at the last frame");
-  cmd->add_option("--window-log", a->view.window_log,
+  add_path_option(cmd, PathRole::Output, "--window-log", a->view.window_log,
                   "Interactive: write a JSON log of every frame (times, refine start / shown / cancel) at exit");
   cmd->callback([a = a]() { run_guarded("view", [&] { return run_view(*a); }); });
 }

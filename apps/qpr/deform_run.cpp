@@ -1,4 +1,5 @@
 #include "deform_run.h"
+#include "path_roles.h"
 #include "refine_run.h"
 #include "run_files.h"
 
@@ -70,22 +71,22 @@ void write_pose(const std::string& path, const Vertices& V, const TriangleMesh* 
 }
 
 void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
-  cmd->add_option("mesh", a->mesh, "Mesh: .obj .off .ply (surface) or .mesh .node/.ele (tets)");
-  auto* sel = cmd->add_option("--sel", a->sel, "Botsch–Sorkine selection (0 fixed, 1 free, 2 handle)")->check(CLI::ExistingFile);
-  cmd->add_option("--def", a->def, "Botsch–Sorkine 4×4 handle transform")->check(CLI::ExistingFile)->needs(sel);
-  cmd->add_option("--anim", a->anim, "Recorded handle poses (.anim)")->check(CLI::ExistingFile);
-  cmd->add_option("--scene", a->scene, "JSON scene (mesh, handles, patches, proxies, parameters)")->check(CLI::ExistingFile);
+  add_path_option(cmd, PathRole::Input, "mesh", a->mesh, "Mesh: .obj .off .ply (surface) or .mesh .node/.ele (tets)");
+  auto* sel = add_path_option(cmd, PathRole::Input, "--sel", a->sel, "Botsch–Sorkine selection (0 fixed, 1 free, 2 handle)")->check(CLI::ExistingFile);
+  add_path_option(cmd, PathRole::Input, "--def", a->def, "Botsch–Sorkine 4×4 handle transform")->check(CLI::ExistingFile)->needs(sel);
+  add_path_option(cmd, PathRole::Input, "--anim", a->anim, "Recorded handle poses (.anim)")->check(CLI::ExistingFile);
+  add_path_option(cmd, PathRole::Input, "--scene", a->scene, "JSON scene (mesh, handles, patches, proxies, parameters)")->check(CLI::ExistingFile);
   cmd->add_option("--frames", a->frames, "With --sel/--def: frames from rest to the .def pose")
       ->check(whole_number_between(1, 100000));
   auto* lp =
       cmd->add_option("--linear-proxies", a->linear_proxies, "Linear proxies (farthest-point samples), default 33")
           ->check(whole_number_between(1, 10000000));
-  cmd->add_option("--linear-groups", a->linear_groups, "Linear proxies as vertex groups (.id)")->check(CLI::ExistingFile)->excludes(lp);
+  add_path_option(cmd, PathRole::Input, "--linear-groups", a->linear_groups, "Linear proxies as vertex groups (.id)")->check(CLI::ExistingFile)->excludes(lp);
   auto* rp = cmd->add_option("--rotational-proxies", a->rotational_proxies,
                              "Rotational clusters (spectral k-means), default 27")
                  ->check(whole_number_between(1, 10000000));
-  cmd->add_option("--rotational-clusters", a->rotational_clusters, "Rotational clusters (.id)")->check(CLI::ExistingFile)->excludes(rp);
-  cmd->add_option("--affine-patches", a->affine_patches, "Affine patches (.id: 0 free, k > 0 patch k)")->check(CLI::ExistingFile);
+  add_path_option(cmd, PathRole::Input, "--rotational-clusters", a->rotational_clusters, "Rotational clusters (.id)")->check(CLI::ExistingFile)->excludes(rp);
+  add_path_option(cmd, PathRole::Input, "--affine-patches", a->affine_patches, "Affine patches (.id: 0 free, k > 0 patch k)")->check(CLI::ExistingFile);
   cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame (the cap with --tolerance)")
       ->check(whole_number_between(1, 100000));
   cmd->add_option("--tolerance", a->tolerance,

@@ -4,6 +4,7 @@
 // outputs only when it succeeded (run_files.h).
 #pragma once
 
+#include "path_roles.h"
 #include "run_files.h"
 
 #include <CLI/CLI.hpp>
@@ -34,6 +35,7 @@ inline void run_guarded(const char* name, const std::function<int()>& body, std:
   outputs.discard();  // nothing staged by an earlier run of this process
   int code = 0;
   try {
+    check_path_roles(name);  // no output may be an input (path_roles.h)
     code = body();
     if (code == 0 || std::find(verdicts.begin(), verdicts.end(), code) != verdicts.end()) {
       outputs.commit();

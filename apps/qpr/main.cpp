@@ -4,12 +4,24 @@
 
 #include <CLI/CLI.hpp>
 
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <csignal>
+#include <cstdio>
+#include <cstring>
 
 int main(int argc, char** argv) {
   // Past a file-size limit a write then fails with EFBIG, which the writers
   // report (leaving the earlier file), instead of SIGXFSZ ending the process.
   std::signal(SIGXFSZ, SIG_IGN);
+  // With the standard output closed (`qpr … >&-`) the next file opened would
+  // take its descriptor and receive the tables: refuse before opening any.
+  if (fcntl(STDOUT_FILENO, F_GETFD) == -1) {
+    std::fprintf(stderr, "qpr: error: the standard output is closed (redirect it to a file or /dev/null)\n");
+    return 2;
+  }
   CLI::App app{"qpr — interactive solves of constrained QPs through linear variational subspaces (qpreduce)"};
   app.name("qpr");
   app.require_subcommand(1);
@@ -25,6 +37,20 @@ int main(int argc, char** argv) {
 #ifdef QPREDUCE_HAVE_MPI
   qpr::register_precompute(app);
 #endif
-  CLI11_PARSE(app, argc, argv);
-  return 0;
+  int code = 0;
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    code = app.exit(e);
+  }
+  // A command whose output could not be written has failed (`qpr check
+  // MESH > /dev/full`, stdout closed): say so, and exit 2 unless it failed
+  // already. A failing stderr can only be told by the exit code.
+  if (std::fflush(stdout) != 0 || std::ferror(stdout)) {
+    const int error = errno;
+    std::fprintf(stderr, "qpr: error: writing the standard output failed: %s\n", std::strerror(error));
+    if (code == 0) code = 2;
+  }
+  if ((std::fflush(stderr) != 0 || std::ferror(stderr)) && code == 0) code = 2;
+  return code;
 }

@@ -464,6 +464,9 @@ WRITERS = [
      ["--reference", "local-global", "--out-dir", "{W}/cmp", "--report", "{OUT}"], ".json"),
 ]
 EARLIER = "earlier contents\n"
+# An earlier cache: a deformer cache's magic bytes, then anything (--cache
+# replaces only a file that starts like a cache).
+EARLIER_CACHE = "QPREDUCEDEFORMER" + EARLIER
 for name, args, ext in WRITERS:
     # Mesh writers pick the format by extension: /dev/full through a link "full.off".
     CASES.append(dict(group="writers", name=name + " to /dev/full",
@@ -478,8 +481,8 @@ for name, args, ext in WRITERS:
                       code=3 if name.startswith("theorem") else RUN,
                       # demo and compare write meshes first: the limit stops the run there.
                       words=["File too large"] + ([] if name.startswith(("demo", "compare")) else ["out" + ext]),
-                      files={"out" + ext: EARLIER + "x" * 4096}, max_seconds=None, stdout_words=[],
-                      fsize=16, intact="out" + ext))
+                      files={"out" + ext: (EARLIER_CACHE if ext == ".qpr" else EARLIER) + "x" * 4096},
+                      max_seconds=None, stdout_words=[], fsize=16, intact="out" + ext))
 # qp --out X_<name>.mtx: a file-size limit keeps the earlier solution.
 CASES.append(dict(group="writers", name="qp --out under a file-size limit", args=qp("--out", "{W}/sol"),
                   code=RUN, words=["X_d0.mtx", "File too large"], files={"sol/X_d0.mtx": EARLIER + "x" * 4096},
@@ -579,7 +582,7 @@ CASES.append(dict(group="writers", name="qp --check-full: a failed full solve (e
                   stdout_words=[], intact=["sol/X_d0.mtx", "r.json"]))
 CASES.append(dict(group="writers", name="deform: a failure after the precompute keeps the earlier --cache",
                   args=deform("--cache", "{W}/c.qpr", "--report", "{W}/r.json", "--out", "{W}/pose.xyz"), code=RUN,
-                  words=["pose.xyz", "unsupported"], files={"c.qpr": EARLIER, "r.json": EARLIER}, max_seconds=None,
+                  words=["pose.xyz", "unsupported"], files={"c.qpr": EARLIER_CACHE, "r.json": EARLIER}, max_seconds=None,
                   stdout_words=[], intact=["c.qpr", "r.json"]))
 CASES.append(dict(group="writers", name="demo: a failing run removes the --out folder it made",
                   args=["demo", "--frames", "1", "--out", "{W}/new/demo", "--report", "{W}/missing/r.json"],
@@ -589,6 +592,40 @@ CASES.append(dict(group="writers", name="theorem: --csv failing keeps the earlie
                   args=["theorem", "--trials", "10", "--json", "{W}/t.json", "--csv", "{W}/full.csv"], code=3,
                   words=["full.csv", "No space left on device"], files={"t.json": EARLIER}, max_seconds=None,
                   stdout_words=[], links={"full.csv": "/dev/full"}, intact=["t.json"]))
+
+# No output may be an input (docs/robustness.md): a path given twice, through
+# a symbolic or a hard link, or a --cache that is not a cache, is refused
+# before any work, naming both options; the inputs stay as they were.
+SAME = "name the same file"
+for name, args, words, links, hardlinks, intact in [
+    ("deform --cache MESH", deform("--cache", "{W}/tube.off"), ["MESH and --cache " + SAME, "cache would replace"],
+     {}, {}, ["tube.off"]),
+    ("deform --cache SEL", deform("--cache", "{W}/tube.sel"), ["--sel and --cache " + SAME], {}, {}, ["tube.sel"]),
+    ("deform --out and --report the same", deform("--out", "{W}/x.off", "--report", "{W}/x.off"),
+     ["--out and --report " + SAME, "one output would overwrite the other", "another path for --report"], {}, {}, []),
+    ("deform --out through a symbolic link to MESH", deform("--out", "{W}/link.off"),
+     ["MESH and --out " + SAME, "link.off and", "tube.off are one file"], {"link.off": "tube.off"}, {}, ["tube.off"]),
+    ("deform --report a hard link of --def", deform("--report", "{W}/hard.def"), ["--def and --report " + SAME],
+     {}, {"hard.def": "tube.def"}, ["tube.def"]),
+    ("deform --out MESH spelled another way", deform("--out", "{W}/./dem/../tube.off"), ["MESH and --out " + SAME],
+     {}, {}, ["tube.off"]),
+    ("deform --cache a file that is not a cache", deform("--cache", "{W}/tube.obj"),
+     ["--cache", "tube.obj exists and is not a qpreduce cache"], {}, {}, ["tube.obj"]),
+    ("check --report MESH", check("--report", "{W}/tube.off"), ["MESH and --report " + SAME], {}, {}, ["tube.off"]),
+    ("qp --report H", qp("--report", "{W}/H.mtx"), ["--H and --report " + SAME], {}, {}, ["H.mtx"]),
+    ("theorem --json and --csv the same", ["theorem", "--trials", "10", "--json", "{W}/t", "--csv", "{W}/t"],
+     ["--json and --csv " + SAME], {}, {}, []),
+]:
+    CASES.append(dict(group="writers", name=name, args=args, code=RUN, words=words, files={}, max_seconds=10,
+                      stdout_words=[], links=links, hardlinks=hardlinks, intact=intact))
+# The standard output is a writer too: a command whose tables cannot be
+# written fails.
+CASES.append(dict(group="writers", name="check with the standard output on /dev/full", args=check(), code=RUN,
+                  words=["writing the standard output failed", "No space left on device"], files={},
+                  max_seconds=None, stdout_words=[], stdout="/dev/full"))
+CASES.append(dict(group="writers", name="check with the standard output closed", args=check(), code=RUN,
+                  words=["the standard output is closed"], files={}, max_seconds=None, stdout_words=[],
+                  stdout="closed"))
 
 # ---------------------------------------------------------------- view
 # The viewer's writers, headless (--screenshot renders the last frame, then
@@ -628,6 +665,11 @@ CASES.append(dict(group="view", name="view: --out on /dev/full keeps the earlier
                   max_seconds=None, stdout_words=[], env=VIEW_ENV, display=True, links={"full.off": "/dev/full"},
                   intact="s.json"))
 
+CASES.append(dict(group="view", name="view --screenshot and --stats the same file",
+                  args=VIEW_TUBE + ["--screenshot", "{W}/v.png", "--stats", "{W}/v.png"], code=RUN,
+                  words=["--screenshot and --stats name the same file"], files={}, max_seconds=10,
+                  stdout_words=[], env=VIEW_ENV, display=True))
+
 # ---------------------------------------------------------------- runner
 
 
@@ -651,6 +693,8 @@ def run_case(qpr, c):
                 f.write(text)
         for rel, target in c.get("links", {}).items():
             os.symlink(target, os.path.join(work, rel))
+        for rel, target in c.get("hardlinks", {}).items():
+            os.link(os.path.join(work, target), os.path.join(work, rel))
         args = [qpr] + [a.replace("{W}", work) for a in c["args"]]
         fsize = c.get("fsize")
 
@@ -660,8 +704,23 @@ def run_case(qpr, c):
                 resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
 
         start = time.monotonic()
-        p = subprocess.run(args, cwd=work, stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=limit,
-                           timeout=300, env=dict(os.environ, **c.get("env", {})))
+        # "stdout": a file to write the standard output to (/dev/full), or
+        # "closed" (closed in the child before qpr starts).
+        sink_path = c.get("stdout")
+
+        def prepare():
+            limit()
+            if sink_path == "closed":
+                os.close(1)
+
+        sink = open(sink_path, "wb") if sink_path not in (None, "closed") else None
+        try:
+            p = subprocess.run(args, cwd=work, stdout=sink or subprocess.PIPE, stderr=subprocess.PIPE,
+                               preexec_fn=prepare, timeout=300, env=dict(os.environ, **c.get("env", {})))
+        finally:
+            if sink:
+                sink.close()
+        p.stdout = p.stdout or b""
         seconds = time.monotonic() - start
         err = p.stderr.decode("utf-8", "replace")
         out = p.stdout.decode("utf-8", "replace")

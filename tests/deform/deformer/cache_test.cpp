@@ -4,6 +4,7 @@
 // refused with a message and leave the session as it was.
 #include <catch2/catch.hpp>
 
+#include "qpreduce/deform/deformer/cache_file.h"
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/io_error.h"
 #include "qpreduce/deform/mesh/shapes.h"
@@ -211,6 +212,27 @@ TEST_CASE("cache: corrupted, truncated and foreign files are refused", "[cache][
   SECTION("missing") { require_refused(temp_path("does_not_exist.qpr"), c, o, "cannot open"); }
   fs::remove(bad);
   fs::remove(good);
+}
+
+TEST_CASE("cache: save replaces a cache or an empty file, never another file", "[cache][errors]") {
+  const Case c = bent_cylinder();
+  Deformer d;
+  REQUIRE(d.precompute(c.model, small_options()).ok());
+  const std::string path = temp_path("replace.qpr");
+  const std::string mesh = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+  write_all(path, mesh);
+  CHECK_FALSE(is_deformer_cache(path));
+  CHECK_THROWS_WITH(d.save(path), Catch::Contains("exists and is not a qpreduce deformer cache"));
+  CHECK(read_all(path) == mesh);
+  write_all(path, "");
+  d.save(path);
+  CHECK(is_deformer_cache(path));
+  d.save(path);  // a cache is replaced
+  CHECK(is_deformer_cache(path));
+  CHECK_FALSE(is_deformer_cache(temp_path("does_not_exist.qpr")));
+  CHECK(may_replace_with_cache(temp_path("does_not_exist.qpr")));
+  CHECK(may_replace_with_cache("/dev/null"));
+  fs::remove(path);
 }
 
 TEST_CASE("cache: a refused load leaves the session as it was", "[cache][errors]") {

@@ -17,6 +17,7 @@
 // other in row order and tile the 3n rows. load() first checks size and CRC over the whole file,
 // then parses with every count bounded by the bytes left, then compares the
 // stored inputs with the given ones, and only then replaces the session.
+#include "qpreduce/deform/deformer/cache_file.h"
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/io_error.h"
 
@@ -32,6 +33,7 @@
 #include <array>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <type_traits>
 
@@ -396,6 +398,21 @@ void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh
 
 }  // namespace
 
+bool is_deformer_cache(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return false;
+  std::ifstream in(path, std::ios::binary);
+  char magic[sizeof kMagic];
+  return in.read(magic, sizeof magic) && std::memcmp(magic, kMagic, sizeof magic) == 0;
+}
+
+bool may_replace_with_cache(const std::string& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (ec || !std::filesystem::exists(status) || !std::filesystem::is_regular_file(status)) return true;
+  return std::filesystem::file_size(path, ec) == 0 || is_deformer_cache(path);
+}
+
 void Deformer::save(const std::string& path) const {
   if (!state_->ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
   const detail_deformer::Model& model = state_->model;
@@ -422,6 +439,12 @@ void Deformer::save(const std::string& path, const BasisBlocks& next) const {
   const State& st = *state_;
   if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
   if (!next) throw std::invalid_argument("Deformer::save: no basis blocks given");
+  if (!may_replace_with_cache(path)) {
+    throw std::invalid_argument(fmt::format(
+        "Deformer::save: {} exists and is not a qpreduce deformer cache; refusing to replace it "
+        "(remove it or choose another path)",
+        path));
+  }
   const Model& model = st.model;
   const Index rows = 3 * model.n, p = model.nx + 9 * model.d;
   try {
