@@ -354,6 +354,27 @@ case("check", "an unanchored component with --sel", check("--sel", "{W}/two.sel"
                    "fixed region anchoring it"])
 
 
+
+def tube_flipped(every):
+    """The tube with every `every`-th triangle (from triangle 1) flipped, as m.off."""
+    lines = OFF.splitlines()
+    faces = lines[2 + NV:]
+    for f in range(1, len(faces), every):
+        _, a, b, c = faces[f].split()
+        faces[f] = "3 %s %s %s" % (a, c, b)
+    return {"m.off": "\n".join(lines[:2 + NV] + faces) + "\n"}
+
+
+# Triangles oriented against their neighbours (was clean).
+case("check", "half the triangles flipped", check(mesh="{W}/m.off"), WARNINGS, [], tube_flipped(2),
+     stdout_words=["warning: triangle 1 (vertices", "is oriented against the rest of its surface",
+                   "(40 triangles in all)", "status: warnings"])
+case("check", "one triangle flipped", check(mesh="{W}/m.off"), WARNINGS, [], tube_flipped(1000),
+     stdout_words=["warning: triangle 1 (vertices", "3 of the 112 shared edges disagree"])
+case("check", "flipped triangles with deform: a pre-flight warning", deform(mesh="{W}/m.off"), 0,
+     ["warning:", "m.off", "oriented against the rest of its surface"], tube_flipped(2))
+
+
 def two_anim(second):
     """An .anim for TWO: handle 0 at vertex 0, handle 1 at vertex `second`, one pose."""
     rows = []

@@ -12,7 +12,9 @@
 #include "qpreduce/deform/mesh/mesh_check.h"
 #include "qpreduce/deform/mesh/shapes.h"
 
+#include <cmath>
 #include <random>
+#include <utility>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -269,6 +271,73 @@ TEST_CASE("an edge in three triangles is non-manifold, a bow-tie vertex too", "[
     const TriangleMesh m = tetrahedron_surface();
     CHECK(diagnose_mesh(m.V, m.F).findings.empty());
   }
+}
+
+TEST_CASE("triangles oriented against their neighbours are counted and named; a Möbius strip is not orientable",
+          "[mesh_check]") {
+  const TriangleMesh tube = shapes::capped_cylinder(1.0, 2.0, 16, 6);
+  const Index m = tube.F.rows();
+  const auto flipped_copy = [&](auto flip) {
+    TriangleMesh t = tube;
+    for (Index f = 0; f < m; ++f)
+      if (flip(f)) std::swap(t.F(f, 1), t.F(f, 2));
+    return t;
+  };
+  CHECK_FALSE(find(diagnose_mesh(tube.V, tube.F), MeshDefect::InconsistentOrientation));
+  // All flipped (inward normals) is consistent too.
+  const TriangleMesh inward = flipped_copy([](Index) { return true; });
+  CHECK_FALSE(find(diagnose_mesh(inward.V, inward.F), MeshDefect::InconsistentOrientation));
+
+  const TriangleMesh one = flipped_copy([](Index f) { return f == 7; });
+  const MeshCheckSummary s1 = diagnose_mesh(one.V, one.F);
+  const MeshFinding* f1 = find(s1, MeshDefect::InconsistentOrientation);
+  REQUIRE(f1);
+  CHECK(f1->severity == CheckSeverity::Warning);
+  CHECK(s1.status == MeshCheckStatus::Warnings);
+  CHECK(f1->count == 1);
+  CHECK(f1->first == std::vector<std::vector<Index>>{{7}});
+  CHECK_THAT(f1->message, Catch::Contains("triangle 7 (vertices") && Catch::Contains("oriented against") &&
+                              Catch::Contains("3 of the"));
+  CHECK(std::string(to_string(f1->defect)) == "inconsistent_orientation");
+
+  // Every other triangle flipped: the smaller class (here the odd ones, a
+  // tie broken against triangle 0's class) is the count.
+  const TriangleMesh half = flipped_copy([](Index f) { return f % 2 == 1; });
+  const MeshCheckSummary sh = diagnose_mesh(half.V, half.F);
+  const MeshFinding* fh = find(sh, MeshDefect::InconsistentOrientation);
+  REQUIRE(fh);
+  CHECK(fh->count == m / 2);
+  CHECK(fh->first.front() == std::vector<Index>{1});
+  CHECK(static_cast<Index>(fh->first.size()) == MeshCheckOptions{}.max_listed);
+  CHECK_THAT(fh->message, !Catch::Contains("not orientable"));
+
+  // A Möbius strip: locally consistent everywhere but along one rung, and no
+  // flip fixes it.
+  const int N = 12;
+  TriangleMesh strip;
+  strip.V.resize(2 * N, 3);
+  for (int i = 0; i < N; ++i) {
+    const double t = 2 * M_PI * i / N;
+    for (int side = 0; side < 2; ++side) {
+      const double w = side == 0 ? 0.3 : -0.3;
+      strip.V.row(2 * i + side) << (1 + w * std::cos(t / 2)) * std::cos(t), (1 + w * std::cos(t / 2)) * std::sin(t),
+          w * std::sin(t / 2);
+    }
+  }
+  strip.F.resize(2 * N, 3);
+  for (int i = 0; i < N; ++i) {
+    const Index top = 2 * i, bottom = 2 * i + 1;
+    // After the half twist the strip meets its start upside down.
+    const Index next_top = i + 1 < N ? 2 * (i + 1) : 1, next_bottom = i + 1 < N ? 2 * (i + 1) + 1 : 0;
+    strip.F.row(2 * i) << top, bottom, next_bottom;
+    strip.F.row(2 * i + 1) << top, next_bottom, next_top;
+  }
+  const MeshCheckSummary ms = diagnose_mesh(strip.V, strip.F);
+  const MeshFinding* fm = find(ms, MeshDefect::InconsistentOrientation);
+  REQUIRE(fm);
+  CHECK(fm->count >= 1);
+  CHECK_THAT(fm->message, Catch::Contains("not orientable"));
+  CHECK_FALSE(ms.has_errors());
 }
 
 TEST_CASE("tets: inverted, all inverted, degenerate, a face in three tets", "[mesh_check]") {

@@ -1,5 +1,8 @@
 #include "qpreduce/deform/mesh/mesh_check.h"
 
+#include "finding_builder.h"
+#include "orientation.h"
+
 #include <qpreduce/support.h>
 
 #include <Eigen/Geometry>  // cross
@@ -31,6 +34,7 @@ const char* to_string(MeshDefect defect) {
     case MeshDefect::UnanchoredComponent: return "unanchored_component";
     case MeshDefect::NearDegenerateElement: return "near_degenerate_element";
     case MeshDefect::InvertedTet: return "inverted_tet";
+    case MeshDefect::InconsistentOrientation: return "inconsistent_orientation";
     case MeshDefect::DuplicateVertex: return "duplicate_vertex";
     case MeshDefect::UnreferencedVertex: return "unreferenced_vertex";
     case MeshDefect::NonManifoldEdge: return "non_manifold_edge";
@@ -79,48 +83,6 @@ const MeshFinding* MeshCheckSummary::first(CheckSeverity severity) const {
 namespace {
 
 // 1204 → "1,204".
-std::string grouped(Index value) {
-  std::string digits = std::to_string(value < 0 ? -value : value), out;
-  for (size_t i = 0; i < digits.size(); ++i) {
-    if (i > 0 && (digits.size() - i) % 3 == 0) out += ',';
-    out += digits[i];
-  }
-  return value < 0 ? "-" + out : out;
-}
-
-std::string plural(const std::string& item) { return item == "vertex" ? "vertices" : item + "s"; }
-
-// Collects the offenders of one defect; finish() writes the message from the
-// first offender's sentence and the count.
-class FindingBuilder {
- public:
-  FindingBuilder(MeshDefect defect, CheckSeverity severity, std::string item, Index max_listed)
-      : max_listed_(max_listed) {
-    f_.defect = defect;
-    f_.severity = severity;
-    f_.item = std::move(item);
-  }
-  // Returns true for the first offender (whose sentence the caller then sets).
-  bool add(std::vector<Index> offender) {
-    if (static_cast<Index>(f_.first.size()) < max_listed_) f_.first.push_back(std::move(offender));
-    return f_.count++ == 0;
-  }
-  void sentence(std::string s) { sentence_ = std::move(s); }
-  Index count() const { return f_.count; }
-  // Appends the finding to `out` when there was an offender.
-  void finish(std::vector<MeshFinding>* out) {
-    if (f_.count == 0) return;
-    f_.message = sentence_;
-    if (f_.count > 1) f_.message += fmt::format(" ({} {} in all)", grouped(f_.count), plural(f_.item));
-    out->push_back(std::move(f_));
-  }
-
- private:
-  MeshFinding f_;
-  Index max_listed_;
-  std::string sentence_;
-};
-
 using Row3 = Eigen::RowVector3d;
 
 // What the steps share.
@@ -435,6 +397,31 @@ void check_manifold_sides(const Inputs& in, const std::vector<SideKey>& sides, s
   many.finish(out);
 }
 
+// Triangles oriented against their neighbours (orientation.h), over the
+// edges exactly two triangles share.
+void check_orientation(const Inputs& in, const std::vector<SideKey>& sides, std::vector<MeshFinding>* out) {
+  std::vector<SharedEdge> shared;
+  for_each_side(sides, [&](size_t i, size_t j) {
+    if (j - i != 2) return;
+    const std::array<Index, 3> at = side_corners(sides[i]);
+    shared.push_back({at[0], at[1], static_cast<Index>(sides[i].element), static_cast<Index>(sides[i + 1].element)});
+  });
+  const OrientationReport r = triangle_orientation(in.E, shared, in.o.max_listed);
+  if (r.flipped == 0) return;
+  FindingBuilder flipped(MeshDefect::InconsistentOrientation, CheckSeverity::Warning, "triangle", in.o.max_listed);
+  for (const Index t : r.first_flipped) flipped.add({t});
+  flipped.sentence(fmt::format(
+      "triangle {} (vertices {}) is oriented against the rest of its surface (its normal points the other way): "
+      "triangles {} and {} both run along edge ({}, {}) from vertex {} to {} ({} of the {} shared edges disagree{})",
+      r.first_flipped.front(), corners_of(in, r.first_flipped.front()), r.example, r.partner, r.edge[0], r.edge[1],
+      r.edge[0], r.edge[1],
+      grouped(r.disagreeing_edges), grouped(static_cast<Index>(shared.size())),
+      r.non_orientable ? "; a part of the surface is not orientable" : ""));
+  // The count is the triangles to flip (FindingBuilder counted the listed ones).
+  flipped.set_count(r.flipped);
+  flipped.finish(out);
+}
+
 // Union–find with path halving.
 Index find_root(std::vector<Index>& parent, Index x) {
   while (parent[x] != x) x = parent[x] = parent[parent[x]];
@@ -568,6 +555,7 @@ MeshCheckSummary diagnose_mesh(const VerticesRef& V, const ElementsRef& E, const
     check_duplicates(in, s, &out);
     const std::vector<SideKey> sides = sorted_sides(in);
     check_manifold_sides(in, sides, &out);
+    if (in.p == 3) check_orientation(in, sides, &out);
     check_vertex_stars(in, sides, &out);
     check_components(in, &s, &out);
   }

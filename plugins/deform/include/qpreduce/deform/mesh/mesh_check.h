@@ -25,6 +25,9 @@
 //     element, → 0 as it flattens; cotangents grow like 1/q)    Warning
 //   inverted tet: det[b − a, c − a, d − a] < 0 while most are
 //     positive (all negative: the file's opposite convention)   Warning
+//   inconsistently oriented triangles: two triangles run along
+//     the edge they share in the same direction; counted as the
+//     triangles to flip (the smaller class in each component)   Warning
 //   duplicate vertex: within duplicate_distance · diagonal of
 //     a lower-numbered vertex (a seam that splits the surface)   Warning
 //   unreferenced vertex (used by no element: kept, not deformed) Warning
@@ -75,6 +78,7 @@ enum class MeshDefect {
   UnanchoredComponent,
   NearDegenerateElement,
   InvertedTet,
+  InconsistentOrientation,
   DuplicateVertex,
   UnreferencedVertex,
   NonManifoldEdge,
