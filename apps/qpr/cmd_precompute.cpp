@@ -307,8 +307,9 @@ void register_precompute(CLI::App& app) {
       ->type_name("DIR");
   cmd->add_flag("--trace-memory", a->trace_memory,
                 "Print every rank's peak and current resident memory at each precompute stage (stderr)");
-  cmd->callback(
-      [a = a]() { run_with_mpi("precompute", [&](const MpiSession& mpi) { return run_precompute(*a, mpi); }); });
+  cmd->callback([a = a, command = cmd]() {
+    run_with_mpi("precompute", *command, [&](const MpiSession& mpi) { return run_precompute(*a, mpi); });
+  });
 
   auto [gmrf, g] = add_command<GmrfArgs>(
       app, "precompute-gmrf", "Subspace build of the seeded GMRF grid family, for scaling runs (mpirun -np K …)");
@@ -323,8 +324,9 @@ void register_precompute(CLI::App& app) {
   gmrf->add_option("--block", g->block, "right-hand sides per MUMPS solve")
       ->check(whole_number_between(1, 4096))
       ->capture_default_str();
-  gmrf->callback(
-      [g = g]() { run_with_mpi("precompute-gmrf", [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); }); });
+  gmrf->callback([g = g, command = gmrf]() {
+    run_with_mpi("precompute-gmrf", *command, [&](const MpiSession& mpi) { return run_gmrf(*g, mpi); });
+  });
 }
 
 }  // namespace qpr

@@ -644,11 +644,12 @@ void register_qp(CLI::App& app) {
                   "docs/scaling.md)")
       ->check(CLI::IsMember({"auto", "mumps"}))
       ->capture_default_str();
-  cmd->callback([opt = opt] {
+  cmd->callback([opt = opt, command = cmd] {
     if (opt->backend != "mumps") return run_guarded("qp", [&] { return run_qp(*opt); }, {1});
 #ifdef QPREDUCE_HAVE_MPI
-    run_with_mpi("qp", [&](const MpiSession&) { return run_qp(*opt); }, {1});
+    run_with_mpi("qp", *command, [&](const MpiSession&) { return run_qp(*opt); }, {1});
 #else
+    (void)command;
     run_guarded("qp", [&]() -> int {
       throw std::invalid_argument("--backend mumps: this qpr was built without MPI and MUMPS (QPREDUCE_WITH_MPI)");
     });

@@ -32,7 +32,7 @@ struct Identity {
   fs::path canonical;
 };
 
-Identity identity(const std::string &path) {
+Identity identity(const std::string& path) {
   Identity id;
   struct stat st {};
   if (::stat(path.c_str(), &st) == 0) {
@@ -44,51 +44,43 @@ Identity identity(const std::string &path) {
   }
   std::error_code ec;
   id.canonical = fs::weakly_canonical(fs::absolute(path, ec), ec);
-  if (ec)
-    id.canonical = fs::path(path).lexically_normal();
+  if (ec) id.canonical = fs::path(path).lexically_normal();
   return id;
 }
 
-bool same_file(const Identity &a, const Identity &b) {
-  if (a.exists && b.exists)
-    return a.device == b.device && a.inode == b.inode;
+bool same_file(const Identity& a, const Identity& b) {
+  if (a.exists && b.exists) return a.device == b.device && a.inode == b.inode;
   return a.canonical == b.canonical;
 }
 
 bool writes(PathRole role) { return role != PathRole::Input; }
 
-const char *role_word(PathRole role) {
+const char* role_word(PathRole role) {
   switch (role) {
-  case PathRole::Input:
-    return "input";
-  case PathRole::Output:
-    return "output";
-  case PathRole::OutputDirectory:
-    return "output folder";
-  case PathRole::Cache:
-    return "cache";
+    case PathRole::Input: return "input";
+    case PathRole::Output: return "output";
+    case PathRole::OutputDirectory: return "output folder";
+    case PathRole::Cache: return "cache";
   }
   return "path";
 }
 
-std::map<std::string, std::vector<std::pair<CLI::Option *, PathRole>>> &
-registry() {
-  static std::map<std::string, std::vector<std::pair<CLI::Option *, PathRole>>>
-      options;
+std::map<std::string, std::vector<std::pair<CLI::Option*, PathRole>>>& registry() {
+  static std::map<std::string, std::vector<std::pair<CLI::Option*, PathRole>>> options;
   return options;
 }
 
-} // namespace
+}  // namespace
 
-CLI::Option *path_role(CLI::App *command, CLI::Option *option, PathRole role) {
+CLI::Option* path_role(CLI::App* command, CLI::Option* option, PathRole role) {
   registry()[command->get_name()].emplace_back(option, role);
   return option;
 }
 
-void check_path_roles(const std::vector<RolePath> &paths) {
+void check_path_roles(const std::vector<RolePath>& paths) {
   std::vector<std::optional<Identity>> ids;
   ids.reserve(paths.size());
-  for (const RolePath &p : paths) {
+  for (const RolePath& p : paths) {
     if (p.path.empty()) {
       ids.emplace_back();
       continue;
@@ -102,13 +94,10 @@ void check_path_roles(const std::vector<RolePath> &paths) {
     ids.emplace_back(std::move(id));
   }
   for (std::size_t i = 0; i < paths.size(); ++i) {
-    if (!ids[i] || !writes(paths[i].role))
-      continue;
+    if (!ids[i] || !writes(paths[i].role)) continue;
     for (std::size_t j = 0; j < paths.size(); ++j) {
-      if (j == i || !ids[j] || (writes(paths[j].role) && j < i))
-        continue; // each pair of writers once
-      if (!same_file(*ids[i], *ids[j]))
-        continue;
+      if (j == i || !ids[j] || (writes(paths[j].role) && j < i)) continue;  // each pair of writers once
+      if (!same_file(*ids[i], *ids[j])) continue;
       const std::string which = paths[i].path == paths[j].path
                                     ? paths[i].path
                                     : fmt::format("{} and {} are one file", paths[i].path, paths[j].path);
@@ -122,9 +111,8 @@ void check_path_roles(const std::vector<RolePath> &paths) {
                                               first.option, second.option, which, what, second.option));
     }
   }
-  for (const RolePath &p : paths) {
-    if (p.role == PathRole::Cache && !p.path.empty() &&
-        !qpreduce::deform::may_replace_with_cache(p.path)) {
+  for (const RolePath& p : paths) {
+    if (p.role == PathRole::Cache && !p.path.empty() && !qpreduce::deform::may_replace_with_cache(p.path)) {
       throw std::invalid_argument(
           fmt::format("{}: {} exists and is not a qpreduce cache; refusing to "
                       "replace it (remove it or choose another path)",
@@ -133,24 +121,26 @@ void check_path_roles(const std::vector<RolePath> &paths) {
   }
 }
 
-void check_path_roles(const std::string &command,
-                      const std::vector<RolePath> &extra) {
+std::vector<RolePath> given_paths(const std::string& command) {
   std::vector<RolePath> paths;
-  for (const auto &[option, role] : registry()[command]) {
-    if (option->count() == 0)
-      continue;
-    for (const std::string &value : option->results()) {
+  for (const auto& [option, role] : registry()[command]) {
+    if (option->count() == 0) continue;
+    for (const std::string& value : option->results()) {
       // A positional (the mesh) by its upper-case name, as in the usage line.
       std::string name = option->get_name(false, true);
       if (option->get_positional()) {
-        for (char &c : name)
-          c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+        for (char& c : name) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
       }
       paths.push_back({std::move(name), value, role});
     }
   }
+  return paths;
+}
+
+void check_path_roles(const std::string& command, const std::vector<RolePath>& extra) {
+  std::vector<RolePath> paths = given_paths(command);
   paths.insert(paths.end(), extra.begin(), extra.end());
   check_path_roles(paths);
 }
 
-} // namespace qpr
+}  // namespace qpr

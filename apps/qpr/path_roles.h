@@ -28,7 +28,7 @@ struct RolePath {
 
 // Registers `option` (a path option of the subcommand `command`) with `role`,
 // for check_path_roles(command). Returns option.
-CLI::Option *path_role(CLI::App *command, CLI::Option *option, PathRole role);
+CLI::Option* path_role(CLI::App* command, CLI::Option* option, PathRole role);
 
 // Throws std::invalid_argument naming both options when an output (or cache)
 // is the same file as an input or as another output; a directory output
@@ -36,20 +36,22 @@ CLI::Option *path_role(CLI::App *command, CLI::Option *option, PathRole role);
 // empty, or name an existing non-regular file (/dev/null, a FIFO), are not
 // compared. A Cache path naming an existing non-empty file that does not
 // start with a qpreduce cache's header is refused ("is not a qpreduce cache").
-void check_path_roles(const std::vector<RolePath> &paths);
+void check_path_roles(const std::vector<RolePath>& paths);
 
 // cmd->add_option(name, variable, description) registered with `role`.
 template <typename T>
-CLI::Option *add_path_option(CLI::App *cmd, PathRole role,
-                             const std::string &name, T &variable,
-                             const std::string &description) {
+CLI::Option* add_path_option(CLI::App* cmd, PathRole role, const std::string& name, T& variable,
+                             const std::string& description) {
   return path_role(cmd, cmd->add_option(name, variable, description), role);
 }
+
+// The paths given on `command`'s command line for the options registered
+// with path_role, each named as in messages ("MESH", "--sel").
+std::vector<RolePath> given_paths(const std::string& command);
 
 // check_path_roles over the options registered for `command` (path_role)
 // that were given on its command line, plus `extra` (paths a command derives,
 // such as a default report inside an output directory).
-void check_path_roles(const std::string &command,
-                      const std::vector<RolePath> &extra = {});
+void check_path_roles(const std::string& command, const std::vector<RolePath>& extra = {});
 
-} // namespace qpr
+}  // namespace qpr
