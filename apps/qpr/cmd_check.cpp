@@ -137,7 +137,7 @@ void register_check(CLI::App& app) {
       ->check(CLI::ExistingFile);
   add_path_option(cmd, PathRole::Output, "--report", a->report, "JSON report");
   cmd->add_flag("--strict", a->strict, "Warnings are errors (exit 2)");
-  cmd->callback([a = a]() { run_guarded("check", [&] { return run_check(*a); }, {1, 2}); });
+  cmd->callback([a = a]() { run_guarded("check", [&] { return run_check(*a); }, {1, 2}, /*linear_algebra=*/false); });
 }
 
 }  // namespace qpr

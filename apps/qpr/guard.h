@@ -4,6 +4,7 @@
 // outputs only when it succeeded (run_files.h).
 #pragma once
 
+#include "blas_memory.h"
 #include "path_roles.h"
 #include "run_files.h"
 
@@ -30,12 +31,16 @@ namespace qpr {
 // "qpr <name>: error: <what>" and exit with code 2; running out of memory
 // says so in words ("out of memory …") instead of "std::bad_alloc". Every
 // subcommand's callback goes through here.
-inline void run_guarded(const char* name, const std::function<int()>& body, std::initializer_list<int> verdicts = {}) {
+// Unless `linear_algebra` is false (qpr check), the BLAS work buffers are
+// reserved first under an address-space limit (blas_memory.h).
+inline void run_guarded(const char* name, const std::function<int()>& body, std::initializer_list<int> verdicts = {},
+                        bool linear_algebra = true) {
   RunFiles& outputs = run_files();
   outputs.discard();  // nothing staged by an earlier run of this process
   int code = 0;
   try {
     check_path_roles(name);  // no output may be an input (path_roles.h)
+    if (linear_algebra) reserve_blas_buffers();
     code = body();
     if (code == 0 || std::find(verdicts.begin(), verdicts.end(), code) != verdicts.end()) {
       outputs.commit();

@@ -1,5 +1,6 @@
 // qpr — the qpreduce command line. No math lives here: each subcommand calls
 // the engine or a plugin and reports.
+#include "blas_memory.h"
 #include "commands.h"
 
 #include <CLI/CLI.hpp>
@@ -13,6 +14,13 @@
 #include <cstring>
 
 int main(int argc, char** argv) {
+  // Under an address-space limit (`ulimit -v`), OpenBLAS's worker threads,
+  // started when the library loads, would each retry their 128 MiB buffer
+  // for ever once it no longer fits (and the exit would wait for them): run
+  // it on the calling thread only, whose buffer reserve_blas_buffers checks
+  // and takes up front (blas_memory.h). The variable must be set before the
+  // library loads, hence a fresh start of this program with it.
+  if (qpr::single_threaded_blas_under_limit(argv)) return 2;
   // Past a file-size limit a write then fails with EFBIG, which the writers
   // report (leaving the earlier file), instead of SIGXFSZ ending the process.
   std::signal(SIGXFSZ, SIG_IGN);

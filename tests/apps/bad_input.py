@@ -7,7 +7,7 @@ file is left intact and that no temporary file stays behind. Run:
 
     bad_input.py QPR_BINARY [--group NAME] [--list]
 
-Groups: options, meshes, handles, scenes, check, matrix, writers, view. Exit status 0 when
+Groups: options, meshes, handles, scenes, check, matrix, writers, memory, view. Exit status 0 when
 every case of the selected groups passed; a failing case prints its command,
 exit code and stderr. The view group (the viewer's writers) needs a display:
 without DISPLAY the suite runs itself again under `xvfb-run -a`; it is skipped,
@@ -648,6 +648,22 @@ CASES.append(dict(group="writers", name="check with the standard output closed",
                   words=["the standard output is closed"], files={}, max_seconds=None, stdout_words=[],
                   stdout="closed"))
 
+# ---------------------------------------------------------------- memory
+# Under an address-space limit (`ulimit -v`): a clear message within seconds
+# instead of OpenBLAS retrying its buffer for ever (apps/qpr/blas_memory.h);
+# enough for the tube runs. Skipped in the sanitizer build, whose shadow
+# memory needs the address space.
+MIB_KB = 1024
+for name, args, vlimit_mb, code, words in [
+    ("deform under ulimit -v 146 MB", deform(), 146, RUN,
+     ["out of memory", "address-space limit (ulimit -v) of 146 MB", "raise the limit by"]),
+    ("qp under ulimit -v 146 MB", qp(), 146, RUN, ["out of memory", "ulimit -v"]),
+    ("deform under ulimit -v 600 MB runs", deform(), 600, 0, []),
+    ("check under ulimit -v 146 MB runs (it was left waiting at exit)", check(), 146, CLEAN, []),
+]:
+    CASES.append(dict(group="memory", name=name, args=args, code=code, words=words, files={}, max_seconds=30,
+                      stdout_words=[], vlimit=vlimit_mb * MIB_KB))
+
 # ---------------------------------------------------------------- view
 # The viewer's writers, headless (--screenshot renders the last frame, then
 # writes the PNG, the --out mesh and the --stats JSON in that order) and in the
@@ -719,7 +735,11 @@ def run_case(qpr, c):
         args = [qpr] + [a.replace("{W}", work) for a in c["args"]]
         fsize = c.get("fsize")
 
+        vlimit = c.get("vlimit")
+
         def limit():
+            if vlimit:
+                resource.setrlimit(resource.RLIMIT_AS, (vlimit * 1024, resource.getrlimit(resource.RLIMIT_AS)[1]))
             if fsize:
                 signal.signal(signal.SIGXFSZ, signal.SIG_DFL)  # qpr itself must ignore it
                 resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
@@ -786,6 +806,9 @@ def main():
             print("%-8s %s" % (c["group"], c["name"]))
         print("%d cases" % len(cases))
         return 0
+    if os.environ.get("QPREDUCE_SANITIZER_BUILD") and any(c.get("vlimit") for c in cases):
+        print("skipped [memory]: an address-space limit leaves AddressSanitizer no room for its shadow memory")
+        cases = [c for c in cases if not c.get("vlimit")]
     if any(c.get("display") for c in cases):
         if subprocess.run([a.qpr, "view", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
             print("skipped [view]: %s has no `view` command (built with QPREDUCE_BUILD_VIEWER=OFF)" % a.qpr)
