@@ -31,11 +31,37 @@ def _check_shape(name, shape, dims):
         raise ValueError(f"{name}: expected shape {_shape_text(dims)}, got {tuple(shape)}")
 
 
+def _check_structure(name, value):
+    """ValueError naming the argument when the arrays of a scipy.sparse matrix
+    do not describe a matrix of its shape (indices or indptr edited after
+    construction): SciPy's own conversions do not check them and would read
+    out of bounds."""
+    fmt = value.format
+    try:
+        if fmt in ("csr", "csc", "bsr"):
+            value.check_format(full_check=True)
+        elif fmt == "coo":
+            rows, cols = value.shape
+            row, col, data = np.asarray(value.row), np.asarray(value.col), np.asarray(value.data)
+            if not (row.ndim == col.ndim == data.ndim == 1 and row.size == col.size == data.size):
+                raise ValueError("row, col and data differ in length")
+            if row.size and (row.min() < 0 or row.max() >= rows or col.min() < 0 or col.max() >= cols):
+                raise ValueError("a row or column index lies outside the shape %s" % (value.shape,))
+        elif fmt in ("dok", "lil", "dia"):
+            pass  # kept consistent by their own methods, or checked by tocsc
+        else:
+            raise TypeError("%s: unsupported scipy.sparse format %r" % (name, fmt))
+    except (ValueError, IndexError) as error:
+        raise ValueError("%s: not a valid %s matrix of shape %s: %s" % (name, fmt.upper(), value.shape, error)) \
+            from None
+
+
 def as_csc(name, value, rows, cols, dtype):
     """Canonical CSC copy (sorted, no duplicates, int32 indices) of value."""
     if scipy.sparse.issparse(value):
         _check_kind(name, value.dtype, "a sparse matrix")
         _check_shape(name, value.shape, (rows, cols))
+        _check_structure(name, value)
         matrix = scipy.sparse.csc_matrix(value, dtype=dtype, copy=True)
     elif isinstance(value, np.ndarray):
         _check_kind(name, value.dtype, "an array")

@@ -138,9 +138,18 @@ RowMap<Scalar> matrix_view(const char* name, py::handle value, Dim rows, Dim col
 }
 
 template <typename Scalar>
-py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size) {
+py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size,
+                               std::initializer_list<InputSpan<Scalar>> inputs) {
   if (out.is_none()) return py::array_t<Scalar>(size.size);
-  vector_view<Scalar>(name, out, size, true);
+  const auto o = vector_view<Scalar>(name, out, size, true);
+  // Both contiguous (vector_view): they overlap when their ranges do.
+  for (const InputSpan<Scalar>& in : inputs) {
+    const Scalar* begin = in.values.data();
+    if (o.size() > 0 && in.values.size() > 0 && o.data() < begin + in.values.size() && begin < o.data() + o.size()) {
+      throw py::value_error(std::string(name) + ": shares memory with " + in.name +
+                            ", which the call reads while it writes " + name + " (pass another array, or None)");
+    }
+  }
   return py::reinterpret_borrow<py::array_t<Scalar>>(out);
 }
 
@@ -160,7 +169,8 @@ void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
   template Vector<Scalar> vector_copy_arg<Scalar>(const char*, py::handle, Dim);                   \
   template Eigen::Map<Vector<Scalar>> vector_view<Scalar>(const char*, py::handle, Dim, bool);     \
   template RowMap<Scalar> matrix_view<Scalar>(const char*, py::handle, Dim, Dim, bool);            \
-  template py::array_t<Scalar> output_arg<Scalar>(const char*, py::handle, Dim);
+  template py::array_t<Scalar> output_arg<Scalar>(const char*, py::handle, Dim,                            \
+                                                  std::initializer_list<InputSpan<Scalar>>);
 QPREDUCE_PYTHON_ARGUMENTS(double)
 QPREDUCE_PYTHON_ARGUMENTS(float)
 #undef QPREDUCE_PYTHON_ARGUMENTS

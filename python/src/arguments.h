@@ -13,6 +13,7 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 
+#include <initializer_list>
 #include <string>
 
 namespace qpreduce::python {
@@ -72,9 +73,19 @@ using RowMap = Eigen::Map<Eigen::Matrix<Scalar, Eigen::Dynamic, Eigen::Dynamic, 
 template <typename Scalar>
 RowMap<Scalar> matrix_view(const char* name, py::handle value, Dim rows, Dim cols, bool writable);
 
-// `out` when given (checked as vector_view), else a new array of `size`.
+// An input vector read in place (vector_arg: contiguous), by its name.
 template <typename Scalar>
-py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size);
+struct InputSpan {
+  const char* name;
+  const Eigen::Map<const Vector<Scalar>>& values;
+};
+
+// `out` when given (checked as vector_view), else a new array of `size`.
+// ValueError when `out` shares memory with any of `inputs` ("out: shares
+// memory with b"): the call reads them while it writes out.
+template <typename Scalar>
+py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size,
+                               std::initializer_list<InputSpan<Scalar>> inputs = {});
 
 // Raises qpreduce.NumericalError(status, message) with .summary = `summary_object`
 // (the Python view of `summary`) unless summary.usable().

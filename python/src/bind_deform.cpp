@@ -34,6 +34,9 @@ struct PyDeformer {
   Handles handles;
   HandleTargets targets;
   FrameSummary last_frame;
+  // Why the last set_handles failed ("" when it held): frames are refused
+  // until a handle set holds, so a failure never leaves a stale set in use.
+  std::string handles_failed;
   std::mutex mutex;
   // The thread running precompute, while it calls the progress callable:
   // a call from there would wait for the lock its own thread holds.
@@ -475,8 +478,11 @@ void bind_deformer_class(py::module_& m) {
             {
               py::gil_scoped_release release;
               std::lock_guard<std::mutex> lock(self.mutex);
+              self.handles_failed = "set_handles raised";
               summary = self.deformer.set_handles(h, opts);
+              self.handles_failed = summary.usable() ? "" : summary.message;
               self.handles = std::move(h);
+              self.targets = HandleTargets{};  // the targets of the last set no longer apply
             }
             return checked(summary);
           },
@@ -493,6 +499,10 @@ void bind_deformer_class(py::module_& m) {
           [](PyDeformer& self, py::handle targets, py::handle out, py::handle patch_transforms) {
             const auto lock = self.lock();
             if (!self.deformer.ready()) throw py::value_error("Deformer.frame: call precompute and set_handles first");
+            if (!self.handles_failed.empty()) {
+              throw py::value_error("Deformer.frame: the last set_handles failed (" + self.handles_failed +
+                                    "); call set_handles with a handle set that holds");
+            }
             targets_arg(self, targets, patch_transforms);
             const Index n = self.deformer.vertex_count();
             py::array_t<double> result = out.is_none() ? py::array_t<double>(std::vector<py::ssize_t>{n, 3})
@@ -532,7 +542,9 @@ void bind_deformer_class(py::module_& m) {
           "set_round_threads",
           [](PyDeformer& self, int threads) { return self.lock(), self.deformer.set_round_threads(threads); },
           py::arg("threads"), "OpenMP threads of a frame's rounds (0: all).")
-      .def_property_readonly("ready", [](PyDeformer& s) { return s.lock(), s.deformer.ready(); })
+      .def_property_readonly(
+          "ready", [](PyDeformer& s) { return s.lock(), s.deformer.ready() && s.handles_failed.empty(); },
+          "True when frames can run: precomputed (or loaded), and the last set_handles (if any) held.")
       .def_property_readonly(
           "vertex_count", [](PyDeformer& s) { return s.lock(), s.deformer.vertex_count(); }, "n")
       .def_property_readonly(

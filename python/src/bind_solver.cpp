@@ -55,7 +55,7 @@ py::array_t<Scalar> apply_map(const LockedSolver<Scalar>& self,
   const auto lock = self.read();
   const auto xv = vector_arg<Scalar>(x_name, x, {(self.solver.*x_dim.size)(), x_dim.label});
   const Index ny = (self.solver.*y_dim.size)();
-  auto y = output_arg<Scalar>("out", out, {ny, y_dim.label});
+  auto y = output_arg<Scalar>("out", out, {ny, y_dim.label}, {{x_name, xv}});
   Eigen::Map<Vector<Scalar>> yv(y.mutable_data(), ny);
   py::gil_scoped_release release;
   (self.solver.*map)(xv, yv);
@@ -160,9 +160,8 @@ void bind_solver_type(py::module_& m, const char* name) {
             const Index m = self.solver.m(), p = self.solver.p();
             const auto bv = vector_arg<Scalar>("b", b, {m, "m"});
             const auto qv = vector_arg<Scalar>("q_r", q_r, {p, "p"});
-            auto w = output_arg<Scalar>("out", out, {p, "p"});
+            auto w = output_arg<Scalar>("out", out, {p, "p"}, {{"b", bv}, {"q_r", qv}});
             Eigen::Map<Vector<Scalar>> wv(w.mutable_data(), p);
-            if (wv.data() == qv.data()) throw py::value_error("out: must not alias q_r");
             self.solver.solve(bv, qv, wv);
             return w;
           },
@@ -178,7 +177,7 @@ void bind_solver_type(py::module_& m, const char* name) {
             const Index m = self.solver.m(), k = self.solver.k(), p = self.solver.p();
             const auto bv = vector_arg<Scalar>("b", b, {m, "m"});
             const auto Yv = vector_arg<Scalar>("Y", Y, {k, "k"});
-            auto w = output_arg<Scalar>("out", out, {p, "p"});
+            auto w = output_arg<Scalar>("out", out, {p, "p"}, {{"b", bv}, {"Y", Yv}});
             Eigen::Map<Vector<Scalar>> wv(w.mutable_data(), p);
             self.solver.solve_in_D(bv, Yv, wv);
             return w;

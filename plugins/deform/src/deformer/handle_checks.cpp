@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -46,6 +47,10 @@ void check_handles(const Handles& handles, Index n, const std::vector<PatchType>
     if (ph.weights.empty() && ph.vertices.size() != 1) {
       throw std::invalid_argument(fmt::format("point handle {}: a group of {} vertices needs weights", h,
                                               ph.vertices.size()));
+    }
+    if (!ph.weights.empty() && std::all_of(ph.weights.begin(), ph.weights.end(), [](double w) { return w == 0.0; })) {
+      throw std::invalid_argument(
+          fmt::format("point handle {}: every weight is 0: the handle would hold no point", h));
     }
     for (size_t i = 0; i < ph.vertices.size(); ++i) {
       const Index v = ph.vertices[i];

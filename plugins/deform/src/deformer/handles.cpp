@@ -1,14 +1,30 @@
 #include "qpreduce/deform/deformer/handles.h"
 
+#include "handle_checks.h"
+
 #include <qpreduce/support.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
+#include <stdexcept>
 
 namespace qpreduce::deform {
 
 double handle_residual(const DeformableMesh& m, const Handles& handles, const HandleTargets& targets,
                        const Vertices& deformed) {
   check_size("handle_residual: deformed vertex count", m.V.rows(), deformed.rows());
+  check_size("handle_residual: deformed columns", 3, deformed.cols());
+  detail_deformer::check_patch_labels(m, "handle_residual");
+  detail_deformer::check_handles(handles, m.V.rows(), m.patch_types);
+  if (targets.points.rows() != static_cast<Index>(handles.points.size()) ||
+      (targets.points.rows() > 0 && targets.points.cols() != 3) ||
+      targets.patch_transforms.size() != handles.patches.size()) {
+    throw std::invalid_argument(fmt::format(
+        "handle_residual: {} point handles and {} prescribed patches, but targets for {} points and {} patches{}",
+        handles.points.size(), handles.patches.size(), targets.points.rows(), targets.patch_transforms.size(),
+        targets.points.rows() == 0 && targets.patch_transforms.empty() ? " (no frame yet?)" : ""));
+  }
   double worst = 0.0;
   for (size_t h = 0; h < handles.points.size(); ++h) {
     const PointHandle& ph = handles.points[h];

@@ -58,5 +58,4 @@ class FindingBuilder {
   std::string sentence_;
 };
 
-
 }  // namespace qpreduce::deform

@@ -21,8 +21,8 @@ struct OrientationReport {
   // shared edges split it into (the class without the component's lowest
   // triangle on a tie). 0 when consistent.
   Index flipped = 0;
-  Index disagreeing_edges = 0;      // shared edges both triangles run in the same direction
-  std::vector<Index> first_flipped; // the first triangles to flip, in index order (at most max_listed)
+  Index disagreeing_edges = 0;       // shared edges both triangles run in the same direction
+  std::vector<Index> first_flipped;  // the first triangles to flip, in index order (at most max_listed)
   // The first disagreeing edge (edge[0] → edge[1] in both triangles) and its triangles.
   std::array<Index, 2> edge{0, 0};
   Index example = 0, partner = 0;

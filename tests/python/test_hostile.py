@@ -1,0 +1,168 @@
+"""Hostile inputs cannot crash the interpreter (docs/robustness.md, "Python").
+
+Each group of cases runs in a subprocess, so that a crash (SIGSEGV, SIGABRT)
+fails the test instead of ending the pytest run: the child prints one line
+per case that raised the expected exception with the expected words, and the
+test requires every line and exit code 0.
+"""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+PRELUDE = textwrap.dedent("""
+    import re, sys
+    import numpy as np
+    import scipy.sparse
+    import qpreduce
+    from qpreduce import deform
+    sys.path.insert(0, {here!r})
+    from conftest import RandomProblem
+
+    def expect(name, error, words, call):
+        try:
+            call()
+        except error as e:
+            for w in words:
+                if w not in str(e):
+                    print("WRONG", name, repr(str(e)[:300]), "lacks", repr(w))
+                    return
+            print("OK", name)
+            return
+        except Exception as e:
+            print("WRONG", name, type(e).__name__, str(e)[:300])
+            return
+        print("WRONG", name, "no exception")
+""").format(here=HERE)
+
+
+def run_cases(body, names):
+    code = PRELUDE + textwrap.dedent(body)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, OMP_NUM_THREADS="1"))
+    said = p.stdout + p.stderr
+    assert p.returncode == 0, f"the interpreter ended with {p.returncode}:\n{said[-3000:]}"
+    wrong = [line for line in p.stdout.splitlines() if line.startswith("WRONG")]
+    assert not wrong, "\n".join(wrong)
+    missing = [n for n in names if f"OK {n}" not in p.stdout.splitlines()]
+    assert not missing, f"cases that did not report: {missing}\n{said[-3000:]}"
+
+
+SPARSE = [f"{where} {kind}" for where in ("precompute H", "set_constraints A")
+          for kind in ("csr index out of range", "csc negative index", "csr indptr decreasing",
+                       "csc data too short", "coo row out of range", "coo col negative")]
+
+
+def test_corrupted_sparse_matrices_are_refused_naming_the_argument():
+    run_cases("""
+        problem = RandomProblem(seed=5)
+
+        def corrupt(matrix, kind):
+            if kind == "csr index out of range":
+                m = scipy.sparse.csr_matrix(matrix, copy=True); m.indices[3] = m.shape[1] + 7
+            elif kind == "csc negative index":
+                m = scipy.sparse.csc_matrix(matrix, copy=True); m.indices[2] = -4
+            elif kind == "csr indptr decreasing":
+                m = scipy.sparse.csr_matrix(matrix, copy=True); m.indptr[2] = m.indptr[3] + 5
+            elif kind == "csc data too short":
+                m = scipy.sparse.csc_matrix(matrix, copy=True); m.data = m.data[:-3]
+            elif kind == "coo row out of range":
+                m = scipy.sparse.coo_matrix(matrix, copy=True); m.row[1] = m.shape[0] + 2
+            else:
+                m = scipy.sparse.coo_matrix(matrix, copy=True); m.col[0] = -1
+            return m
+
+        for kind in ["csr index out of range", "csc negative index", "csr indptr decreasing",
+                     "csc data too short", "coo row out of range", "coo col negative"]:
+            solver = qpreduce.SubspaceSolver()
+            expect("precompute H " + kind, ValueError, ["H: not a valid"],
+                   lambda: solver.precompute(corrupt(problem.H, kind), problem.C, problem.D))
+            ready = qpreduce.SubspaceSolver()
+            assert ready.precompute(problem.H, problem.C, problem.D).ok()
+            expect("set_constraints A " + kind, ValueError, ["A: not a valid"],
+                   lambda: ready.set_constraints(corrupt(problem.A, kind)))
+    """, SPARSE)
+
+
+def test_out_overlapping_an_input_is_refused():
+    run_cases("""
+        problem = RandomProblem(seed=5)
+        solver = qpreduce.SubspaceSolver()
+        assert solver.precompute(problem.H, problem.C, problem.D).ok()
+        assert solver.set_constraints(problem.A).ok()
+        p, m, k, n = solver.p, solver.m, solver.k, solver.n
+        buf = np.zeros(max(p, n) + k + m + 8)
+        b = np.linspace(0.0, 1.0, m)
+        buf[:k] = 1.0
+        expect("solve_in_D out over Y", ValueError, ["out: shares memory with Y"],
+               lambda: solver.solve_in_D(b, buf[:k], out=buf[:p]))
+        buf2 = np.zeros(p + m)
+        expect("solve out over b", ValueError, ["out: shares memory with b"],
+               lambda: solver.solve(buf2[p - 1:p - 1 + m], np.zeros(p), out=buf2[:p]))
+        q_r = np.zeros(p)
+        expect("solve out is q_r", ValueError, ["out: shares memory with q_r"],
+               lambda: solver.solve(b, q_r, out=q_r))
+        buf3 = np.zeros(n + p)
+        expect("reconstruct out over w", ValueError, ["out: shares memory with w"],
+               lambda: solver.reconstruct(buf3[n - 2:n - 2 + p], out=buf3[:n]))
+        buf4 = np.zeros(n + p)
+        expect("reduce_linear_term out over q", ValueError, ["out: shares memory with q"],
+               lambda: solver.reduce_linear_term(buf4[:n], out=buf4[n - 1:n - 1 + p]))
+        # Disjoint slices of one buffer are fine.
+        whole = np.zeros(p + k)
+        whole[p:] = 1.0
+        solver.solve_in_D(b, whole[p:], out=whole[:p])
+        print("OK disjoint slices run")
+    """, ["solve_in_D out over Y", "solve out over b", "solve out is q_r", "reconstruct out over w",
+          "reduce_linear_term out over q", "disjoint slices run"])
+
+
+def test_handle_residual_and_failed_handle_sets_never_read_out_of_bounds():
+    run_cases("""
+        V, F = deform.shapes.capped_cylinder(1.0, 4.0, 12, 6)
+        sel = np.ones(len(V), dtype=np.int32)
+        sel[V[:, 2] < 0.3] = 0
+        sel[V[:, 2] > 3.7] = 2
+        M = np.eye(4); M[:3, 3] = [0.0, 0.5, 0.0]
+        sc = deform.sel_def_scenario(V, F, sel, M, frames=2)
+        one_target = deform.HandleTargets(np.zeros((1, 3)))
+        expect("free handle_residual vertex out of range", ValueError, ["vertex 1000000 outside [0,"],
+               lambda: deform.handle_residual(sc.model, deform.Handles([10**6]), one_target, sc.model.V))
+        expect("free handle_residual short weights", ValueError, ["1 weights for 3 vertices"],
+               lambda: deform.handle_residual(sc.model, deform.Handles([deform.PointHandle([0, 1, 2], [1.0])]),
+                                              one_target, sc.model.V))
+        expect("free handle_residual fewer target rows", ValueError, ["targets for 1 points"],
+               lambda: deform.handle_residual(sc.model, deform.Handles([0, 1]), one_target, sc.model.V))
+        d = deform.Deformer(sc.model, deform.DeformerOptions(rotational_proxies=6, linear_proxies=8))
+        d.precompute()
+        d.set_handles(sc.handles, options=sc.constraints)
+        expect("Deformer.handle_residual before a frame", ValueError, ["no frame yet"],
+               lambda: d.handle_residual(sc.model.V))
+        V1 = d.frame(sc.frames[-1])
+        assert d.handle_residual(V1) < 1e-3
+        print("OK a frame's residual")
+        expect("a group with every weight 0", ValueError, ["every weight is 0"],
+               lambda: d.set_handles([([0, 1], [0.0, 0.0])]))
+        expect("frame after a refused handle set", ValueError, ["the last set_handles failed"],
+               lambda: d.frame(np.zeros((1, 3))))
+        assert not d.ready
+        print("OK not ready after a refused set")
+        expect("set_handles([]) fails", qpreduce.NumericalError, ["not strictly convex"],
+               lambda: d.set_handles([]))
+        assert not d.ready
+        expect("frame after a failed handle set", ValueError, ["the last set_handles failed"],
+               lambda: d.frame(np.zeros((0, 3))))
+        d.set_handles(sc.handles, options=sc.constraints)
+        assert d.ready
+        V2 = d.frame(sc.frames[-1])
+        assert d.handle_residual(V2) < 1e-3
+        print("OK a good set makes it ready again")
+    """, ["free handle_residual vertex out of range", "free handle_residual short weights",
+          "free handle_residual fewer target rows", "Deformer.handle_residual before a frame", "a frame's residual",
+          "a group with every weight 0", "frame after a refused handle set", "not ready after a refused set",
+          "set_handles([]) fails", "frame after a failed handle set", "a good set makes it ready again"])
