@@ -11,6 +11,7 @@
 
 #include <qpreduce/deform/deformer/deformer.h>
 #include <qpreduce/deform/io/io_error.h>
+#include <qpreduce/deform/io/scenario.h>
 
 #include <pybind11/stl.h>
 
@@ -504,6 +505,7 @@ void bind_deformer_class(py::module_& m) {
                                     "); call set_handles with a handle set that holds");
             }
             targets_arg(self, targets, patch_transforms);
+            check_handle_targets(self.model, self.handles, self.targets, -1, "Deformer.frame");
             const Index n = self.deformer.vertex_count();
             py::array_t<double> result = out.is_none() ? py::array_t<double>(std::vector<py::ssize_t>{n, 3})
                                                        : py::reinterpret_borrow<py::array_t<double>>(out);

@@ -157,6 +157,18 @@ def test_handle_residual_and_failed_handle_sets_never_read_out_of_bounds():
         assert not d.ready
         expect("frame after a failed handle set", ValueError, ["the last set_handles failed"],
                lambda: d.frame(np.zeros((0, 3))))
+        # A vertex pinned twice: the CLI's words.
+        mid = [int(v) for v in np.flatnonzero(np.abs(V[:, 2] - 2.0) < 0.5)[:2]]
+        patches = list(sc.handles.patches)
+        transforms = list(sc.frames[-1].patch_transforms)
+        d.set_handles([mid[0], mid[1], mid[0]], patches=patches)
+        pins = np.array([V[mid[0]], V[mid[1]], V[mid[0]] + [0.0, 0.3, 0.0]])
+        expect("a vertex held at two places", ValueError,
+               ["Deformer.frame: vertex %d is held at two places by point handles 0 and 2" % mid[0],
+                "bounding-box diagonals apart"],
+               lambda: d.frame(pins, patch_transforms=np.array(transforms)))
+        d.frame(np.array([V[mid[0]], V[mid[1]], V[mid[0]]]), patch_transforms=np.array(transforms))
+        print("OK the same place twice runs")
         d.set_handles(sc.handles, options=sc.constraints)
         assert d.ready
         V2 = d.frame(sc.frames[-1])
@@ -165,4 +177,5 @@ def test_handle_residual_and_failed_handle_sets_never_read_out_of_bounds():
     """, ["free handle_residual vertex out of range", "free handle_residual short weights",
           "free handle_residual fewer target rows", "Deformer.handle_residual before a frame", "a frame's residual",
           "a group with every weight 0", "frame after a refused handle set", "not ready after a refused set",
-          "set_handles([]) fails", "frame after a failed handle set", "a good set makes it ready again"])
+          "set_handles([]) fails", "frame after a failed handle set", "a vertex held at two places",
+          "the same place twice runs", "a good set makes it ready again"])

@@ -150,37 +150,10 @@ HandleTargets scene_targets(const Scene& scene, const std::vector<Index>& patch_
 // place: round-off of the same transform applied twice, not a conflict.
 constexpr double kSamePlace = 1e-9;
 
-// A vertex pinned by two point handles to different places, or pinned inside
-// a fixed patch away from its rest position, cannot hold: the solve would
-// split the difference (a handle far from its target). Throws naming both.
+// check_handle_targets on every frame of the scenario.
 void check_conflicting_pins(const Scenario& sc, const std::string& source) {
-  const Vertices& V = sc.model.V;
-  const double diag = V.rows() > 0 ? (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm() : 0.0;
-  const double tol = kSamePlace * std::max(diag, 1.0);
-  std::map<int, Index> first_pin;  // vertex → its first single-vertex point handle
-  for (Index k = 0; k < static_cast<Index>(sc.handles.points.size()); ++k) {
-    const PointHandle& h = sc.handles.points[static_cast<size_t>(k)];
-    if (h.vertices.size() != 1 || !h.weights.empty()) continue;
-    const int v = static_cast<int>(h.vertices[0]);
-    const auto [it, fresh] = first_pin.emplace(v, k);
-    const int patch = static_cast<size_t>(v) < sc.model.patch_of_vertex.size() ? sc.model.patch_of_vertex[v] : -1;
-    const bool in_fixed = patch >= 0 && sc.model.patch_types[static_cast<size_t>(patch)] == PatchType::Fixed;
-    for (size_t f = 0; f < sc.frames.size(); ++f) {
-      const Eigen::RowVector3d target = sc.frames[f].points.row(k);
-      const double to_other = fresh ? 0.0 : (target - sc.frames[f].points.row(it->second)).norm();
-      const double to_rest = in_fixed ? (target - V.row(v)).norm() : 0.0;
-      if (to_other > tol)
-        throw std::invalid_argument(fmt::format(
-            "{}: vertex {} is held at two places by point handles {} and {} (frame {}: {:.3g} bounding-box "
-            "diagonals apart)",
-            source, v, it->second, k, f, to_other / std::max(diag, 1e-300)));
-      if (to_rest > tol)
-        throw std::invalid_argument(fmt::format(
-            "{}: vertex {} is in fixed patch {} but point handle {} moves it (frame {}: {:.3g} bounding-box "
-            "diagonals from rest)",
-            source, v, patch, k, f, to_rest / std::max(diag, 1e-300)));
-    }
-  }
+  for (size_t f = 0; f < sc.frames.size(); ++f)
+    check_handle_targets(sc.model, sc.handles, sc.frames[f], static_cast<Index>(f), source);
 }
 
 }  // namespace
@@ -209,6 +182,38 @@ std::pair<double, std::string> frame_reach(const Scenario& sc, size_t f) {
 }
 
 }  // namespace
+
+void check_handle_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
+                          Index frame, const std::string& source) {
+  const Vertices& V = model.V;
+  const double diag = V.rows() > 0 ? (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm() : 0.0;
+  const double tol = kSamePlace * diag;
+  const std::string at = frame >= 0 ? fmt::format("frame {}: ", frame) : std::string();
+  std::map<Index, Index> first_pin;  // vertex → its first single-vertex point handle
+  const Index h = std::min<Index>(static_cast<Index>(handles.points.size()), targets.points.rows());
+  for (Index k = 0; k < h; ++k) {
+    const PointHandle& ph = handles.points[static_cast<size_t>(k)];
+    if (ph.vertices.size() != 1 || !ph.weights.empty()) continue;
+    const Index v = ph.vertices[0];
+    if (v < 0 || v >= V.rows()) continue;  // refused by the handle checks, with their words
+    const auto [it, fresh] = first_pin.emplace(v, k);
+    const int patch = static_cast<size_t>(v) < model.patch_of_vertex.size() ? model.patch_of_vertex[v] : -1;
+    const bool in_fixed = patch >= 0 && static_cast<size_t>(patch) < model.patch_types.size() &&
+                          model.patch_types[static_cast<size_t>(patch)] == PatchType::Fixed;
+    const Eigen::RowVector3d target = targets.points.row(k);
+    const double to_other = fresh ? 0.0 : (target - targets.points.row(it->second)).norm();
+    const double to_rest = in_fixed ? (target - V.row(v)).norm() : 0.0;
+    if (to_other > tol)
+      throw std::invalid_argument(fmt::format(
+          "{}: vertex {} is held at two places by point handles {} and {} ({}{:.3g} bounding-box diagonals apart)",
+          source, v, it->second, k, at, to_other / std::max(diag, 1e-300)));
+    if (to_rest > tol)
+      throw std::invalid_argument(fmt::format(
+          "{}: vertex {} is in fixed patch {} but point handle {} moves it ({}{:.3g} bounding-box diagonals from "
+          "rest)",
+          source, v, patch, k, at, to_rest / std::max(diag, 1e-300)));
+  }
+}
 
 std::vector<char> anchored_vertices(const Scenario& sc) {
   std::vector<char> anchored(static_cast<size_t>(sc.model.V.rows()), 0);

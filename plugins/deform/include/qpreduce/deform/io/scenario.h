@@ -38,6 +38,16 @@ struct Scenario {
 // mesh's side of this and more.)
 void check_scenario(const Scenario& scenario, const std::string& source);
 
+// Handles that cannot hold in one frame: a vertex pinned by two single-vertex
+// point handles to places more than 1e-9 bounding-box diagonals apart, or
+// pinned inside a fixed patch away from its rest position (the solve would
+// split the difference). Throws std::invalid_argument "<source>: vertex v is
+// held at two places by point handles i and j ([frame f: ]d bounding-box
+// diagonals apart)"; `frame` < 0 is not named. Targets beyond the handles'
+// count are not read.
+void check_handle_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
+                          Index frame, const std::string& source);
+
 // One flag per vertex (n entries), non-zero for a vertex the handles hold: in
 // a point handle, a fixed patch or a prescribed patch (diagnose_mesh's anchors).
 std::vector<char> anchored_vertices(const Scenario& scenario);
