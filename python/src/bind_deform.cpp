@@ -505,11 +505,12 @@ void bind_deformer_class(py::module_& m) {
                                     "); call set_handles with a handle set that holds");
             }
             targets_arg(self, targets, patch_transforms);
-            check_handle_targets(self.model, self.handles, self.targets, -1, "Deformer.frame");
             const Index n = self.deformer.vertex_count();
             py::array_t<double> result = out.is_none() ? py::array_t<double>(std::vector<py::ssize_t>{n, 3})
                                                        : py::reinterpret_borrow<py::array_t<double>>(out);
             auto view = matrix_view<double>("out", result, {n, "n"}, {3, "3"}, true);
+            // Arguments first, then whether the targets can hold at all.
+            check_handle_targets(self.model, self.handles, self.targets, -1, "Deformer.frame");
             {
               py::gil_scoped_release release;
               self.last_frame = self.deformer.frame(self.targets, Eigen::Map<Vertices>(view.data(), n, 3));
