@@ -13,7 +13,8 @@ void bind_analysis(py::module_& m);  // full_solve.h, quotient.h, theorem.h
 void bind_problems(py::module_& m);  // problems/families.h, problems/generators.h
 // The submodule qpreduce.deform (made by bind_deform_io, which calls bind_deformer and bind_refiner):
 void bind_deform_io(py::module_& m);      // deform/io/*, mesh/shapes.h, reference/reference.h
-void bind_deformer(py::module_& deform);  // deform/deformer/*: options, handles, Model, Deformer
+void bind_deformer(py::module_& deform);  // deform/deformer/*: options, Model, Deformer
+void bind_handles(py::module_& deform);   // deform/deformer/handles.h: PointHandle, Handles, HandleTargets
 void bind_refiner(py::module_& deform);   // deform/reference/refine.h: RefineOptions, Refiner
 
 }  // namespace qpreduce::python
