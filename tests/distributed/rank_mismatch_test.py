@@ -100,6 +100,25 @@ def main():
             print(f"FAIL {name}: {'; '.join(problems)}\n  $ {' '.join(cmd)}\n{p.stderr[-1500:]}")
         else:
             print(f"ok   {name}")
+    # Under an address-space limit every rank says "out of memory" within the
+    # bound (apps/qpr/blas_memory.h; OpenBLAS used to retry its buffer for ever).
+    import resource
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (146 * 1024 * 1024, resource.getrlimit(resource.RLIMIT_AS)[1]))
+
+    cmd = [mpirun, "--oversubscribe", "-np", "2", *pre("tube.off")]
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=BOUND, preexec_fn=limit)
+        if p.returncode == 0 or "out of memory: the address-space limit (ulimit -v)" not in p.stderr:
+            failures += 1
+            print(f"FAIL under ulimit -v: exit {p.returncode}\n{p.stderr[-1500:]}")
+        else:
+            print("ok   under ulimit -v 146 MB: out of memory, no hang")
+    except subprocess.TimeoutExpired:
+        failures += 1
+        print(f"FAIL under ulimit -v: still running after {BOUND} s")
+    cases.append(None)
     print(f"{len(cases) - failures} of {len(cases)} cases passed")
     return 1 if failures else 0
 
