@@ -273,7 +273,7 @@ TEST_CASE("an edge in three triangles is non-manifold, a bow-tie vertex too", "[
   }
 }
 
-TEST_CASE("triangles oriented against their neighbours are counted and named; a Möbius strip is not orientable",
+TEST_CASE("triangles oriented against their neighbours are counted and named, a Möbius strip is not orientable",
           "[mesh_check]") {
   const TriangleMesh tube = shapes::capped_cylinder(1.0, 2.0, 16, 6);
   const Index m = tube.F.rows();
