@@ -39,6 +39,10 @@ struct PyDeformer {
   // Why the last set_handles failed ("" when it held): frames are refused
   // until a handle set holds, so a failure never leaves a stale set in use.
   std::string handles_failed;
+  // Whether the handles pin a vertex twice or inside a fixed patch: only
+  // then can a frame's targets fail check_handle_targets (kept off the
+  // frame path otherwise).
+  bool pins_to_check = false;
   std::mutex mutex;
   // The thread running precompute, while it calls the progress callable:
   // a call from there would wait for the lock its own thread holds.
@@ -54,6 +58,23 @@ struct PyDeformer {
     return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex);
   }
 };
+
+// True when a single-vertex point handle pins a vertex another one pins too,
+// or a vertex inside a fixed patch (PyDeformer::pins_to_check).
+bool pins_to_check(const DeformableMesh& model, const Handles& handles) {
+  std::vector<char> pinned(static_cast<size_t>(model.V.rows()), 0);
+  for (const PointHandle& ph : handles.points) {
+    if (ph.vertices.size() != 1 || !ph.weights.empty()) continue;
+    const Index v = ph.vertices[0];
+    if (v < 0 || v >= model.V.rows()) continue;
+    const int patch = static_cast<size_t>(v) < model.patch_of_vertex.size() ? model.patch_of_vertex[v] : -1;
+    if (pinned[static_cast<size_t>(v)]++ ||
+        (patch >= 0 && model.patch_types[static_cast<size_t>(patch)] == PatchType::Fixed)) {
+      return true;
+    }
+  }
+  return false;
+}
 
 // Thrown through precompute when the progress callable raised; the Python
 // error is back in the interpreter's error indicator.
@@ -387,6 +408,7 @@ void bind_deformer_class(py::module_& m) {
               self.handles_failed = summary.usable() ? "" : summary.message;
               self.handles = std::move(h);
               self.targets = HandleTargets{};  // the targets of the last set no longer apply
+              self.pins_to_check = pins_to_check(self.model, self.handles);
             }
             return checked(summary);
           },
@@ -413,7 +435,7 @@ void bind_deformer_class(py::module_& m) {
                                                        : py::reinterpret_borrow<py::array_t<double>>(out);
             auto view = matrix_view<double>("out", result, {n, "n"}, {3, "3"}, true);
             // Arguments first, then whether the targets can hold at all.
-            check_handle_targets(self.model, self.handles, self.targets, -1, "Deformer.frame");
+            if (self.pins_to_check) check_handle_targets(self.model, self.handles, self.targets, -1, "Deformer.frame");
             {
               py::gil_scoped_release release;
               self.last_frame = self.deformer.frame(self.targets, Eigen::Map<Vertices>(view.data(), n, 3));
