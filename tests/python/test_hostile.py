@@ -89,6 +89,106 @@ def test_corrupted_sparse_matrices_are_refused_naming_the_argument():
     """, SPARSE)
 
 
+KINDS = ["csr index out of range", "csc negative index", "csr indptr decreasing", "csc data too short",
+         "coo row out of range", "coo col negative", "lil col out of range", "lil row lengths differ",
+         "bsr index out of range", "dok key out of range"]
+# Every binding argument that takes a matrix, sparse (sparse_arg) or dense (dense_arg).
+ARGUMENTS = ["SubspaceSolver.precompute C", "SubspaceSolver32.precompute D", "restore N",
+             "set_constraints_in_design A_c", "solve_full A", "factor_psd H", "PsdFactor.whiten M",
+             "whiten_design C", "companion_demand A", "h_distance H", "TheoremChecker.precompute H",
+             "TheoremChecker.check A", "check_theorem A", "HandleTargets points", "sel_def_scenario def"]
+
+
+def test_every_matrix_argument_refuses_every_corruption():
+    run_cases("""
+        problem = RandomProblem(seed=5)
+        H, C, D, A = problem.H, problem.C, problem.D, problem.A
+        solver = qpreduce.SubspaceSolver()
+        assert solver.precompute(H, C, D).ok()
+        factor, _ = qpreduce.factor_psd(H)
+        checker = qpreduce.TheoremChecker()
+        checker.precompute(H, C, D)
+        V, F = deform.shapes.capped_cylinder(1.0, 4.0, 12, 6)
+        sel = np.ones(len(V), dtype=np.int32)
+        sel[V[:, 2] < 0.3] = 0
+        sel[V[:, 2] > 3.7] = 2
+        calls = {
+            "SubspaceSolver.precompute C": (C, lambda m: qpreduce.SubspaceSolver().precompute(H, m, D)),
+            "SubspaceSolver32.precompute D": (D, lambda m: qpreduce.SubspaceSolver32().precompute(H, C, m)),
+            "restore N": (solver.subspace.N, lambda m: qpreduce.SubspaceSolver().restore(
+                m, solver.subspace.UD, solver.reduced_hessian, solver.reduced_linear_map)),
+            "set_constraints_in_design A_c": (problem.A_c, lambda m: solver.set_constraints_in_design(m)),
+            "solve_full A": (A, lambda m: qpreduce.solve_full(H, m, problem.b, problem.q)),
+            "factor_psd H": (H, lambda m: qpreduce.factor_psd(m)),
+            "PsdFactor.whiten M": (C, lambda m: factor.whiten(m)),
+            "whiten_design C": (C, lambda m: qpreduce.whiten_design(factor, m, D)),
+            "companion_demand A": (A, lambda m: qpreduce.companion_demand(factor, m, problem.b, problem.q,
+                                                                           np.zeros(60))),
+            "h_distance H": (H, lambda m: qpreduce.h_distance(m, np.zeros(60), np.ones(60))),
+            "TheoremChecker.precompute H": (H, lambda m: qpreduce.TheoremChecker().precompute(m, C, D)),
+            "TheoremChecker.check A": (A, lambda m: checker.check(m, problem.b, problem.q)),
+            "check_theorem A": (A, lambda m: qpreduce.check_theorem(H, C, D, m, problem.b, problem.q)),
+            "HandleTargets points": (np.ones((6, 3)), lambda m: deform.HandleTargets(m)),
+            "sel_def_scenario def": (np.eye(4), lambda m: deform.sel_def_scenario(V, F, sel, m)),
+        }
+
+        def corrupt(matrix, kind):
+            dense = matrix.toarray() if scipy.sparse.issparse(matrix) else np.asarray(matrix)
+            dense = dense + 1.0  # every entry stored
+            rows, cols = dense.shape
+            if kind == "csr index out of range":
+                m = scipy.sparse.csr_matrix(dense); m.indices[1] = cols + 7
+            elif kind == "csc negative index":
+                m = scipy.sparse.csc_matrix(dense); m.indices[0] = -4
+            elif kind == "csr indptr decreasing":
+                m = scipy.sparse.csr_matrix(dense); m.indptr[1] = m.indptr[2] + 3
+            elif kind == "csc data too short":
+                m = scipy.sparse.csc_matrix(dense); m.data = m.data[:-1]
+            elif kind == "coo row out of range":
+                m = scipy.sparse.coo_matrix(dense); m.row[1] = rows + 2
+            elif kind == "coo col negative":
+                m = scipy.sparse.coo_matrix(dense); m.col[0] = -1
+            elif kind == "lil col out of range":
+                m = scipy.sparse.lil_matrix(dense); m.rows[0] = [0, 10**6]; m.data[0] = [1.0, 2.0]
+            elif kind == "lil row lengths differ":
+                m = scipy.sparse.lil_matrix(dense); m.rows[0] = [0]; m.data[0] = [1.0] * 9
+            elif kind == "bsr index out of range":
+                m = scipy.sparse.bsr_matrix(dense, blocksize=(1, 1)); m.indices[0] = 10**6
+            else:
+                m = scipy.sparse.dok_matrix(dense); dict.__setitem__(m, (rows + 5, 0), 1.0)
+            return m
+
+        for label, (matrix, call) in calls.items():
+            argument = label.split()[-1]
+            for kind in KINDS:
+                expect(label + " " + kind, ValueError, [argument + ": not a valid " + kind.split()[0].upper()],
+                       lambda: call(corrupt(matrix, kind)))
+            m = scipy.sparse.csr_matrix(np.asarray(matrix.toarray() if scipy.sparse.issparse(matrix) else matrix))
+            m.indices = m.indices.astype(float)
+            expect(label + " float indices", TypeError, [argument + ": not a valid CSR matrix",
+                                                        "indices must hold integers"], lambda: call(m))
+
+        # A valid matrix with unused trailing entries and int64 indices is read, not changed.
+        m = scipy.sparse.csr_matrix(C)
+        m.indices = np.concatenate([m.indices, [0]]).astype(np.int64)
+        m.data = np.concatenate([m.data, [7.0]])
+        before = (m.indices.copy(), m.data.copy(), m.indptr.copy())
+        assert qpreduce.SubspaceSolver().precompute(H, m, D).ok()
+        assert all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(before, (m.indices, m.data, m.indptr)))
+        print("OK the caller's matrix is not changed")
+        # Duplicates are summed, as SciPy does; unsorted indices are sorted.
+        dup = scipy.sparse.coo_matrix((np.r_[problem.A[:, 0], problem.A[:, 0]],
+                                       (np.r_[np.arange(60), np.arange(60)], np.zeros(120, dtype=int))), shape=(60, 1))
+        solver.set_constraints(dup)
+        summed = solver.reduced_constraints
+        solver.set_constraints(2 * problem.A[:, :1])
+        assert summed.shape == (1, solver.p) and np.array_equal(summed, solver.reduced_constraints)
+        print("OK duplicates summed")
+    """.replace("KINDS", repr(KINDS)),
+        [f"{label} {kind}" for label in ARGUMENTS for kind in KINDS + ["float indices"]]
+        + ["the caller's matrix is not changed", "duplicates summed"])
+
+
 def test_out_overlapping_an_input_is_refused():
     run_cases("""
         problem = RandomProblem(seed=5)
