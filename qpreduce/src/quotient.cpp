@@ -71,6 +71,7 @@ FactorSummary factor_psd(const Matrix<double>& H, const QuotientOptions& options
   require_options(options);
   if (!out) throw std::invalid_argument("factor_psd: out must not be null");
   check_size("factor_psd: H cols", H.rows(), H.cols());
+  if (H.rows() == 0) throw std::invalid_argument("factor_psd: H is empty (n = 0)");
   check_finite("factor_psd: H", H);
   check_dense_symmetric("factor_psd: H", H, options.symmetry_tolerance);
   const ScopedThreads threads(options.threads);
@@ -124,6 +125,7 @@ FactorSummary factor_psd(const Matrix<double>& H, const QuotientOptions& options
 FactorSummary factor_psd(const SparseMatrix<double>& H, const QuotientOptions& options, PsdFactor* out) {
   require_options(options);
   check_size("factor_psd: H cols", H.rows(), H.cols());
+  if (H.rows() == 0) throw std::invalid_argument("factor_psd: H is empty (n = 0)");
   check_finite("factor_psd: H", H);
   check_symmetric("factor_psd: H", H, options.symmetry_tolerance);
   return factor_psd(MatD(H), options, out);

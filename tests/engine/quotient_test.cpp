@@ -117,6 +117,10 @@ TEST_CASE("bad input: std::invalid_argument or a failed status naming the proble
     const Matrix<double> H = Matrix<double>::Identity(5, 4);
     CHECK_THAT(message_of([&] { factor_psd(H, {}, &f); }), Catch::Contains("expected 5, got 4"));
   }
+  SECTION("empty H (n = 0)") {
+    CHECK_THAT(message_of([&] { factor_psd(SparseMatrix<double>(0, 0), {}, &f); }), Catch::Contains("H is empty"));
+    CHECK_THAT(message_of([&] { factor_psd(Matrix<double>(0, 0), {}, &f); }), Catch::Contains("H is empty"));
+  }
   SECTION("NaN in H") {
     SparseMatrix<double> H = t.H;
     H.coeffRef(2, 2) = std::numeric_limits<double>::quiet_NaN();

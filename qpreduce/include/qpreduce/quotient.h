@@ -74,7 +74,7 @@ struct FactorSummary : Outcome {  // status: Success or IndefiniteH
 };
 
 // Rank-revealing factor of a symmetric PSD H. Throws std::invalid_argument on
-// a non-square H, NaN/Inf entries, asymmetry, or invalid options. An
+// an empty (0 × 0) or non-square H, NaN/Inf entries, asymmetry, or invalid options. An
 // indefinite H comes back as Status::IndefiniteH (message names the most
 // negative eigenvalue) and `out` is left empty.
 FactorSummary factor_psd(const Matrix<double>& H, const QuotientOptions& options, PsdFactor* out);

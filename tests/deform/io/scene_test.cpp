@@ -7,6 +7,7 @@
 #include "qpreduce/deform/io/scenario.h"
 #include "qpreduce/deform/io/scene.h"
 #include "qpreduce/deform/io/tet_io.h"
+#include "qpreduce/deform/mesh/shapes.h"
 
 #include <limits>
 
@@ -177,4 +178,20 @@ TEST_CASE("JSON scene: a transform handle on exactly a patch prescribes that pat
   REQUIRE(sc.frames[0].patch_transforms.size() == 1);
   CHECK(sc.frames[0].patch_transforms[0](0, 1) == -1.0);
   CHECK(sc.frames[0].points(0, 0) == Approx(sc.model.V(5, 0) + 0.5));
+}
+
+TEST_CASE("anchored_vertices refuses handles and patch labels that do not fit the model", "[io][scene][errors]") {
+  const TriangleMesh mesh = shapes::capped_cylinder(1.0, 4.0, 12, 6);
+  Selection sel;
+  for (Index v = 0; v < mesh.V.rows(); ++v)
+    sel.roles.push_back(mesh.V(v, 2) < 0.3 ? SelRole::Fixed : mesh.V(v, 2) > 3.7 ? SelRole::Handle : SelRole::Free);
+  Scenario sc = scenario_from_sel_def(mesh.V, sel, Eigen::Matrix4d::Identity(), 1);
+  sc.model.F = mesh.F;
+  CHECK(anchored_vertices(sc).size() == static_cast<size_t>(mesh.V.rows()));
+  Scenario far = sc;
+  far.handles.points.push_back({{1000000}, {}});
+  CHECK_THROWS_WITH(anchored_vertices(far), Catch::Contains("vertex 1000000 outside [0, 74)"));
+  Scenario labels = sc;
+  labels.model.patch_of_vertex.assign(static_cast<size_t>(mesh.V.rows()), 4);
+  CHECK_THROWS_WITH(anchored_vertices(labels), Catch::Contains("anchored_vertices: vertex 0 has patch 4 outside"));
 }

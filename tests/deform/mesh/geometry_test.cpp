@@ -1,8 +1,11 @@
 // Mesh geometry (src/mesh/geometry.cpp: cotangent Laplacians, masses,
-// normals, components): invariants, hand-computed values and the error paths.
+// normals, components) and the procedural shapes: invariants, hand-computed
+// values and the error paths.
 #include <catch2/catch.hpp>
 
 #include "../proxies/proxies_test_util.h"  // the seeded meshes and Laplacian invariants
+
+#include "qpreduce/deform/mesh/shapes.h"
 
 #include <cmath>
 #include <stdexcept>
@@ -178,4 +181,17 @@ TEST_CASE("unreferenced vertices: zero mass, empty Laplacian row, their own flag
   CHECK(c.vertex_component[42] == 1);
   for (Index f = 0; f < s.F.rows(); ++f) CHECK(c.element_component[f] == (f < 80 ? 0 : 1));
   CHECK(std::abs(bounding_box_diagonal(s.V) - Eigen::Vector3d(11, 11, 11).norm()) <= 8 * eps * 20);
+}
+
+// ---------------------------------------------------------------- shapes
+
+TEST_CASE("procedural shapes refuse sizes whose meshes would overflow the int indices", "[geometry][shapes]") {
+  // Products of sizes that wrap around 64 bits once gave a tiny mesh and writes past it.
+  CHECK_THROWS_WITH(shapes::capped_cylinder(1.0, 4.0, Index(1) << 40, Index(1) << 40),
+                    Catch::Contains("beyond the 32-bit indices"));
+  CHECK_THROWS_WITH(shapes::capped_cylinder(1.0, 4.0, Index(1) << 31, 2), Catch::Contains("beyond the 32-bit indices"));
+  CHECK_THROWS_WITH(shapes::box_tets(1.0, 1.0, 1.0, Index(1) << 22, Index(1) << 22, Index(1) << 22),
+                    Catch::Contains("beyond the 32-bit indices"));
+  CHECK(shapes::capped_cylinder(1.0, 4.0, 12, 6).V.rows() == 74);
+  CHECK(shapes::box_tets(1.0, 1.0, 1.0, 1, 1, 1).T.rows() == 6);
 }

@@ -12,6 +12,21 @@
 #include <stdexcept>
 
 namespace qpreduce::deform::shapes {
+namespace {
+
+// Throws std::invalid_argument unless `vertices` and `elements` (counted in
+// double, so that a product of sizes cannot wrap) fit the int vertex indices
+// of Triangles and Tetrahedra.
+void check_index_range(const char* who, double vertices, double elements) {
+  constexpr double kMaxIndex = 2147483647.0;  // 2³¹ − 1
+  if (vertices > kMaxIndex || elements > kMaxIndex) {
+    throw std::invalid_argument(fmt::format(
+        "{}: {:.3g} vertices and {:.3g} elements, beyond the 32-bit indices of a mesh (2³¹ − 1)", who, vertices,
+        elements));
+  }
+}
+
+}  // namespace
 
 TriangleMesh capped_cylinder(double radius, double height, Index around, Index rings) {
   if (around < 3 || rings < 2 || !(radius > 0) || !(height > 0)) {
@@ -19,6 +34,8 @@ TriangleMesh capped_cylinder(double radius, double height, Index around, Index r
         "capped_cylinder: need radius > 0, height > 0, around ≥ 3, rings ≥ 2 (got {}, {}, {}, {})", radius, height,
         around, rings));
   }
+  check_index_range("capped_cylinder", static_cast<double>(around) * static_cast<double>(rings) + 2.0,
+                    2.0 * static_cast<double>(around) * static_cast<double>(rings));
   TriangleMesh m;
   const Index n = around * rings + 2;
   m.V.resize(n, 3);
@@ -52,6 +69,9 @@ TetMesh box_tets(double sx, double sy, double sz, Index nx, Index ny, Index nz) 
   if (nx < 1 || ny < 1 || nz < 1 || !(sx > 0) || !(sy > 0) || !(sz > 0)) {
     throw std::invalid_argument("box_tets: sizes and cell counts must be positive");
   }
+  const double cells = static_cast<double>(nx) * static_cast<double>(ny) * static_cast<double>(nz);
+  check_index_range("box_tets",
+                    static_cast<double>(nx + 1) * static_cast<double>(ny + 1) * static_cast<double>(nz + 1), 6.0 * cells);
   TetMesh m;
   const Index px = nx + 1, py = ny + 1, pz = nz + 1;
   m.V.resize(px * py * pz, 3);

@@ -50,6 +50,8 @@ void check_handle_targets(const DeformableMesh& model, const Handles& handles, c
 
 // One flag per vertex (n entries), non-zero for a vertex the handles hold: in
 // a point handle, a fixed patch or a prescribed patch (diagnose_mesh's anchors).
+// Throws std::invalid_argument when the handles or the patch labels do not
+// fit the model (a vertex or patch out of range).
 std::vector<char> anchored_vertices(const Scenario& scenario);
 
 // Applies the scenario's overrides (α, β, γ, model, ψ, iterations, proxy
