@@ -221,7 +221,8 @@ def as_labels(name, value, size, label):
     if array.size == 0:
         array = array.astype(np.int32)
     if array.dtype.kind not in "iu":
-        raise TypeError(f"{name}: expected integers with shape ({label},) = ({size},), got dtype {array.dtype}")
+        raise TypeError(f"{name}: expected integers with shape {_shape_text(((size, label),))}, got dtype "
+                        f"{array.dtype}")
     _check_shape(name, array.shape, ((size, label),))
     if array.size and (array.min() < -_INT32_MAX or array.max() > _INT32_MAX):
         raise ValueError(f"{name}: entries out of the 32-bit range")

@@ -415,8 +415,9 @@ void bind_deformer_class(py::module_& m) {
           py::arg("handles") = py::none(), py::kw_only(), py::arg("patches") = py::none(),
           py::arg("options") = py::none(),
           "set_handles(handles=None, *, patches=None, options=None) -> ConstraintSummary\n\n"
-          "The on-site step. handles: a Handles, or a sequence whose items are vertex indices or\n"
-          "(vertices, weights) pairs (h point handles); patches: prescribed patch indices (s);\n"
+          "The on-site step. handles: a Handles, or a sequence whose items are vertex indices,\n"
+          "(vertices, weights) pairs or PointHandles (h point handles); patches: prescribed patch\n"
+          "indices (s);\n"
           "options: ConstraintOptions (soft=True for soft handles). Fixed patches always hold.\n"
           "Raises ValueError on indices out of range, NumericalError when the reduced constraints\n"
           "fail. Cost independent of n; releases the GIL.")

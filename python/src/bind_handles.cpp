@@ -19,14 +19,20 @@ using namespace qpreduce::deform;
 
 namespace {
 
-// A point handle from an int (one vertex) or a pair (vertices, weights).
+// A point handle from an int (one vertex), a pair (vertices, weights) or a
+// PointHandle.
 PointHandle point_handle_arg(py::handle item, size_t index) {
+  if (py::isinstance<PointHandle>(item)) return item.cast<PointHandle>();
   PointHandle handle;
+  const std::string name = "points[" + std::to_string(index) + "]";
   if (py::isinstance<py::int_>(item) || py::isinstance(item, py::module_::import("numpy").attr("integer"))) {
-    handle.vertices = {item.cast<Index>()};
+    try {
+      handle.vertices = {item.cast<Index>()};
+    } catch (const py::cast_error&) {  // beyond 64 bits: pybind11's RuntimeError would not name it
+      throw py::value_error(name + ": vertex index " + py::str(item).cast<std::string>() + " is out of range");
+    }
     return handle;
   }
-  const std::string name = "points[" + std::to_string(index) + "]";
   if (!py::isinstance<py::sequence>(item) || py::len(item) != 2) {
     throw py::type_error(name + ": expected a vertex index or a pair (vertices, weights), got " +
                          py::str(py::type::of(item).attr("__name__")).cast<std::string>());
@@ -66,11 +72,7 @@ void bind_handles(py::module_& m) {
           py::init([](py::iterable points, std::vector<Index> patches) {
             Handles handles;
             size_t i = 0;
-            for (py::handle item : points) {
-              handles.points.push_back(py::isinstance<PointHandle>(item) ? item.cast<PointHandle>()
-                                                                         : point_handle_arg(item, i));
-              ++i;
-            }
+            for (py::handle item : points) handles.points.push_back(point_handle_arg(item, i++));
             handles.patches = std::move(patches);
             return handles;
           }),
@@ -115,7 +117,11 @@ Handles handles_arg(py::handle handles, py::handle patches) {
     size_t i = 0;
     for (py::handle item : handles) h.points.push_back(point_handle_arg(item, i++));
   }
-  if (!patches.is_none()) h.patches = patches.cast<std::vector<Index>>();
+  if (!patches.is_none()) {
+    h.patches = py::module_::import("qpreduce._convert")
+                    .attr("as_labels")("patches", patches, -1, "s")
+                    .cast<std::vector<Index>>();
+  }
   return h;
 }
 

@@ -279,3 +279,40 @@ def test_handle_residual_and_failed_handle_sets_never_read_out_of_bounds():
           "a group with every weight 0", "frame after a refused handle set", "not ready after a refused set",
           "set_handles([]) fails", "frame after a failed handle set", "a vertex held at two places",
           "the same place twice runs", "a good set makes it ready again"])
+
+
+def test_sizes_empty_matrices_and_replaced_scenario_parts_are_refused():
+    run_cases("""
+        expect("capped_cylinder beyond 32-bit indices", ValueError,
+               ["capped_cylinder:", "beyond the 32-bit indices"],
+               lambda: deform.shapes.capped_cylinder(1.0, 4.0, 2**40, 2**40))
+        expect("box_tets beyond 32-bit indices", ValueError, ["box_tets:", "beyond the 32-bit indices"],
+               lambda: deform.shapes.box_tets(1.0, 1.0, 1.0, 2**22, 2**22, 2**22))
+        empty = scipy.sparse.csc_matrix((0, 0))
+        expect("factor_psd of an empty H", ValueError, ["factor_psd: H is empty"], lambda: qpreduce.factor_psd(empty))
+        expect("TheoremChecker of an empty H", ValueError, ["H is empty"],
+               lambda: qpreduce.TheoremChecker().precompute(empty, empty, None))
+
+        V, F = deform.shapes.capped_cylinder(1.0, 4.0, 12, 6)
+        sel = np.where(V[:, 2] < 0.3, 0, np.where(V[:, 2] > 3.7, 2, 1)).astype(np.int32)
+        sc = deform.sel_def_scenario(V, F, sel, np.eye(4))
+        sc.handles = deform.Handles([10**6])
+        expect("anchored_vertices with a handle out of range", ValueError, ["vertex 1000000 outside [0, 74)"],
+               lambda: deform.anchored_vertices(sc))
+        sc = deform.sel_def_scenario(V, F, sel, np.eye(4))
+        sc.model = deform.Model(V, F, patch_of_vertex=np.full(len(V), 4), patch_types=[deform.PatchType.Fixed])
+        expect("anchored_vertices with a patch label out of range", ValueError,
+               ["anchored_vertices: vertex 0 has patch 4 outside [-1, 1)"], lambda: deform.anchored_vertices(sc))
+
+        d = deform.Deformer(V, F, deform.DeformerOptions(rotational_proxies=6, linear_proxies=8))
+        d.precompute()
+        expect("a vertex index beyond 64 bits", ValueError, ["points[0]: vertex index", "is out of range"],
+               lambda: d.set_handles([2**70]))
+        expect("a patch index beyond 64 bits", TypeError, ["patches: expected integers"],
+               lambda: d.set_handles([0], patches=[10**30]))
+        expect("a PointHandle item with short weights", ValueError, ["point handle 0: 1 weights for 2 vertices"],
+               lambda: d.set_handles([deform.PointHandle([0, 1], [0.5])]))
+    """, ["capped_cylinder beyond 32-bit indices", "box_tets beyond 32-bit indices", "factor_psd of an empty H",
+          "TheoremChecker of an empty H", "anchored_vertices with a handle out of range",
+          "anchored_vertices with a patch label out of range", "a vertex index beyond 64 bits",
+          "a patch index beyond 64 bits", "a PointHandle item with short weights"])
