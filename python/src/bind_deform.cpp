@@ -39,6 +39,7 @@ struct PyDeformer {
   // Why the last set_handles failed ("" when it held): frames are refused
   // until a handle set holds, so a failure never leaves a stale set in use.
   std::string handles_failed;
+  bool handles_set = false;  // a set_handles held since the last precompute or load
   // Whether the handles pin a vertex twice or inside a fixed patch: only
   // then can a frame's targets fail check_handle_targets (kept off the
   // frame path otherwise).
@@ -52,6 +53,15 @@ struct PyDeformer {
     if (reporting.load() == std::this_thread::get_id()) {
       throw py::value_error("Deformer: called from its own precompute's progress callable");
     }
+  }
+  // After a precompute or load that succeeded: the C++ deformer starts
+  // without a handle set (a failed one keeps the last, and so does this).
+  void forget_handles() {
+    handles = Handles{};
+    targets = HandleTargets{};
+    handles_failed.clear();
+    handles_set = false;
+    pins_to_check = false;
   }
   std::unique_lock<std::mutex> lock() {
     refuse_reentry();
@@ -357,6 +367,7 @@ void bind_deformer_class(py::module_& m) {
                 throw;
               }
               self.reporting = std::thread::id{};
+              if (summary.usable()) self.forget_handles();
             }
             return checked(summary);
           },
@@ -387,6 +398,7 @@ void bind_deformer_class(py::module_& m) {
               py::gil_scoped_release release;
               std::lock_guard<std::mutex> lock(self.mutex);
               summary = self.deformer.load(path, self.model, self.options);
+              if (summary.usable()) self.forget_handles();
             }
             return checked(summary);
           },
@@ -406,6 +418,7 @@ void bind_deformer_class(py::module_& m) {
               self.handles_failed = "set_handles raised";
               summary = self.deformer.set_handles(h, opts);
               self.handles_failed = summary.usable() ? "" : summary.message;
+              self.handles_set = summary.usable();
               self.handles = std::move(h);
               self.targets = HandleTargets{};  // the targets of the last set no longer apply
               self.pins_to_check = pins_to_check(self.model, self.handles);
@@ -429,6 +442,9 @@ void bind_deformer_class(py::module_& m) {
             if (!self.handles_failed.empty()) {
               throw py::value_error("Deformer.frame: the last set_handles failed (" + self.handles_failed +
                                     "); call set_handles with a handle set that holds");
+            }
+            if (!self.handles_set) {
+              throw py::value_error("Deformer.frame: call set_handles first (a precompute or load starts without handles)");
             }
             targets_arg(self, targets, patch_transforms);
             const Index n = self.deformer.vertex_count();
@@ -473,7 +489,8 @@ void bind_deformer_class(py::module_& m) {
           py::arg("threads"), "OpenMP threads of a frame's rounds (0: all).")
       .def_property_readonly(
           "ready", [](PyDeformer& s) { return s.lock(), s.deformer.ready() && s.handles_failed.empty(); },
-          "True when frames can run: precomputed (or loaded), and the last set_handles (if any) held.")
+          "precompute (or load) succeeded and the last set_handles since then, if any, held; frame runs\n"
+          "once a set_handles has.")
       .def_property_readonly(
           "vertex_count", [](PyDeformer& s) { return s.lock(), s.deformer.vertex_count(); }, "n")
       .def_property_readonly(

@@ -316,3 +316,30 @@ def test_sizes_empty_matrices_and_replaced_scenario_parts_are_refused():
           "TheoremChecker of an empty H", "anchored_vertices with a handle out of range",
           "anchored_vertices with a patch label out of range", "a vertex index beyond 64 bits",
           "a patch index beyond 64 bits", "a PointHandle item with short weights"])
+
+
+def test_a_new_precompute_starts_without_handles_and_a_failed_one_keeps_them():
+    run_cases("""
+        V, F = deform.shapes.capped_cylinder(1.0, 4.0, 12, 6)
+        d = deform.Deformer(V, F, deform.DeformerOptions(rotational_proxies=6, linear_proxies=8))
+        d.precompute()
+        expect("frame before any set_handles", ValueError, ["Deformer.frame: call set_handles first"],
+               lambda: d.frame(np.zeros((0, 3))))
+        pins = np.ascontiguousarray(V[[0, 40, 70]])
+        d.set_handles([0, 40, 70])
+        d.frame(pins)
+
+        def abort(stage, fraction):
+            raise KeyError("stop")
+        expect("a precompute its progress aborts", KeyError, ["stop"], lambda: d.precompute(progress=abort))
+        assert d.ready and len(d.handles.points) == 3 and d.frame(pins).shape == V.shape
+        print("OK the aborted precompute kept the handles")
+        d.precompute()
+        assert d.ready and len(d.handles.points) == 0
+        expect("frame after a new precompute", ValueError, ["Deformer.frame: call set_handles first"],
+               lambda: d.frame(pins))
+        d.set_handles([0, 40, 70])
+        assert d.frame(pins).shape == V.shape
+        print("OK a new set after the new precompute")
+    """, ["frame before any set_handles", "a precompute its progress aborts", "the aborted precompute kept the handles",
+          "frame after a new precompute", "a new set after the new precompute"])
