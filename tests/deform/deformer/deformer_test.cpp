@@ -302,15 +302,20 @@ TEST_CASE("deformer: bad input gets a clear error", "[deformer][errors]") {
     h.points.push_back({{100000}, {}});
     CHECK_THROWS_WITH(deformer.set_handles(h), Catch::Contains("outside"));
   }
-  SECTION("NaN target") {
+  SECTION("a NaN target, and one that would overflow in the energy (the words of qpr's scenario check)") {
     REQUIRE(deformer.precompute(model).ok());
     Handles h;
     h.points.push_back({{0}, {}});
     REQUIRE(deformer.set_handles(h).ok());
     HandleTargets t;
-    t.points = Vertices::Constant(1, 3, std::numeric_limits<double>::quiet_NaN());
     Vertices out;
+    t.points = Vertices::Constant(1, 3, std::numeric_limits<double>::quiet_NaN());
     CHECK_THROWS_WITH(deformer.frame(t, &out), Catch::Contains("NaN"));
+    t.points = Vertices::Constant(1, 3, 1e300);
+    CHECK_THROWS_WITH(deformer.frame(t, &out), Catch::Contains("a point handle's target reaches 1e+300") &&
+                                                   Catch::Contains("handle targets beyond 1e+30 overflow"));
+    t.points = model.V.topRows(1);
+    CHECK(deformer.frame(t, &out).ok());  // refused before any work: the next frame runs
   }
   SECTION("invalid energy parameters") {
     DeformerOptions o;

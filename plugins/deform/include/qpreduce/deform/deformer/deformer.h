@@ -286,6 +286,9 @@ class Deformer {
   // Status::NumericalFailure and the pose stays the last good one: *out is
   // not written, rotations(), reduced_coordinates() and global_rotation()
   // are as after the last good frame, and the next frame starts from there.
+  // Throws std::invalid_argument before any work on targets that do not fit
+  // the handle set, are not finite, or reach beyond kMaxCoordinate
+  // (mesh_check.h; they would overflow in the energy).
   FrameSummary frame(const HandleTargets& targets, Vertices* out);
   // The same, reconstructing into the caller's n × 3 buffer (a NumPy array,
   // a mapped GPU buffer) in place: no copy, no allocation. Throws
