@@ -430,10 +430,9 @@ void bind_deformer_class(py::module_& m) {
           "set_handles(handles=None, *, patches=None, options=None) -> ConstraintSummary\n\n"
           "The on-site step. handles: a Handles, or a sequence whose items are vertex indices,\n"
           "(vertices, weights) pairs or PointHandles (h point handles); patches: prescribed patch\n"
-          "indices (s);\n"
-          "options: ConstraintOptions (soft=True for soft handles). Fixed patches always hold.\n"
-          "Raises ValueError on indices out of range, NumericalError when the reduced constraints\n"
-          "fail. Cost independent of n; releases the GIL.")
+          "indices (s); options: ConstraintOptions (soft=True for soft handles). Fixed patches always\n"
+          "hold. Raises ValueError on indices out of range, NumericalError when the reduced\n"
+          "constraints fail. Cost independent of n; releases the GIL.")
       .def(
           "frame",
           [](PyDeformer& self, py::handle targets, py::handle out, py::handle patch_transforms) {
@@ -444,7 +443,8 @@ void bind_deformer_class(py::module_& m) {
                                     "); call set_handles with a handle set that holds");
             }
             if (!self.handles_set) {
-              throw py::value_error("Deformer.frame: call set_handles first (a precompute or load starts without handles)");
+              throw py::value_error(
+                  "Deformer.frame: call set_handles first (a precompute or load starts without handles)");
             }
             targets_arg(self, targets, patch_transforms);
             const Index n = self.deformer.vertex_count();

@@ -70,8 +70,8 @@ TetMesh box_tets(double sx, double sy, double sz, Index nx, Index ny, Index nz) 
     throw std::invalid_argument("box_tets: sizes and cell counts must be positive");
   }
   const double cells = static_cast<double>(nx) * static_cast<double>(ny) * static_cast<double>(nz);
-  check_index_range("box_tets",
-                    static_cast<double>(nx + 1) * static_cast<double>(ny + 1) * static_cast<double>(nz + 1), 6.0 * cells);
+  const double points = static_cast<double>(nx + 1) * static_cast<double>(ny + 1) * static_cast<double>(nz + 1);
+  check_index_range("box_tets", points, 6.0 * cells);
   TetMesh m;
   const Index px = nx + 1, py = ny + 1, pz = nz + 1;
   m.V.resize(px * py * pz, 3);
