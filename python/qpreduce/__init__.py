@@ -60,6 +60,14 @@ _sys.modules[__name__ + ".deform"] = deform
 _sys.modules[__name__ + ".deform.shapes"] = deform.shapes
 
 
+class QpreduceWarning(UserWarning):
+    """A result whose meaning changed: handles met only in the least-squares
+    sense, a solve stopped at its round limit. The message says how far off
+    and what to do; ``strict=True`` (Deformer, ArapSolver, deform.arap) raises
+    NumericalError instead, and ``warnings.simplefilter("error",
+    QpreduceWarning)`` turns every one into an exception."""
+
+
 class NumericalError(RuntimeError):
     """A numerical step failed: carries the step's ``status`` and ``message``."""
 

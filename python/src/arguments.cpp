@@ -161,6 +161,18 @@ void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
   throw py::error_already_set();
 }
 
+void warn_or_raise(const std::string& message, bool strict, const Outcome& summary, py::handle summary_object) {
+  const py::module_ package = py::module_::import("qpreduce");
+  if (strict) {
+    py::object error = package.attr("NumericalError")(summary.status, message);
+    error.attr("summary") = summary_object;
+    PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
+    throw py::error_already_set();
+  }
+  const py::object category = package.attr("QpreduceWarning");
+  if (PyErr_WarnEx(category.ptr(), message.c_str(), 1) != 0) throw py::error_already_set();
+}
+
 #define QPREDUCE_PYTHON_ARGUMENTS(Scalar)                                                          \
   template SparseMatrix<Scalar> sparse_arg<Scalar>(const char*, py::handle, Dim, Dim);             \
   template SparseMatrix<Scalar> square_sparse_arg<Scalar>(const char*, py::handle);                 \

@@ -91,6 +91,13 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size,
 // (the Python view of `summary`) unless summary.usable().
 void raise_if_unusable(const Outcome& summary, py::handle summary_object);
 
+// A result whose meaning changed (handles met only in the least-squares
+// sense, a solve stopped at its round limit): warns with
+// qpreduce.QpreduceWarning through Python's warnings, or under `strict`
+// raises qpreduce.NumericalError(summary.status, message) with .summary.
+// A warnings filter that turns the warning into an error raises it.
+void warn_or_raise(const std::string& message, bool strict, const Outcome& summary, py::handle summary_object);
+
 // Options argument: the default T{} for None, else a T (TypeError otherwise).
 template <typename T>
 T options_arg(const char* name, py::handle value) {

@@ -14,6 +14,7 @@
 #include <qpreduce/deform/io/io_error.h>
 #include <qpreduce/deform/io/scenario.h>
 
+#include <fmt/format.h>
 #include <pybind11/stl.h>
 
 #include <atomic>
@@ -44,6 +45,12 @@ struct PyDeformer {
   // then can a frame's targets fail check_handle_targets (kept off the
   // frame path otherwise).
   bool pins_to_check = false;
+  // The handle set holds only in the least-squares sense (set_handles said
+  // ConstraintsLeastSquares): each frame then measures how far its handles
+  // end from their targets and warns (or raises under strict).
+  bool least_squares = false;
+  std::string least_squares_reason;
+  bool strict = false;
   std::mutex mutex;
   // The thread running precompute, while it calls the progress callable:
   // a call from there would wait for the lock its own thread holds.
@@ -62,12 +69,37 @@ struct PyDeformer {
     handles_failed.clear();
     handles_set = false;
     pins_to_check = false;
+    least_squares = false;
   }
   std::unique_lock<std::mutex> lock() {
     refuse_reentry();
     return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex);
   }
 };
+
+// What to do about a least-squares handle set: a set the subspace cannot
+// follow needs its vertices named at precompute; a dependent one (a vertex
+// held twice) needs one target per vertex.
+std::string least_squares_advice(const std::string& reason) {
+  if (reason.find("subspace") != std::string::npos) {
+    return "Name point-handle vertices at precompute to meet them exactly: deform.ArapSolver(V, F, b)";
+  }
+  return "Give each vertex one target (its targets are averaged now)";
+}
+
+// After a frame of a least-squares handle set: warns (raises under strict)
+// when its handles end more than 10⁻⁶ of the diagonal from their targets,
+// saying how far.
+void warn_if_off_target(PyDeformer& self, const RowMap<double>& pose, py::handle summary) {
+  const Vertices& V = self.model.V;
+  const double diagonal = (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
+  const double off = handle_residual(self.model, self.handles, self.targets, Vertices(pose));
+  if (!(off > 1e-6 * diagonal)) return;
+  warn_or_raise(fmt::format("Deformer.frame: the handles end {:.2e} of the bounding-box diagonal from their targets "
+                            "(the set holds only in the least-squares sense: {}). {}",
+                            off / diagonal, self.least_squares_reason, least_squares_advice(self.least_squares_reason)),
+                self.strict, self.last_frame, summary);
+}
 
 // True when a single-vertex point handle pins a vertex another one pins too,
 // or a vertex inside a fixed patch (PyDeformer::pins_to_check).
@@ -325,8 +357,9 @@ void bind_deformer_class(py::module_& m) {
       "be shared, its calls then run one at a time.")
       .def(
           py::init([](py::handle V, py::handle elements, py::handle options, py::handle clusters,
-                      py::handle patch_of_vertex, py::handle patch_types) {
+                      py::handle patch_of_vertex, py::handle patch_types, bool strict) {
             auto self = std::make_unique<PyDeformer>();
+            self->strict = strict;
             if (py::isinstance<DeformableMesh>(V)) {  // Deformer(model, options)
               if (!options.is_none() || !clusters.is_none() || !patch_of_vertex.is_none() || !patch_types.is_none()) {
                 throw py::type_error("Deformer(model, options=None): the model carries the mesh, clusters and patches");
@@ -341,8 +374,9 @@ void bind_deformer_class(py::module_& m) {
           }),
           py::arg("V"), py::arg("elements") = py::none(), py::arg("options") = py::none(), py::kw_only(),
           py::arg("clusters") = py::none(), py::arg("patch_of_vertex") = py::none(),
-          py::arg("patch_types") = py::none(),
-          "Deformer(V, elements, options=None, *, clusters=None, patch_of_vertex=None, patch_types=None)\n"
+          py::arg("patch_types") = py::none(), py::arg("strict") = false,
+          "Deformer(V, elements, options=None, *, clusters=None, patch_of_vertex=None, patch_types=None,\n"
+          "strict=False)\n"
           "Deformer(model, options=None)\n\n"
           "V: (n, 3) rest positions; elements: (m, 3) triangles or (m, 4) tetrahedra (see Model);\n"
           "options: DeformerOptions. Nothing is computed until precompute (or load).")
@@ -422,8 +456,16 @@ void bind_deformer_class(py::module_& m) {
               self.handles = std::move(h);
               self.targets = HandleTargets{};  // the targets of the last set no longer apply
               self.pins_to_check = pins_to_check(self.model, self.handles);
+              self.least_squares = summary.status == Status::ConstraintsLeastSquares;
+              self.least_squares_reason = summary.message;
             }
-            return checked(summary);
+            py::object result = py::cast(checked(summary));
+            if (self.least_squares) {
+              warn_or_raise("Deformer.set_handles: the frames will meet these handles only in the least-squares "
+                            "sense (" + summary.message + "). " + least_squares_advice(summary.message),
+                            self.strict, summary, result);
+            }
+            return result;
           },
           py::arg("handles") = py::none(), py::kw_only(), py::arg("patches") = py::none(),
           py::arg("options") = py::none(),
@@ -458,6 +500,7 @@ void bind_deformer_class(py::module_& m) {
               self.last_frame = self.deformer.frame(self.targets, Eigen::Map<Vertices>(view.data(), n, 3));
             }
             checked(self.last_frame);
+            if (self.least_squares && self.last_frame.ok()) warn_if_off_target(self, view, py::cast(self.last_frame));
             return result;
           },
           py::arg("targets") = py::none(), py::arg("out") = py::none(), py::kw_only(),

@@ -341,6 +341,7 @@ void bind_deform_io(py::module_& m) {
   bind_mesh_check(deform);
   bind_references(deform);
   bind_refiner(deform);
+  bind_arap(deform);
 }
 
 }  // namespace qpreduce::python

@@ -122,20 +122,48 @@ LinearProxies linear_proxies_from_ids(const std::vector<int>& ids, Index n) {
 }
 
 LinearProxies linear_proxies_fps(const VerticesRef& V, const ElementsRef& E, Index m) {
+  return linear_proxies_fps(V, E, m, {});
+}
+
+LinearProxies linear_proxies_fps(const VerticesRef& V, const ElementsRef& E, Index m, const std::vector<Index>& seeds) {
   const char* what = "linear_proxies_fps";
   if (V.cols() != 3) throw std::invalid_argument(fmt::format("{}: V must have 3 columns: expected 3, got {}", what, V.cols()));
   if (!V.allFinite()) throw std::invalid_argument(fmt::format("{}: V contains NaN or infinite entries", what));
   const Index n = V.rows();
   const MeshComponents components = connected_components(n, E);  // checks indices
-  check_count(what, "sample", m, n, "vertices", components.count, static_cast<Index>(components.unreferenced.size()));
+  std::vector<char> sampled(static_cast<std::size_t>(n), 0);
+  std::vector<char> covered(static_cast<std::size_t>(components.count), 0);
+  for (std::size_t i = 0; i < seeds.size(); ++i) {
+    const Index v = seeds[i];
+    if (v < 0 || v >= n) throw std::invalid_argument(fmt::format("{}: seeds[{}] = {} is outside [0, {})", what, i, v, n));
+    if (sampled[static_cast<std::size_t>(v)]++) {
+      throw std::invalid_argument(fmt::format("{}: seeds[{}] = {} is listed twice", what, i, v));
+    }
+    covered[static_cast<std::size_t>(components.vertex_component[v])] = 1;
+  }
+  const Index seeded = static_cast<Index>(seeds.size());
+  if (seeded == 0) {
+    check_count(what, "sample", m, n, "vertices", components.count, static_cast<Index>(components.unreferenced.size()));
+  } else {
+    const Index uncovered = components.count - static_cast<Index>(std::count(covered.begin(), covered.end(), 1));
+    if (m < uncovered || m > n - seeded) {
+      throw std::invalid_argument(
+          fmt::format("{}: {} samples beyond the {} seeds: expected at least {} (the connected components without a "
+                      "seed) and at most {} (the vertices that are not seeds)",
+                      what, m, seeded, uncovered, n - seeded));
+    }
+  }
 
   const EdgeGraph graph = edge_graph(V, E);
   const double inf = std::numeric_limits<double>::infinity();
   std::vector<double> dist(static_cast<std::size_t>(n), inf);
-  std::vector<char> sampled(static_cast<std::size_t>(n), 0);
   std::vector<std::vector<Index>> groups;
-  groups.reserve(static_cast<std::size_t>(m));
-  while (static_cast<Index>(groups.size()) < m) {
+  groups.reserve(static_cast<std::size_t>(seeded + m));
+  for (Index v : seeds) {
+    groups.push_back({v});
+    relax_from(graph, v, dist);
+  }
+  while (static_cast<Index>(groups.size()) < seeded + m) {
     Index s = argmax(dist);
     if (dist[s] == inf) {
       // A component without a sample: start at the vertex farthest (along the

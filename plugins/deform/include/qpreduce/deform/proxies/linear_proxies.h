@@ -41,6 +41,14 @@ LinearProxies linear_proxies_from_groups(std::vector<std::vector<Index>> groups,
 // where the mesh is least covered. Throws std::invalid_argument when m < c
 // (naming both) or m > n.
 LinearProxies linear_proxies_fps(const VerticesRef& V, const ElementsRef& E, Index m);
+// The same with `seeds` (distinct vertices in [0, n)) sampled first, each its
+// own proxy and in that order, then m more samples farthest from them (the
+// components without a seed first): the proxies of a handle set known at
+// precompute, which the subspace then meets exactly (docs/deform.md, "Exact
+// handles"). seeds.size() + m proxies. Throws std::invalid_argument on a seed
+// out of range or listed twice, or when m is below the number of components
+// without a seed or above n − seeds.size().
+LinearProxies linear_proxies_fps(const VerticesRef& V, const ElementsRef& E, Index m, const std::vector<Index>& seeds);
 
 // (b) m vertex groups by k-means per component (counts apportioned like the
 // rotational clusters, at least one per component, unreferenced vertices

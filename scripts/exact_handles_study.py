@@ -1,0 +1,101 @@
+"""Exact handles and the one-call API (docs/performance.md, "Exact handles"):
+ArapSolver's precompute and solve against the handle count, and the
+break-even of ArapSolver against deform.arap on the shared cylinder.
+
+    build/bin/qpreduce-python scripts/exact_handles_study.py [--counts 10 30 100 300] [--data ../shared/data]
+
+Prints a Markdown table per part; medians over --repeats runs of each solve.
+"""
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+from qpreduce import deform
+
+
+def bent(V, b):
+    t = (V[b, 2] - V[:, 2].min()) / np.ptp(V[:, 2])
+    out = V[b].copy()
+    c, s = np.cos(0.8 * t), np.sin(0.8 * t)
+    out[:, 1], out[:, 2] = c * V[b, 1] - s * V[b, 2], s * V[b, 1] + c * V[b, 2]
+    return out
+
+
+def timed(f, repeats):
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        result = f()
+        times.append(time.perf_counter() - t)
+    return result, statistics.median(times)
+
+
+def sweep(counts, repeats):
+    V, F = deform.shapes.capped_cylinder(1.0, 6.0, 30, 60)
+    d = np.linalg.norm(np.ptp(V, axis=0))
+    rng = np.random.default_rng(19)
+    print(f"capped cylinder, n = {len(V)}; b random vertices, targets a bend")
+    print("| handle vertices | p | precompute s | basis MB (float) | solve ms (median) | rounds | handle error / diag |")
+    print("|---|---|---|---|---|---|---|")
+    for h in counts:
+        b = rng.choice(len(V), size=h, replace=False)
+        bc = bent(V, b)
+        t = time.perf_counter()
+        solver = deform.ArapSolver(V, F, b)
+        pre = time.perf_counter() - t
+        solver.solve(bc)  # the cold start
+        bc2 = bc + 0.01 * d
+        U, ms = timed(lambda: solver.solve(bc2), repeats)
+        p = solver.precompute_summary.reduced_size
+        print(f"| {h} | {p} | {pre:.2f} | {3 * len(V) * p * 4 / 1e6:.0f} | {1e3 * ms:.2f} | "
+              f"{solver.last_solve.rounds} | {np.abs(U[b] - bc2).max() / d:.0e} |")
+
+
+def break_even(data, repeats):
+    bs = os.path.join(data, "meshes", "botsch-sorkine")
+    V, F = deform.read_mesh(os.path.join(bs, "cylinder.off"))
+    sel = deform.read_sel(os.path.join(bs, "cylinder.sel"))
+    M = deform.read_def(os.path.join(bs, "cylinder.def"))
+    b = np.flatnonzero(sel != 1)
+    bc = V[b].copy()
+    handle = sel[b] == 2
+    bc[handle] = V[b][handle] @ M[:3, :3].T + M[:3, 3]
+    d = np.linalg.norm(np.ptp(V, axis=0))
+    U, one_call = timed(lambda: deform.arap(V, F, b, bc), repeats)
+    t = time.perf_counter()
+    solver = deform.ArapSolver(V, F, b)
+    pre = time.perf_counter() - t
+    R, solve = timed(lambda: solver.solve(bc), repeats)
+    F2, refine = timed(lambda: solver.solve(bc, refine=True), repeats)
+    rms = lambda A: np.sqrt(((A - U) ** 2).sum(axis=1).mean()) / d
+    print(f"\nshared cylinder.off (n = {len(V)}), every fixed and handle vertex of cylinder.sel held ({len(b)})")
+    print("| call | seconds (median) | RMS from arap() / diag |")
+    print("|---|---|---|")
+    print(f"| deform.arap (full space, from rest) | {one_call:.3f} | 0 |")
+    print(f"| ArapSolver(V, F, b) precompute | {pre:.2f} | |")
+    print(f"| ArapSolver.solve(bc) (reduced, warm) | {solve:.4f} | {rms(R):.1e} |")
+    print(f"| ArapSolver.solve(bc, refine=True) | {refine:.3f} | {rms(F2):.1e} |")
+    print(f"\nbreak-even: the precompute pays after {pre / max(one_call - solve, 1e-9):.1f} reduced solves "
+          f"in place of one-call solves")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="*", default=[10, 30, 100, 300])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--data", default=os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__)))), "shared", "data"))
+    args = parser.parse_args()
+    sweep(args.counts, args.repeats)
+    if os.path.isdir(args.data):
+        break_even(args.data, args.repeats)
+    else:
+        print(f"\n{args.data} not found: the break-even part needs the shared data")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,262 @@
+// ARAP in libigl's terms (arap.h): handles named at precompute are met
+// exactly by the reduced solve, on surfaces and tets, for random targets and
+// for the cylinder's .sel handle set held vertex by vertex; arap() and ArapSolver::refine reach the
+// same converged shape; bad arguments throw errors that name them.
+#include <catch2/catch.hpp>
+
+#include "../../shared_data.h"
+
+#include "qpreduce/deform/arap/arap.h"
+#include "qpreduce/deform/io/handles_io.h"
+#include "qpreduce/deform/io/mesh_io.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+#include <string>
+#include <vector>
+
+using namespace qpreduce;
+using namespace qpreduce::deform;
+using shapes::box_tets;
+using shapes::capped_cylinder;
+
+namespace {
+
+double diagonal(const Vertices& V) { return (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm(); }
+
+// `count` distinct vertices, drawn with a fixed seed.
+std::vector<Index> random_vertices(Index n, Index count, unsigned seed) {
+  std::vector<Index> all(static_cast<size_t>(n));
+  for (Index v = 0; v < n; ++v) all[static_cast<size_t>(v)] = v;
+  std::mt19937 rng(seed);
+  std::shuffle(all.begin(), all.end(), rng);
+  all.resize(static_cast<size_t>(count));
+  return all;
+}
+
+// Targets for b: a smooth bend of the rest shape (rotation about x growing
+// along z) plus a random offset of `noise` diagonals per vertex.
+Vertices bent_targets(const Vertices& V, const std::vector<Index>& b, double noise, unsigned seed) {
+  const double lo = V.col(2).minCoeff(), hi = V.col(2).maxCoeff(), d = diagonal(V);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Vertices bc(static_cast<Index>(b.size()), 3);
+  for (size_t i = 0; i < b.size(); ++i) {
+    const Eigen::Vector3d p = V.row(b[i]).transpose();
+    const double t = (p.z() - lo) / (hi - lo);
+    const Eigen::Matrix3d R = Eigen::AngleAxisd(0.8 * t, Eigen::Vector3d::UnitX()).toRotationMatrix();
+    bc.row(static_cast<Index>(i)) = (R * p + noise * d * Eigen::Vector3d(u(rng), u(rng), u(rng))).transpose();
+  }
+  return bc;
+}
+
+double handle_error(const Vertices& U, const std::vector<Index>& b, const Vertices& bc) {
+  double worst = 0.0;
+  for (size_t i = 0; i < b.size(); ++i) worst = std::max(worst, (U.row(b[i]) - bc.row(static_cast<Index>(i))).norm());
+  return worst;
+}
+
+Handles as_handles(const std::vector<Index>& b) {
+  Handles h;
+  for (Index v : b) h.points.push_back(PointHandle{{v}, {}});
+  return h;
+}
+
+// The reduced deformer's own frame for (b, bc) on `model` (no rows written
+// from bc): how far its float reconstruction puts the handles.
+double deformer_handle_error(const DeformableMesh& model, const DeformerOptions& options, const std::vector<Index>& b,
+                             const Vertices& bc, Status* handle_status) {
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, options).ok());
+  const ConstraintSummary cs = deformer.set_handles(as_handles(b));
+  REQUIRE(cs.usable());
+  *handle_status = cs.status;
+  HandleTargets targets;
+  targets.points = bc;
+  Vertices U;
+  REQUIRE(deformer.frame(targets, &U).ok());
+  return handle_error(U, b, bc);
+}
+
+// ArapSolver on (V, F, b): the subspace holds b exactly (the on-site step
+// has full rank, and the float reconstruction is within its round-off of the
+// targets before their rows are written), the solve writes them exactly, and
+// the rest of the shape moves (it is not the rest pose).
+void check_exact(const Vertices& V, const ElementsRef& F, const std::vector<Index>& b, const Vertices& bc,
+                 const ArapSolverOptions& options = {}) {
+  ArapSolver solver;
+  const PrecomputeSummary ps = solver.precompute(V, F, b, options);
+  INFO(ps.message);
+  REQUIRE(ps.ok());
+  REQUIRE(solver.ready());
+  CHECK(solver.handle_summary().status == Status::Success);
+  CHECK(solver.handle_summary().rank == 3 * static_cast<Index>(b.size()));
+  const double d = diagonal(V);
+  Vertices U;
+  const FrameSummary fs = solver.solve(bc, &U);
+  REQUIRE(fs.ok());
+  CAPTURE(b.size(), solver.reconstruction_handle_error() / d);
+  CHECK(solver.reconstruction_handle_error() <= 1e-5 * d);  // float round-off of exactly held proxies
+  CHECK(handle_error(U, b, bc) <= 1e-8 * d);
+  CHECK((U - V).rowwise().norm().maxCoeff() > 1e-3 * d);
+}
+
+}  // namespace
+
+TEST_CASE("ArapSolver: handles named at precompute are met exactly, on a surface", "[arap]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 16, 24);
+  for (const Index count : {Index(3), Index(10), Index(100)}) {
+    CAPTURE(count);
+    const std::vector<Index> b = random_vertices(m.V.rows(), count, 7u + static_cast<unsigned>(count));
+    check_exact(m.V, m.F, b, bent_targets(m.V, b, 0.01, 3));
+  }
+}
+
+TEST_CASE("ArapSolver: handles named at precompute are met exactly, on tets", "[arap]") {
+  const TetMesh m = box_tets(1.0, 1.0, 4.0, 3, 3, 12);
+  for (const Index count : {Index(4), Index(40)}) {
+    CAPTURE(count);
+    const std::vector<Index> b = random_vertices(m.V.rows(), count, 11u + static_cast<unsigned>(count));
+    check_exact(m.V, m.T, b, bent_targets(m.V, b, 0.01, 5));
+  }
+}
+
+TEST_CASE("ArapSolver: a 300-vertex handle set is met exactly", "[arap]") {
+  // (The precompute's dense p × p steps grow as the cube of the handle count:
+  // docs/performance.md, "Exact handles", has 1,000 and 3,000.)
+#ifdef QPREDUCE_SANITIZER_BUILD
+  const Index count = 100;
+#else
+  const Index count = 300;
+#endif
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 30, 60);
+  const std::vector<Index> b = random_vertices(m.V.rows(), count, 19u);
+  ArapSolverOptions options;
+  options.deformer.linear_proxies = 10;
+  check_exact(m.V, m.F, b, bent_targets(m.V, b, 0.0, 1), options);
+}
+
+TEST_CASE("ArapSolver: without the handles at precompute the same set is not met", "[arap]") {
+  // The contrast that makes the exact set worth naming: the default proxies
+  // (farthest-point samples that do not know b) cannot follow 100 point
+  // handles, and the deformer's frame leaves them visibly off.
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 16, 24);
+  const std::vector<Index> b = random_vertices(m.V.rows(), 100, 107u);
+  const Vertices bc = bent_targets(m.V, b, 0.01, 3);
+  DeformableMesh model;
+  model.V = m.V;
+  model.F = m.F;
+  Status status = Status::NotRun;
+  const double error = deformer_handle_error(model, DeformerOptions{}, b, bc, &status);
+  CHECK(status == Status::ConstraintsLeastSquares);
+  CHECK(error > 1e-3 * diagonal(m.V));
+}
+
+TEST_CASE("arap: one call reaches the shape ArapSolver::refine reaches", "[arap][refine]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 16, 24);
+  std::vector<Index> b;
+  for (Index v = 0; v < m.V.rows(); ++v)
+    if (m.V(v, 2) < 0.3 || m.V(v, 2) > 5.7) b.push_back(v);  // both ends, as a libigl user would hold them
+  const Vertices bc = bent_targets(m.V, b, 0.0, 1);
+  RefineOptions tight;
+  tight.distance_tolerance = 1e-7;
+  Vertices U;
+  const RefineSummary full = arap(m.V, m.F, b, bc, &U, tight);
+  INFO(full.message);
+  REQUIRE(full.ok());
+  CHECK(full.converged);
+  const double d = diagonal(m.V);
+  CHECK(handle_error(U, b, bc) <= 1e-8 * d);
+
+  ArapSolverOptions options;
+  options.refine = tight;
+  ArapSolver solver;
+  REQUIRE(solver.precompute(m.V, m.F, b, options).ok());
+  Vertices R;
+  const RefineSummary finished = solver.refine(bc, &R);
+  REQUIRE(finished.ok());
+  const double rms = std::sqrt((R - U).rowwise().squaredNorm().mean()) / d;
+  CAPTURE(rms, full.rounds, finished.rounds);
+  CHECK(rms <= 1e-5);
+  CHECK(finished.arap_energy == Approx(full.arap_energy).epsilon(1e-6));
+  // From the reduced shape the finish needs fewer rounds than from rest.
+  CHECK(finished.rounds < full.rounds);
+
+  // U as libigl's initial guess: from the converged shape nothing moves far.
+  Vertices again = U;
+  const RefineSummary warm = arap(m.V, m.F, b, bc, &again, tight);
+  REQUIRE(warm.ok());
+  CHECK(warm.rounds <= full.rounds);
+  CHECK(std::sqrt((again - U).rowwise().squaredNorm().mean()) / d <= 1e-5);
+}
+
+TEST_CASE("ArapSolver: a shared .sel handle set, held vertex by vertex, is met exactly", "[arap][data]") {
+  REQUIRE_SHARED_DATA(data);
+  // The cylinder's 482 held vertices; the cactus (864), bar (962) and Bumpy
+  // Plane (3,417) sets are measured in docs/performance.md ("Exact handles").
+  const std::vector<std::string> names = {"cylinder"};
+#ifdef QPREDUCE_SANITIZER_BUILD
+  const Index every = 4;  // every fourth held vertex: the same check, smaller
+#else
+  const Index every = 1;
+#endif
+  for (const std::string& name : names) {
+    CAPTURE(name);
+    const std::string bs = data + "/meshes/botsch-sorkine/";
+    const TriangleMesh m = read_triangle_mesh(bs + name + ".off");
+    const Selection sel = read_sel(bs + name + ".sel");
+    const Eigen::Matrix4d def = read_def(bs + name + ".def");
+    // libigl's habit: every fixed and handle vertex a point handle; the
+    // fixed ones at rest, the handle ones where the .def puts them.
+    std::vector<Index> b;
+    Vertices bc(0, 3);
+    for (Index v = 0, held = 0; v < sel.size(); ++v) {
+      if (sel.roles[v] == SelRole::Free || held++ % every != 0) continue;
+      Eigen::Vector3d p = m.V.row(v).transpose();
+      if (sel.roles[v] == SelRole::Handle) p = def.topLeftCorner<3, 3>() * p + def.topRightCorner<3, 1>();
+      b.push_back(v);
+      bc.conservativeResize(bc.rows() + 1, 3);
+      bc.row(bc.rows() - 1) = p.transpose();
+    }
+    CAPTURE(b.size());
+    check_exact(m.V, m.F, b, bc);
+  }
+}
+
+TEST_CASE("arap and ArapSolver: bad arguments are refused with their names", "[arap][bad-input]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 8, 6);
+  const std::vector<Index> b = {0, 5};
+  const Vertices bc = m.V(b, Eigen::all);
+  Vertices U;
+  using Catch::Matchers::Contains;
+  const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> two_columns = m.F.leftCols(2);
+  CHECK_THROWS_WITH(arap(m.V, two_columns, b, bc, &U), Contains("F must have 3 columns"));
+  CHECK_THROWS_WITH(arap(m.V, m.F, {0, m.V.rows()}, bc, &U), Contains("b[1]") && Contains("outside"));
+  CHECK_THROWS_WITH(arap(m.V, m.F, {3, 3}, bc, &U), Contains("b lists vertex 3 twice"));
+  CHECK_THROWS_WITH(arap(m.V, m.F, {}, Vertices(0, 3), &U), Contains("b is empty"));
+  CHECK_THROWS_WITH(arap(m.V, m.F, b, bc.topRows(1), &U), Contains("bc has 1 rows: expected 2"));
+  Vertices nan = bc;
+  nan(1, 2) = std::nan("");
+  CHECK_THROWS_WITH(arap(m.V, m.F, b, nan, &U), Contains("bc contains NaN"));
+  Vertices short_guess = m.V.topRows(3);
+  CHECK_THROWS_WITH(arap(m.V, m.F, b, bc, &short_guess), Contains("U has 3 rows"));
+  CHECK_THROWS_WITH(arap(m.V, m.F, b, bc, nullptr), Contains("U is null"));
+
+  ArapSolver solver;
+  CHECK_FALSE(solver.ready());
+  CHECK_THROWS_WITH(solver.solve(bc, &U), Contains("call precompute first"));
+  ArapSolverOptions bad;
+  bad.max_rounds = 0;
+  CHECK_THROWS_WITH(solver.precompute(m.V, m.F, b, bad), Contains("max_rounds"));
+  CHECK_THROWS_WITH(solver.precompute(m.V, m.F, {1, 1}, {}), Contains("twice"));
+  REQUIRE(solver.precompute(m.V, m.F, b).ok());
+  CHECK_THROWS_WITH(solver.solve(nan, &U), Contains("bc contains NaN"));
+  CHECK_THROWS_WITH(solver.solve(bc.topRows(1), &U), Contains("bc has 1 rows"));
+  // A refused call loses nothing: the next good one works.
+  REQUIRE(solver.solve(bc, &U).ok());
+  CHECK(handle_error(U, b, bc) == 0.0);
+}
