@@ -47,6 +47,7 @@ int run_view(ViewArgs& a) {
 
   viewer::ViewerInput input;
   input.name = ls.name;
+  input.exact_handles = a.exact_handles;
   input.options = ls.options;
   qpreduce::deform::apply_scenario_options(ls.scenario, &input.options);
   input.faces = !ls.tet ? ls.surface.F : ls.solid.F.rows() > 0 ? ls.solid.F : qpreduce::deform::boundary_faces(ls.solid.T);

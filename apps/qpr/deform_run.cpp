@@ -81,7 +81,11 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   auto* lp =
       cmd->add_option("--linear-proxies", a->linear_proxies, "Linear proxies (farthest-point samples), default 33")
           ->check(whole_number_between(1, 10000000));
-  add_path_option(cmd, PathRole::Input, "--linear-groups", a->linear_groups, "Linear proxies as vertex groups (.id)")->check(CLI::ExistingFile)->excludes(lp);
+  auto* lg = add_path_option(cmd, PathRole::Input, "--linear-groups", a->linear_groups, "Linear proxies as vertex groups (.id)")->check(CLI::ExistingFile)->excludes(lp);
+  cmd->add_flag("--exact-handles", a->exact_handles,
+                "Make every point-handle vertex its own linear proxy at precompute, so the subspace meets its "
+                "targets exactly (--linear-proxies more samples around them; precompute grows with their count)")
+      ->excludes(lg);
   auto* rp = cmd->add_option("--rotational-proxies", a->rotational_proxies,
                              "Rotational clusters (spectral k-means), default 27")
                  ->check(whole_number_between(1, 10000000));
@@ -243,6 +247,14 @@ LoadedScenario load_scenario(const ScenarioArgs& a, bool strict) {
   }
   ls.name = !a.scene.empty() ? a.scene : a.mesh;
   ls.options = deformer_options(a, ls.scenario.model_kind, tet);
+  if (a.exact_handles && !sc.handles.points.empty()) {
+    if (sc.model.linear.count() > 0) {
+      throw std::invalid_argument("--exact-handles makes the linear proxies; the scene gives its own (proxies/linear)");
+    }
+    DeformerOptions counts = ls.options;  // the scene's proxy count, when it gives one
+    apply_scenario_options(sc, &counts);
+    sc.model.linear = exact_handle_proxies(sc.model, sc.handles, counts.linear_proxies);
+  }
   ls.preflight = preflight(ls.scenario, ls.name, strict);
   check_scenario(ls.scenario, ls.name);
   return ls;
@@ -418,10 +430,20 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
   if (cs.status != Status::Success && settings.strict)
     throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
-  if (cs.status != Status::Success) std::fprintf(stderr, "  warning: %s\n", cs.message.c_str());
+  // A set the subspace cannot follow: say what makes it exact.
+  const bool subspace_short = cs.message.find("subspace") != std::string::npos;
+  if (cs.status != Status::Success) {
+    std::fprintf(stderr, "  warning: %s%s\n", cs.message.c_str(),
+                 subspace_short ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
+                                : "");
+  }
 
   const double diag = bounding_box_diagonal(scenario.model.V);
   const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);
+  if (cs.status != Status::Success && !s.residual.empty()) {
+    std::fprintf(stderr, "  warning: the handles end up to %.2e of the bounding-box diagonal from their targets\n",
+                 *std::max_element(s.residual.begin(), s.residual.end()));
+  }
   if (outputs) {  // the deformer's state after the last frame, before any settle
     outputs->clusters = deformer.clusters();
     outputs->rotations = deformer.rotations();

@@ -36,6 +36,7 @@ struct ScenarioArgs {
   std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
   bool no_second_order = false;        // DeformerOptions::second_order = false
   bool exact_unreachable = false;      // DeformerOptions::soften_unreachable_handles = false
+  bool exact_handles = false;          // point-handle vertices as linear proxies (exact_handle_proxies)
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

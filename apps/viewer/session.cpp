@@ -48,8 +48,13 @@ Session::~Session() {
 
 namespace {
 // Linear proxies are sampled here (as precompute would) so that the viewer can
-// colour them; precompute then uses exactly these.
-void ensure_linear_proxies(DeformableMesh* model, Index count) {
+// colour them; precompute then uses exactly these. `exact`: the point-handle
+// vertices of these handles first (ViewerInput::exact_handles).
+void ensure_linear_proxies(DeformableMesh* model, Index count, const Handles* exact) {
+  if (exact && !exact->points.empty()) {
+    model->linear = exact_handle_proxies(*model, *exact, count);
+    return;
+  }
   if (model->linear.count() == count && count > 0) return;
   const bool tet = model->is_tet();
   model->linear = tet ? linear_proxies_fps(model->V, model->T, count) : linear_proxies_fps(model->V, model->F, count);
@@ -61,7 +66,7 @@ void Session::precompute(const DeformerOptions& options, const ProgressFn& progr
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("deformer options: " + why);
   if (!input_.scenario.model.linear.count() || options.linear_proxies != options_.linear_proxies)
-    ensure_linear_proxies(&input_.scenario.model, options.linear_proxies);
+    ensure_linear_proxies(&input_.scenario.model, options.linear_proxies, exact_handles());
   auto d = std::make_unique<Deformer>();
   const PrecomputeSummary s = d->precompute(input_.scenario.model, options, progress);
   if (!s.ok()) throw std::runtime_error("precompute failed: " + s.message);
@@ -88,7 +93,7 @@ void Session::precompute_async(const DeformerOptions& options) {
   DeformableMesh model = input_.scenario.model;
   if (model.linear.count() != options.linear_proxies) {
     try {
-      ensure_linear_proxies(&model, options.linear_proxies);
+      ensure_linear_proxies(&model, options.linear_proxies, exact_handles());
     } catch (const std::exception& e) {
       error_ = e.what();
       return;

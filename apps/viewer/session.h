@@ -49,6 +49,9 @@ struct ViewerInput {
   qpreduce::deform::Triangles faces;  // triangles drawn (tets: the boundary)
   qpreduce::deform::DeformerOptions options;
   std::string name;
+  // The scenario's point-handle vertices are linear proxies (qpr view
+  // --exact-handles: exact_handle_proxies, re-sampled with the proxy count).
+  bool exact_handles = false;
 };
 
 enum class Reconstruction { Gpu, Cpu };
@@ -141,6 +144,10 @@ class Session {
   RefineWorker& refine_worker(const qpreduce::deform::RefineOptions& options = {});
 
  private:
+  // The handles whose vertices are linear proxies (ViewerInput::exact_handles), or null.
+  const qpreduce::deform::Handles* exact_handles() const {
+    return input_.exact_handles ? &input_.scenario.handles : nullptr;
+  }
   ViewerInput input_;
   double diagonal_ = 1.0;
   std::unique_ptr<qpreduce::deform::Deformer> deformer_, pending_;

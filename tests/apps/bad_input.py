@@ -88,9 +88,9 @@ def scene(body):
 CASES = []
 
 
-def case(group, name, args, code, words, files=None, max_seconds=None, stdout_words=None):
+def case(group, name, args, code, words, files=None, max_seconds=None, stdout_words=None, stderr_absent=None):
     CASES.append(dict(group=group, name=name, args=args, code=code, words=words, files=files or {},
-                      max_seconds=max_seconds, stdout_words=stdout_words or []))
+                      max_seconds=max_seconds, stdout_words=stdout_words or [], stderr_absent=stderr_absent or []))
 
 
 OPT = 105  # CLI11's exit code for a value that fails its check
@@ -309,6 +309,15 @@ HELD = ', "proxies": {"linear": 9}, %s, "handles": [{"vertices": [40, 41, 42, 43
 case("scenes", "handles the subspace cannot meet are a warning (soft)", ["deform", "--scene", "{W}/s.json"], 0,
      ["warning", "cannot meet these handles", "rank 36 in the full space but 33", "soft constraints"],
      {"s.json": scene(HELD)})
+case("scenes", "handles the subspace cannot meet say what makes them exact", ["deform", "--scene", "{W}/s.json"], 0,
+     ["--exact-handles", "the handles end up to", "of the bounding-box diagonal from their targets"],
+     {"s.json": scene(HELD)})
+case("scenes", "--exact-handles meets them (their vertices are proxies)",
+     ["deform", "--scene", "{W}/s.json", "--exact-handles"], 0, [], {"s.json": scene(HELD)},
+     stdout_words=["handle residual"], stderr_absent=["warning"])
+case("scenes", "--exact-handles refuses a group handle", ["deform", "--scene", "{W}/s.json", "--exact-handles"], RUN,
+     ["point handle 0 is a group of 2 vertices", "as a patch"],
+     {"s.json": scene(', %s, "handles": [{"group": [[44, 0.5], [45, 0.5]], "targets": [[1, 0, 5]]}]' % PATCH)})
 case("scenes", "least-squares handles are a warning", ["deform", "--scene", "{W}/s.json", "--exact-unreachable"], 0,
      ["warning", "least-squares sense"], {"s.json": scene(HELD)})
 case("scenes", "least-squares handles with --strict are an error", ["deform", "--scene", "{W}/s.json", "--strict"],
@@ -774,6 +783,9 @@ def run_case(qpr, c):
         for w in c["stdout_words"]:
             if w not in out:
                 problems.append("stdout lacks %r" % w)
+        for w in c.get("stderr_absent", []):
+            if w in err:
+                problems.append("stderr has %r" % w)
         if c["code"] != 0 and len(err) > 2000:
             problems.append("stderr is %d characters long" % len(err))
         if c["max_seconds"] and seconds > c["max_seconds"]:

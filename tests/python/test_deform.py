@@ -2,6 +2,7 @@
 the caller's array, save/load), the models, the references, and the errors."""
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -240,7 +241,8 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
     for soften in (True, False):
         deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS, soften_unreachable_handles=soften))
         deformer.precompute()
-        summary = deformer.set_handles(handles)
+        with pytest.warns(qpreduce.QpreduceWarning, match="least-squares sense"):
+            summary = deformer.set_handles(handles)
         assert summary.status == qpreduce.Status.ConstraintsLeastSquares and summary.usable()
         if soften:
             assert "cannot meet these handles" in summary.message
@@ -249,7 +251,10 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
         else:
             assert "least-squares sense" in summary.message
         for _ in range(3):
-            Vp = deformer.frame(targets)
+            with warnings.catch_warnings(record=True) as caught:  # a frame that ends off target says how far
+                warnings.simplefilter("always")
+                Vp = deformer.frame(targets)
+            assert all("of the bounding-box diagonal from their targets" in str(w.message) for w in caught)
             assert np.isfinite(Vp).all()
             assert np.linalg.norm(Vp - V, axis=1).max() < 0.2 * diagonal  # the top moved 0.09 diagonals
             # soft: within 10⁻⁴ of the diagonal at δ = 10³ (measured 0.8·10⁻⁴); exact: to round-off
@@ -259,7 +264,8 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
     deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS))
     deformer.precompute()
     few = list(base[::3])
-    summary = deformer.set_handles(few + [(np.array(few[:2]), np.array([0.5, 0.5])), handles[-1]])
+    with pytest.warns(qpreduce.QpreduceWarning, match="one target"):  # dependent rows: the advice differs
+        summary = deformer.set_handles(few + [(np.array(few[:2]), np.array([0.5, 0.5])), handles[-1]])
     assert summary.status == qpreduce.Status.ConstraintsLeastSquares
     assert "least-squares sense" in summary.message and "soft" not in summary.message
     Vp = deformer.frame(np.ascontiguousarray(np.vstack([V[few], V[few[:2]].mean(axis=0), targets[-1]])))
@@ -413,7 +419,8 @@ def test_calls_out_of_order_raise_value_error():
 def test_bad_frame_arguments(ready):
     deformer, scenario = ready
     n = deformer.vertex_count
-    deformer.set_handles(deform.Handles(points=[0, 5], patches=[1]))
+    with pytest.warns(qpreduce.QpreduceWarning, match="dependent rows"):  # 0 and 5 are in a fixed patch
+        deformer.set_handles(deform.Handles(points=[0, 5], patches=[1]))
     good_pt = np.eye(4)[None, :3]
     good = np.zeros((2, 3))
     strided = np.zeros((2, 6))[:, ::2]

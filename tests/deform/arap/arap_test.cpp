@@ -260,3 +260,49 @@ TEST_CASE("arap and ArapSolver: bad arguments are refused with their names", "[a
   REQUIRE(solver.solve(bc, &U).ok());
   CHECK(handle_error(U, b, bc) == 0.0);
 }
+
+TEST_CASE("exact_handle_proxies: held vertices become proxies once, patches and groups as documented", "[arap]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 16, 24);
+  DeformableMesh model;
+  model.V = m.V;
+  model.F = m.F;
+  std::vector<Index> bottom;  // a fixed patch at the base
+  for (Index v = 0; v < m.V.rows(); ++v)
+    if (m.V(v, 2) < 0.3) bottom.push_back(v);
+  model.patch_of_vertex.assign(static_cast<size_t>(m.V.rows()), -1);
+  for (Index v : bottom) model.patch_of_vertex[static_cast<size_t>(v)] = 0;
+  model.patch_types = {PatchType::Fixed};
+  const std::vector<Index> b = random_vertices(m.V.rows(), 60, 23u);
+  Handles handles = as_handles(b);
+  handles.points.push_back(PointHandle{{b[0]}, {}});       // held twice: one proxy
+  handles.points.push_back(PointHandle{{bottom[0]}, {}});  // inside the fixed patch: no proxy
+  const LinearProxies proxies = exact_handle_proxies(model, handles, 12);
+  std::vector<Index> first;
+  for (Index j = 0; j < proxies.count(); ++j) first.push_back(proxies.groups[static_cast<size_t>(j)][0]);
+  Index seeds = 0;
+  for (Index v : b) seeds += model.patch_of_vertex[static_cast<size_t>(v)] < 0;
+  CHECK(proxies.count() == seeds + 12);
+  for (Index v : b) {
+    if (model.patch_of_vertex[static_cast<size_t>(v)] >= 0) continue;
+    CHECK(std::count(first.begin(), first.end(), v) == 1);
+  }
+  CHECK(std::count(first.begin(), first.end(), bottom[0]) == 0);
+
+  // With them as the model's proxies the set is exact (its free vertices: a
+  // point handle inside the fixed patch would contradict the patch).
+  model.linear = proxies;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model).ok());
+  std::vector<Index> free_b;
+  for (Index v : b)
+    if (model.patch_of_vertex[static_cast<size_t>(v)] < 0) free_b.push_back(v);
+  REQUIRE(free_b.size() > 40);
+  CHECK(deformer.set_handles(as_handles(free_b)).status == Status::Success);
+
+  Handles group;
+  group.points.push_back(PointHandle{{b[0], b[1]}, {0.5, 0.5}});
+  CHECK_THROWS_WITH(exact_handle_proxies(model, group, 12), Catch::Matchers::Contains("is a group of 2 vertices"));
+  Handles outside;
+  outside.points.push_back(PointHandle{{m.V.rows()}, {}});
+  CHECK_THROWS_WITH(exact_handle_proxies(model, outside, 12), Catch::Matchers::Contains("outside"));
+}

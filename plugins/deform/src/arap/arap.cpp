@@ -124,8 +124,7 @@ PrecomputeSummary ArapSolver::precompute(const Vertices& V, const ElementsRef& F
   st->options = options;
   // Every held vertex its own linear proxy, then samples around them (as
   // many as the options ask, within what the mesh has).
-  const Index more = std::min<Index>(options.deformer.linear_proxies, V.rows() - static_cast<Index>(b.size()));
-  st->model.linear = linear_proxies_fps(V, F, more, b);
+  st->model.linear = exact_handle_proxies(st->model, st->handles, options.deformer.linear_proxies);
   PrecomputeSummary summary = st->deformer.precompute(st->model, options.deformer);
   if (!summary.ok()) return summary;
   st->deformer.set_rounds(options.max_rounds, options.tolerance);

@@ -50,4 +50,29 @@ double handle_residual(const DeformableMesh& m, const Handles& handles, const Ha
   return worst;
 }
 
+LinearProxies exact_handle_proxies(const DeformableMesh& model, const Handles& handles, Index more) {
+  const Index n = model.V.rows();
+  std::vector<Index> seeds;
+  std::vector<char> seen(static_cast<size_t>(n), 0);
+  for (size_t h = 0; h < handles.points.size(); ++h) {
+    const PointHandle& ph = handles.points[h];
+    if (ph.vertices.size() != 1) {
+      throw std::invalid_argument(fmt::format(
+          "exact handles: point handle {} is a group of {} vertices; only single-vertex handles become proxies "
+          "(hold the group as a patch to meet it exactly)",
+          h, ph.vertices.size()));
+    }
+    const Index v = ph.vertices[0];
+    if (v < 0 || v >= n) {
+      throw std::invalid_argument(fmt::format("exact handles: point handle {} holds vertex {} outside [0, {})", h, v, n));
+    }
+    const bool in_patch = !model.patch_of_vertex.empty() && model.patch_of_vertex[static_cast<size_t>(v)] >= 0;
+    if (in_patch || seen[static_cast<size_t>(v)]++) continue;
+    seeds.push_back(v);
+  }
+  const Index room = n - static_cast<Index>(seeds.size());
+  if (model.is_tet()) return linear_proxies_fps(model.V, model.T, std::min(more, room), seeds);
+  return linear_proxies_fps(model.V, model.F, std::min(more, room), seeds);
+}
+
 }  // namespace qpreduce::deform

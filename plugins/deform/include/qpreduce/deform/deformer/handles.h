@@ -66,4 +66,14 @@ struct HandleTargets {
 double handle_residual(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                        const Vertices& deformed);
 
+// Linear proxies that make `handles` exact (docs/deform.md, "Exact handles"):
+// every single-vertex point handle's vertex its own proxy (once, however
+// often it is held; vertices inside patches are held by their patch), then
+// `more` farthest-point samples around them (linear_proxies_fps with seeds).
+// Set it as model.linear before Deformer::precompute: the subspace then
+// meets any targets of these handles exactly (set_handles returns Success).
+// Throws std::invalid_argument for a weighted group (it has no proxy of its
+// own), a vertex out of range, or as linear_proxies_fps.
+LinearProxies exact_handle_proxies(const DeformableMesh& model, const Handles& handles, Index more);
+
 }  // namespace qpreduce::deform
