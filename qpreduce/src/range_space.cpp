@@ -1,6 +1,7 @@
 #include "range_space.h"
 
 #include "blas.h"
+#include "dense.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -33,8 +34,12 @@ RangeSpace prepare_range_space(const MatD& H, double lift_tolerance, bool factor
   }
   rs.inv_scale = rs.scale.cwiseInverse();
   const MatD Hbar = rs.scale.asDiagonal() * H * rs.scale.asDiagonal();
-  const Eigen::SelfAdjointEigenSolver<MatD> es(0.5 * (Hbar + Hbar.transpose()));
-  const Eigen::VectorXd& lambda = es.eigenvalues();
+  Eigen::VectorXd lambda;
+  MatD V;
+  if (!symmetric_eigen(MatD(0.5 * (Hbar + Hbar.transpose())), &lambda, &V)) {
+    lambda.setConstant(p, std::numeric_limits<double>::quiet_NaN());  // the operators below come out NaN
+    V.setZero(p, p);
+  }
   rs.hbar_max = p > 0 ? std::max(lambda.maxCoeff(), std::numeric_limits<double>::min()) : 1.0;
   const double sigma = rs.hbar_max;
   Eigen::VectorXd inv(p);
@@ -47,7 +52,7 @@ RangeSpace prepare_range_space(const MatD& H, double lift_tolerance, bool factor
       inv(i) = 1.0 / lambda(i);
     }
   }
-  const MatD DV = rs.scale.asDiagonal() * es.eigenvectors();  // D_s·V
+  const MatD DV = rs.scale.asDiagonal() * V;  // D_s·V
   rs.Minv0 = DV * inv.asDiagonal() * DV.transpose();
   rs.Minv0 = 0.5 * (rs.Minv0 + rs.Minv0.transpose()).eval();
   const Index nu = static_cast<Index>(lifted.size());

@@ -284,8 +284,7 @@ bool SubspaceBuild<Scalar>::augmented_route(const std::vector<Index>& aug) {
   // S = CᵀG is SPD when C has full rank and H_ρ is SPD.
   MatD S = C.transpose() * Nw;
   S = 0.5 * (S + S.transpose()).eval();
-  const Eigen::SelfAdjointEigenSolver<MatD> Seig(S, Eigen::EigenvaluesOnly);
-  const auto& eig = Seig.eigenvalues();
+  const Eigen::VectorXd eig = detail::symmetric_eigenvalues(S);
   summary.s_condition = eig.maxCoeff() / std::max(eig.minCoeff(), 1e-300);
   if (detail::numerical_rank(eig, options.rank_tolerance) < d) {
     return fail_kkt(fmt::format("S = Cᵀ(H + ρCCᵀ)⁻¹C is singular (condition {:.2e}): the KKT matrix is "
