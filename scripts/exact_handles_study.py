@@ -5,6 +5,7 @@ display-rate frames (8 rounds each) with 100 exact handle vertices on the
 shared Bumpy Plane.
 
     build/bin/qpreduce-python scripts/exact_handles_study.py [--counts 10 30 100 300] [--data ../shared/data]
+        [--parts sweep break-even frames]
 
 Prints a Markdown table per part; medians over --repeats runs of each solve.
 """
@@ -115,15 +116,20 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", type=int, nargs="*", default=[10, 30, 100, 300])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--parts", nargs="*", default=["sweep", "break-even", "frames"],
+                        choices=["sweep", "break-even", "frames"], help="which tables (default: all three)")
     parser.add_argument("--data", default=os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
         os.path.abspath(__file__)))), "shared", "data"))
     args = parser.parse_args()
-    sweep(args.counts, args.repeats)
-    if os.path.isdir(args.data):
+    if "sweep" in args.parts:
+        sweep(args.counts, args.repeats)
+    if not os.path.isdir(args.data):
+        print(f"\n{args.data} not found: the break-even and frames parts need the shared data")
+        return
+    if "break-even" in args.parts:
         break_even(args.data, args.repeats)
+    if "frames" in args.parts:
         frames_on_bumpy_plane(args.data, 100, args.repeats)
-    else:
-        print(f"\n{args.data} not found: the break-even part needs the shared data")
 
 
 if __name__ == "__main__":
