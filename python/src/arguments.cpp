@@ -153,23 +153,23 @@ py::array_t<Scalar> output_arg(const char* name, py::handle out, Dim size,
   return py::reinterpret_borrow<py::array_t<Scalar>>(out);
 }
 
-void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
-  if (summary.usable()) return;
-  py::object error = py::module_::import("qpreduce").attr("NumericalError")(summary.status, summary.message);
+namespace {
+// Raises qpreduce.NumericalError(status, message) with .summary.
+[[noreturn]] void raise_numerical_error(Status status, const std::string& message, py::handle summary_object) {
+  py::object error = py::module_::import("qpreduce").attr("NumericalError")(status, message);
   error.attr("summary") = summary_object;
   PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
   throw py::error_already_set();
 }
+}  // namespace
+
+void raise_if_unusable(const Outcome& summary, py::handle summary_object) {
+  if (!summary.usable()) raise_numerical_error(summary.status, summary.message, summary_object);
+}
 
 void warn_or_raise(const std::string& message, bool strict, const Outcome& summary, py::handle summary_object) {
-  const py::module_ package = py::module_::import("qpreduce");
-  if (strict) {
-    py::object error = package.attr("NumericalError")(summary.status, message);
-    error.attr("summary") = summary_object;
-    PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(error.ptr())), error.ptr());
-    throw py::error_already_set();
-  }
-  const py::object category = package.attr("QpreduceWarning");
+  if (strict) raise_numerical_error(summary.status, message, summary_object);
+  const py::object category = py::module_::import("qpreduce").attr("QpreduceWarning");
   if (PyErr_WarnEx(category.ptr(), message.c_str(), 1) != 0) throw py::error_already_set();
 }
 

@@ -51,6 +51,7 @@ struct PyDeformer {
   bool least_squares = false;
   std::string least_squares_reason;
   bool strict = false;
+  double diagonal = 0.0;  // of the model's rest bounding box (set with the model)
   std::mutex mutex;
   // The thread running precompute, while it calls the progress callable:
   // a call from there would wait for the lock its own thread holds.
@@ -91,8 +92,7 @@ std::string least_squares_advice(const std::string& reason) {
 // when its handles end more than 10⁻⁶ of the diagonal from their targets,
 // saying how far.
 void warn_if_off_target(PyDeformer& self, const RowMap<double>& pose, py::handle summary) {
-  const Vertices& V = self.model.V;
-  const double diagonal = (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
+  const double diagonal = self.diagonal;
   const double off = handle_residual(self.model, self.handles, self.targets, Vertices(pose));
   if (!(off > 1e-6 * diagonal)) return;
   warn_or_raise(fmt::format("Deformer.frame: the handles end {:.2e} of the bounding-box diagonal from their targets "
@@ -370,6 +370,8 @@ void bind_deformer_class(py::module_& m) {
               self->model = model_arg(V, elements, clusters, patch_of_vertex, patch_types);
             }
             self->options = options_arg<DeformerOptions>("options", options);
+            const Vertices& rest = self->model.V;
+            if (rest.rows() > 0) self->diagonal = (rest.colwise().maxCoeff() - rest.colwise().minCoeff()).norm();
             return self;
           }),
           py::arg("V"), py::arg("elements") = py::none(), py::arg("options") = py::none(), py::kw_only(),

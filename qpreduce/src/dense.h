@@ -24,7 +24,7 @@ inline constexpr Index kLapackEigenRows = 400;
 // columns. From kLapackEigenRows rows LAPACK's divide-and-conquer dsyevd
 // (blocked, through the system BLAS), else Eigen's SelfAdjointEigenSolver.
 // False when the solver does not converge (*values then unspecified).
-inline bool symmetric_eigen(const Matrix<double>& S, Eigen::VectorXd* values, Matrix<double>* vectors = nullptr) {
+inline bool symmetric_eigen(Matrix<double> S, Eigen::VectorXd* values, Matrix<double>* vectors = nullptr) {
   const Index n = S.rows();
   if (n < kLapackEigenRows) {
     Eigen::SelfAdjointEigenSolver<Matrix<double>> es(S, vectors ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly);
@@ -33,7 +33,7 @@ inline bool symmetric_eigen(const Matrix<double>& S, Eigen::VectorXd* values, Ma
     if (vectors) *vectors = es.eigenvectors();
     return true;
   }
-  Matrix<double> A = S;
+  Matrix<double>& A = S;  // taken by value: LAPACK overwrites it with the eigenvectors
   values->resize(n);
   const char jobz = vectors ? 'V' : 'N', uplo = 'L';
   const int m = static_cast<int>(n), lda = m;
