@@ -101,13 +101,13 @@ nlohmann::json reference_json(const std::string& which, const DeformableMesh& mo
 
 // The comparison table (stdout).
 void print_comparison(const CompareArgs& a, const std::string& primary, const nlohmann::json& report,
-                      const nlohmann::json& refs, int reduced_iterations) {
+                      const nlohmann::json& refs, int reduced_rounds) {
   const nlohmann::json& red = report["reduced"];
   fmt::print("compare ({} energy), reference = {}:\n", a.energy, primary);
   fmt::print("  {:<14}{:>14}{:>14}{:>12}{:>12}{:>14}{:>12}\n", "", "ARAP energy", "handle res.", "RMS dev.", "max dev.",
              "time ms", "iterations");
   fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>12}{:>12}{:>14.3f}{:>12}\n", "reduced", red["arap_energy"].get<double>(),
-             red["handle_residual"].get<double>(), "", "", red["frame_ms"].get<double>(), reduced_iterations);
+             red["handle_residual"].get<double>(), "", "", red["frame_ms"].get<double>(), reduced_rounds);
   for (const auto& [which, r] : refs.items()) {
     if (!r.contains("rms_deviation")) continue;
     fmt::print("  {:<14}{:>14.6g}{:>14.2e}{:>11.2f}%{:>11.2f}%{:>14.1f}{:>12}{}\n", which, r["arap_energy"].get<double>(),
@@ -200,7 +200,7 @@ int run_compare(const CompareArgs& a) {
   report["max_deviation"] = ref["max_deviation"];
   report["speedup"] = ref["solve_ms"].get<double>() / report["reduced"]["frame_ms"].get<double>();
 
-  print_comparison(a, primary, report, refs, rep["iterations"].get<int>());
+  print_comparison(a, primary, report, refs, rep["rounds"].get<int>());
   if (!a.report.empty()) write_json(run_files().stage(a.report), report);
   return 0;
 }

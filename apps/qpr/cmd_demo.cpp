@@ -14,6 +14,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <optional>
 #include <filesystem>
 #include <memory>
 
@@ -25,7 +26,7 @@ struct DemoArgs {
   int frames = 12;
   std::string out_dir = "qpr-demo";
   std::string report;
-  int iterations = 8;
+  std::optional<int> iterations;  // unset: DeformerOptions' default
   long rotational = 27, linear = 33;
 };
 
@@ -65,7 +66,7 @@ int run_demo(const DemoArgs& a) {
   run_files().create_directories(a.out_dir);
   RunSettings settings;
   settings.name = "demo (built-in capped cylinder, bend 90° + twist 90°)";
-  settings.options.iterations = a.iterations;
+  if (a.iterations) settings.options.iterations = *a.iterations;
   settings.options.rotational_proxies = a.rotational;
   settings.options.linear_proxies = a.linear;
   settings.out_path = a.out_dir + "/cylinder_{frame}.off";
@@ -87,7 +88,12 @@ void register_demo(CLI::App& app) {
   cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(whole_number_between(1, 10000));
   add_path_option(cmd, PathRole::OutputDirectory, "--out", args->out_dir, "Output folder for the meshes and the report");
   add_path_option(cmd, PathRole::Output, "--report", args->report, "JSON report path (default OUT/report.json)");
-  cmd->add_option("--iterations", args->iterations, "Phase 1/Phase 2 rounds per frame")
+  cmd->add_option("--iterations", args->iterations,
+                  fmt::format("Phase 1/Phase 2 rounds per frame: the cap (default {}; the rounds stop at a "
+                              "fixed-point residual of {:g} or after {:g} ms)",
+                              qpreduce::deform::DeformerOptions{}.iterations,
+                              qpreduce::deform::DeformerOptions{}.tolerance,
+                              1e3 * qpreduce::deform::DeformerOptions{}.time_budget))
       ->check(whole_number_between(1, 1000));
   cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")
       ->check(whole_number_between(1, 100000));

@@ -91,12 +91,22 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
                  ->check(whole_number_between(1, 10000000));
   add_path_option(cmd, PathRole::Input, "--rotational-clusters", a->rotational_clusters, "Rotational clusters (.id)")->check(CLI::ExistingFile)->excludes(rp);
   add_path_option(cmd, PathRole::Input, "--affine-patches", a->affine_patches, "Affine patches (.id: 0 free, k > 0 patch k)")->check(CLI::ExistingFile);
-  cmd->add_option("--iterations", a->iterations, "Phase 1/Phase 2 rounds per frame (the cap with --tolerance)")
+  const DeformerOptions defaults;
+  cmd->add_option("--iterations", a->iterations,
+                  fmt::format("Phase 1/Phase 2 rounds per frame: the cap with --tolerance and --time-budget-ms "
+                              "(default {})",
+                              defaults.iterations))
       ->check(whole_number_between(1, 100000));
   cmd->add_option("--tolerance", a->tolerance,
-                  "Stop a frame's rounds once the relative fixed-point residual |ΔS|/|S| is at most this (0: always "
-                  "--iterations rounds)")
+                  fmt::format("Stop a frame's rounds once the relative fixed-point residual |ΔS|/|S| is at most this "
+                              "(default {:g}; 0: always --iterations rounds unless the budget ends them)",
+                              defaults.tolerance))
       ->check(number_between(0.0, 1.0));
+  cmd->add_option("--time-budget-ms", a->time_budget_ms,
+                  fmt::format("Stop a frame's rounds once they have run this many milliseconds (default {:g}; 0: "
+                              "no budget; the first frame's cold start has none)",
+                              1e3 * defaults.time_budget))
+      ->check(number_between(0.0, 1e6));
   cmd->add_option("--cold-start-rounds", a->cold_start_rounds,
                   "The first frame after the handles are set runs to a fixed-point residual of 1e-6 within this "
                   "many rounds (default 500; 0: like the other frames)")
@@ -184,8 +194,9 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   DeformerOptions options;
   if (a.linear_proxies > 0) options.linear_proxies = a.linear_proxies;
   if (a.rotational_proxies > 0) options.rotational_proxies = a.rotational_proxies;
-  options.iterations = a.iterations;
-  options.tolerance = a.tolerance;
+  if (a.iterations) options.iterations = *a.iterations;
+  if (a.tolerance) options.tolerance = *a.tolerance;
+  if (a.time_budget_ms) options.time_budget = 1e-3 * *a.time_budget_ms;
   if (a.cold_start_rounds) options.cold_start_rounds = *a.cold_start_rounds;
   options.rotation_fit = a.rotation_step == "paper" ? ClusterRotationFit::PaperPhase2 : ClusterRotationFit::Exact;
   if (a.anderson_window) {
@@ -275,6 +286,8 @@ void progress_bar(const std::string& stage, double fraction) {
 struct FrameSeries {
   std::vector<double> iter_us, recon_ms, frame_ms, residual;  // one per frame; residual / bbox diagonal
   std::vector<int> rounds;                                     // rounds run, one per frame
+  std::vector<std::string> stops;                              // what ended them, one per frame
+  std::vector<double> fixed_point_residual;                    // ‖ΔS‖/‖S‖ after them, one per frame
   FrameSummary last;                                           // the last frame's summary
   Vertices out;                                                // the last frame's pose
 };
@@ -318,6 +331,8 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
     s.recon_ms.push_back(1e3 * fs.reconstruct_seconds);
     s.frame_ms.push_back(1e3 * fs.total_seconds);
     s.rounds.push_back(fs.iterations);
+    s.stops.emplace_back(to_string(fs.stop));
+    s.fixed_point_residual.push_back(fs.fixed_point_residual);
     s.last = fs;
     s.residual.push_back(handle_residual(scenario, scenario.frames[f], out) / diag);
     const bool write = std::find(settings.write_frames.begin(), settings.write_frames.end(), f) !=
@@ -336,15 +351,28 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
 // kSettleRounds rounds, a few ms even at 100k vertices: one reconstruction).
 // From the fixed point the refine has less to do than from the frame's
 // pose (docs/quality.md, "Refine": the bar 168 rounds to the 1e-4 gap
-// instead of 626). *out: that pose, or the frame's when the rounds fail.
+// instead of 626). A last frame already at kSettleTolerance (the default
+// rounds end there unless the time budget ends them first) is its own
+// settled pose: no rounds. *out: that pose, or the frame's when the rounds
+// fail. The deformer's round settings are `options`' again afterwards.
 constexpr int kSettleRounds = 500;
 constexpr double kSettleTolerance = 1e-6;
 
-nlohmann::json settle_last_frame(Deformer& deformer, const Scenario& scenario, const Vertices& last, Vertices* out) {
+nlohmann::json settle_last_frame(Deformer& deformer, const Scenario& scenario, const FrameSeries& s,
+                                 const DeformerOptions& options, Vertices* out) {
+  if (s.last.fixed_point_residual <= kSettleTolerance) {
+    *out = s.out;
+    return {{"rounds", 0},
+            {"fixed_point_residual", s.last.fixed_point_residual},
+            {"seconds", 0.0},
+            {"status", to_string(Status::Success)},
+            {"tolerance", kSettleTolerance}};
+  }
   deformer.set_rounds(kSettleRounds, kSettleTolerance);
   const FrameSummary fs = deformer.frame(scenario.frames.back(), out);
-  const bool ok = usable(fs.status) && out->rows() == last.rows();
-  if (!ok) *out = last;
+  deformer.set_rounds(options.iterations, options.tolerance, options.time_budget);
+  const bool ok = usable(fs.status) && out->rows() == s.out.rows();
+  if (!ok) *out = s.out;
   return {{"rounds", fs.iterations},
           {"fixed_point_residual", fs.fixed_point_residual},
           {"seconds", fs.total_seconds},
@@ -365,6 +393,7 @@ void report_model(const Deformer& deformer, const Scenario& scenario, const Defo
   report["frames"] = static_cast<int>(scenario.frames.size());
   report["iterations"] = options.iterations;
   report["tolerance"] = options.tolerance;
+  report["time_budget_ms"] = 1e3 * options.time_budget;
   report["rotation_step"] = to_string(options.rotation_fit);
   report["anderson_window"] = options.anderson_window;
   report["second_order"] = options.second_order;
@@ -401,14 +430,19 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
                to_string(pre.subspace.backend_used));
   }
   fmt::print("  {:<28}{:>12.3f} ms\n", "OP (set handles)", op_ms);
-  fmt::print("  {:<28}{:>12.2f} µs   (median over {} frames, {} iterations each)\n", "one iteration", median(s.iter_us),
-             s.frame_ms.size(), iterations);
+  const auto [fewest, most] = std::minmax_element(s.rounds.begin(), s.rounds.end());
+  fmt::print("  {:<28}{:>12.2f} µs   (median over {} frames, {} rounds each{})\n", "one iteration", median(s.iter_us),
+             s.frame_ms.size(), *fewest == *most ? std::to_string(*fewest) : fmt::format("{}-{}", *fewest, *most),
+             *fewest == *most && *most == iterations ? "" : fmt::format(", cap {}", iterations));
   fmt::print("  {:<28}{:>12.3f} ms\n", "reconstruction", median(s.recon_ms));
   fmt::print("  {:<28}{:>12.3f} ms\n", "frame total", median(s.frame_ms));
   fmt::print("  {:<28}{:>12.2e}      (max over frames, / bbox diagonal)\n", "handle residual", report["handle_residual_max"].get<double>());
   fmt::print("  {:<28}{:>12.5g}      (last frame)\n", "ARAP energy", report["arap_energy"].get<double>());
-  fmt::print("  {:<28}{:>12.2e}      (last frame, {} rounds; |ΔS|/|S|)\n", "fixed-point residual",
-             s.last.fixed_point_residual, s.last.iterations);
+  const auto budget_stops = std::count(s.stops.begin(), s.stops.end(), to_string(RoundStop::TimeBudget));
+  fmt::print("  {:<28}{:>12.2e}      (last frame, {} rounds, ended by the {}; |ΔS|/|S|){}\n", "fixed-point residual",
+             s.last.fixed_point_residual, s.last.iterations, to_string(s.last.stop),
+             budget_stops > 0 ? fmt::format("; {} of {} frames ended by the time budget", budget_stops, s.stops.size())
+                              : std::string());
 }
 
 }  // namespace
@@ -453,7 +487,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   Vertices shown;  // the refined pose, with --refine
   Vertices settled;  // the last frame's fixed point, with --refine or settle
   nlohmann::json refined, settle;
-  if (settings.refine || settings.settle) settle = settle_last_frame(deformer, scenario, s.out, &settled);
+  if (settings.refine || settings.settle) settle = settle_last_frame(deformer, scenario, s, options, &settled);
   if (settings.refine) {
     refined = refine_last_frame(scenario, settled, *settings.refine, &shown);
     const int last = static_cast<int>(scenario.frames.size()) - 1;
@@ -492,6 +526,10 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["fixed_point_residual"] = s.last.fixed_point_residual;
   report["rounds"] = s.last.iterations;
   report["rounds_total"] = std::accumulate(s.rounds.begin(), s.rounds.end(), 0);
+  report["rounds_per_frame"] = s.rounds;
+  report["stop"] = to_string(s.last.stop);  // what ended the last frame's rounds
+  report["stop_per_frame"] = s.stops;
+  report["fixed_point_residual_per_frame"] = s.fixed_point_residual;
   report["second_order_steps"] = s.last.second_order;  // the last frame took Newton steps, not rounds
   if (std::isfinite(s.last.model_energy)) {
     report["model_energy"] = s.last.model_energy;

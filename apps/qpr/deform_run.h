@@ -27,11 +27,12 @@ struct ScenarioArgs {
   std::string mesh, sel, def, anim, scene;
   long linear_proxies = 0, rotational_proxies = 0;
   std::string linear_groups, rotational_clusters, affine_patches;
-  int iterations = 8, frames = 1;
+  std::optional<int> iterations;  // unset: DeformerOptions' default
+  int frames = 1;
   std::optional<double> alpha, beta, gamma, psi, soft;
   std::string model;  // "", "arap" or "conformal"
   std::string rotation_step = "exact";  // "exact" or "paper"
-  double tolerance = 0.0;
+  std::optional<double> tolerance, time_budget_ms;  // unset: DeformerOptions' defaults
   std::optional<int> cold_start_rounds;  // unset: DeformerOptions' default
   std::optional<int> anderson_window;  // unset: DeformerOptions' default with exact, 0 with paper
   bool no_second_order = false;        // DeformerOptions::second_order = false

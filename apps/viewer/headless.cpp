@@ -37,6 +37,7 @@ struct HeadlessRun {
   double residual = 0.0;  // max handle residual / bbox diagonal
   double fixed_point_residual = 0.0;  // of the last frame (FrameSummary), after its `iterations` rounds
   int iterations = 0;
+  qpreduce::RoundStop stop = qpreduce::RoundStop::RoundLimit;  // what ended the last frame's rounds
   double gpu_cpu = -1.0;  // GPU path: max |GPU read-back − CPU r₀·B·w| / bbox diagonal; −1 on the CPU path
 };
 
@@ -66,6 +67,7 @@ HeadlessRun run_frames(Session& session, MeshRenderer& renderer, const ViewerOpt
     run.residual = std::max(run.residual, s.handle_residual);
     run.fixed_point_residual = s.fixed_point_residual;
     run.iterations = s.iterations;
+    run.stop = s.stop;
   }
   // GPU path: compare the read-back positions with a CPU reconstruction of the same w.
   if (session.reconstruction() == Reconstruction::Gpu) {
@@ -142,8 +144,8 @@ void print_summary(const Session& session, const GlContext& context, const Headl
              upper_median(run.frame_ms));
   fmt::print("  handle residual {:.2e} (max, / bbox diagonal)", run.residual);
   if (run.gpu_cpu >= 0) fmt::print(", GPU vs CPU max |Δ| {:.2e} (/ bbox diagonal)", run.gpu_cpu);
-  fmt::print("\n  fixed-point residual {:.2e} after {} rounds (last frame)\n", run.fixed_point_residual,
-             run.iterations);
+  fmt::print("\n  fixed-point residual {:.2e} after {} rounds, ended by the {} (last frame)\n",
+             run.fixed_point_residual, run.iterations, to_string(run.stop));
   if (!refine.is_null())
     fmt::print(
         "  refine {} rounds, {:.3f} s: ARAP energy {:.6g} -> {:.6g}, from the reduced pose RMS {:.2e}, max {:.2e} "
@@ -173,6 +175,7 @@ nlohmann::json stats_json(const Session& session, const GlContext& context, cons
                       {"gpu_cpu_max_deviation", run.gpu_cpu},
                       {"fixed_point_residual", run.fixed_point_residual},
                       {"iterations", run.iterations},
+                      {"stop", to_string(run.stop)},
                       {"arap_energy", arap_energy},
                       {"screenshot", o.screenshot}};
   if (!refine.is_null()) j["refine"] = refine;

@@ -98,7 +98,11 @@ int Interactive::run() {
       if (ready_ && !showing_refined_) {
         try {
           stats_ = session_.step(&renderer_);
-          if (frame_log_ != nullptr) frame_log_->stepped = true;
+          if (frame_log_ != nullptr) {
+            frame_log_->stepped = true;
+            frame_log_->rounds = stats_.iterations;
+            frame_log_->stop = to_string(stats_.stop);
+          }
           smooth();
         } catch (const std::exception& e) {
           message_ = e.what();
@@ -149,6 +153,10 @@ void Interactive::write_window_log() const {
     nlohmann::json j = {{"start_s", f.start_s},   {"frame_ms", f.frame_ms}, {"moved", f.moved},
                         {"stepped", f.stepped}, {"refined_shown", f.refined_shown}};
     if (!f.event.empty()) j["event"] = f.event;
+    if (f.stepped) {
+      j["rounds"] = f.rounds;
+      j["stop"] = f.stop;
+    }
     if (f.cancel_ms >= 0) {
       j["cancel_ms"] = f.cancel_ms;
       j["worker_state"] = f.worker_state;

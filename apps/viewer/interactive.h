@@ -77,6 +77,8 @@ class Interactive {
     double cancel_ms = -1.0;  // refine-cancel: time inside cancel_refine()
     std::string worker_state;  // refine-cancel: the worker's state just before
     int worker_rounds = -1;    // refine-cancel: its rounds so far (Running)
+    int rounds = 0;            // stepped: the reduced rounds, and what ended them
+    std::string stop;
   };
   std::vector<FrameLog> log_;
   FrameLog* frame_log_ = nullptr;  // this frame's entry (null when not logging)

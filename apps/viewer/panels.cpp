@@ -92,6 +92,7 @@ void Interactive::frame_panel() {
   ImGui::Text("frame          %8.3f ms", shown_.frame_ms);
   ImGui::Text("handle residual %.2e (/ bbox diag.)", shown_.handle_residual);
   ImGui::Text("fixed-point residual %.2e after %d rounds", stats_.fixed_point_residual, stats_.iterations);
+  ImGui::Text("rounds ended by the %s", to_string(stats_.stop));
   ImGui::Text("display %.1f fps", ImGui::GetIO().Framerate);
   if (!op_note_.empty()) ImGui::TextWrapped("%s", op_note_.c_str());
   ImGui::End();

@@ -268,23 +268,23 @@ FrameStats Session::step(MeshRenderer* renderer) {
   if (!constraints_ready_) update_constraints(nullptr);
   fill_targets();
   FrameStats stats;
-  const Timer total;
-  if (path_ == Reconstruction::Gpu) {
-    const FrameSummary fs = deformer_->frame(targets_, nullptr);
+  const auto rounds = [&stats](const FrameSummary& fs) {
     stats.fixed_point_residual = fs.fixed_point_residual;
     stats.iterations = fs.iterations;
+    stats.stop = fs.stop;
     stats.solve_ms = 1e3 * fs.solve_seconds;
     stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
+  };
+  const Timer total;
+  if (path_ == Reconstruction::Gpu) {
+    rounds(deformer_->frame(targets_, nullptr));
     const Timer t;
     renderer->reconstruct_gpu(deformer_->reduced_coordinates(), deformer_->global_rotation().cast<float>());
     glFinish();  // honest timing: wait for the GPU
     stats.reconstruction_ms = 1e3 * t.seconds();
   } else {
     const FrameSummary fs = deformer_->frame(targets_, &cpu_out_);
-    stats.fixed_point_residual = fs.fixed_point_residual;
-    stats.iterations = fs.iterations;
-    stats.solve_ms = 1e3 * fs.solve_seconds;
-    stats.iteration_us = 1e6 * fs.solve_seconds / std::max(1, fs.iterations);
+    rounds(fs);
     const Timer t;
     renderer->upload_positions(cpu_out_);
     glFinish();

@@ -68,6 +68,7 @@ struct FrameStats {
   // rounds (FrameSummary::fixed_point_residual, ‖ΔS‖/‖S‖), and those rounds.
   double fixed_point_residual = 0.0;
   int iterations = 0;
+  qpreduce::RoundStop stop = qpreduce::RoundStop::RoundLimit;  // what ended the rounds (FrameSummary::stop)
 };
 
 class Session {

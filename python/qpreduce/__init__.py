@@ -27,6 +27,7 @@ from ._qpreduce import (
     Outcome,
     PsdFactor,
     QuotientOptions,
+    RoundStop,
     Status,
     SubspaceOptions,
     SubspaceSolver,

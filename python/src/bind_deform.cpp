@@ -169,8 +169,10 @@ void bind_deformer_options(py::module_& m) {
       .rw("rotational_proxies", &DeformerOptions::rotational_proxies, "Clusters d when not given. Default 27.")
       .rw("linear_proxies", &DeformerOptions::linear_proxies, "Linear proxies when not given. Default 33.")
       .rw("rotation_fit", &DeformerOptions::rotation_fit, "ClusterRotationFit.Exact (default) or PaperPhase2.")
-      .rw("iterations", &DeformerOptions::iterations, "Phase 1/Phase 2 rounds per frame (the cap). Default 8.")
-      .rw("tolerance", &DeformerOptions::tolerance, "Stop once fixed_point_residual ≤ this; 0 (default): never.")
+      .rw("iterations", &DeformerOptions::iterations, "Phase 1/Phase 2 rounds per frame (the cap).")
+      .rw("tolerance", &DeformerOptions::tolerance, "Stop once fixed_point_residual ≤ this; 0: never.")
+      .rw("time_budget", &DeformerOptions::time_budget,
+          "Stop a frame's rounds after this many seconds (not the cold start); 0: no budget.")
       .rw("anderson_window", &DeformerOptions::anderson_window, "Anderson acceleration window (0 off, 1–16).")
       .rw("second_order", &DeformerOptions::second_order,
           "Newton steps on stiff point-handle sets instead of rounds (default True).")
@@ -213,6 +215,7 @@ void bind_deformer_options(py::module_& m) {
       .listed("status")
       .listed("message")
       .ro("iterations", &FrameSummary::iterations, "Rounds run (the alternation's rounds).")
+      .ro("stop", &FrameSummary::stop, "RoundStop: the cap, the tolerance or the time budget ended them.")
       .ro("last_change", &FrameSummary::last_change, "‖ΔS‖ of the last Phase 2.")
       .ro("fixed_point_residual", &FrameSummary::fixed_point_residual, "‖ΔS‖/‖S‖ of the last round.")
       .ro("model_energy", &FrameSummary::model_energy, "E′ of the reduced model (accelerated rounds), else NaN.")
@@ -522,12 +525,13 @@ void bind_deformer_class(py::module_& m) {
           "Back to the rest rotations.")
       .def(
           "set_rounds",
-          [](PyDeformer& self, int iterations, double tolerance) {
+          [](PyDeformer& self, int iterations, double tolerance, double time_budget) {
             const auto lock = self.lock();
-            self.deformer.set_rounds(iterations, tolerance);
+            self.deformer.set_rounds(iterations, tolerance, time_budget);
           },
-          py::arg("iterations"), py::arg("tolerance") = 0.0,
-          "set_rounds(iterations, tolerance=0.0)\n\nThe cap on rounds per frame (≥ 1) and the early stop.")
+          py::arg("iterations"), py::arg("tolerance") = 0.0, py::arg("time_budget") = 0.0,
+          "set_rounds(iterations, tolerance=0.0, time_budget=0.0)\n\nReplaces the cap on rounds per frame (≥ 1), "
+          "the early stop and the time budget in seconds (set_rounds(8): the paper's fixed 8 rounds).")
       .def(
           "set_round_threads",
           [](PyDeformer& self, int threads) { return self.lock(), self.deformer.set_round_threads(threads); },

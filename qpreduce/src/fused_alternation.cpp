@@ -5,6 +5,7 @@
 #include "blas.h"
 #include "fused_rounds.h"
 #include "phase_one.h"
+#include "round_stop.h"
 #include "simd_kernels.h"
 
 #include "qpreduce/support.h"
@@ -33,6 +34,10 @@ bool AlternatingOptions::is_valid(std::string* why) const {
     if (why) *why = "tolerance must be non-negative";
     return false;
   }
+  if (!(time_budget >= 0.0) || !std::isfinite(time_budget)) {
+    if (why) *why = fmt::format("time_budget must be finite and ≥ 0 seconds (0: none), got {}", time_budget);
+    return false;
+  }
   if (threads < 0) {
     if (why) *why = fmt::format("threads must be ≥ 0 (0: all), got {}", threads);
     return false;
@@ -49,6 +54,15 @@ bool AlternatingOptions::is_valid(std::string* why) const {
     return false;
   }
   return true;
+}
+
+const char* to_string(RoundStop stop) {
+  switch (stop) {
+    case RoundStop::RoundLimit: return "round limit";
+    case RoundStop::Tolerance: return "tolerance";
+    case RoundStop::TimeBudget: return "time budget";
+  }
+  return "unknown";
 }
 
 namespace {
@@ -446,8 +460,8 @@ void round_product(const FusedModel& M, FusedWorkspace& W, const double* y, cons
 // The rounds on `threads` threads over block ranges (AlternatingOptions::
 // threads); y is updated in place, z is left to the caller.
 AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                                const AlternatingOptions& options, Index threads, Index block,
-                                Eigen::Ref<Vector<double>> y) {
+                                const AlternatingOptions& options, const detail::StopTest& stop, Index threads,
+                                Index block, Eigen::Ref<Vector<double>> y) {
   const Index q = M.q(), blocks = q / block, mu = M.rounds().scratch_size();
   const bool use_float = options.float_products;
   W.y2.resize(q, 2);
@@ -461,10 +475,12 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
   constexpr int kMaxThreads = 64;
   threads = std::min<Index>(threads, kMaxThreads);
   double change2[2][kMaxThreads] = {}, norm2[2][kMaxThreads] = {};
+  // Thread 0's reading of the budget, by round parity like the sums, so that
+  // every thread takes the same decision.
+  bool spent[2] = {false, false};
   W.scratch_threads.resize(mu, threads);  // these allocate on the first call only
   W.scratch_f_threads.resize(mu, threads);
-  int rounds = 0;
-  double last = 0.0;
+  AlternatingSummary summary;
 #pragma omp parallel num_threads(static_cast<int>(threads))
   {
     const Index t = omp_get_thread_num(), nt = omp_get_num_threads();
@@ -479,6 +495,7 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
       norm2[cur][t] = static_cast<double>(y.segment(r0, rows).squaredNorm());
       W.y2.col(next).segment(r0, rows) = y.segment(r0, rows);
       if (use_float) W.yf2.col(next).segment(r0, rows) = y.segment(r0, rows).cast<float>();
+      if (t == 0) spent[cur] = stop.over_budget();
 #pragma omp barrier
       // Only this round's sums are read here: y itself may already be
       // changing in another thread's next round.
@@ -489,16 +506,20 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
       }
       const double change = std::sqrt(total);
       if (t == 0) {
-        rounds = it + 1;
-        last = change;
+        summary.iterations = it + 1;
+        summary.last_change = change;
       }
       // Every thread takes the same decision from the same sums.
-      if (options.tolerance > 0 && change <= options.tolerance * std::max(1.0, std::sqrt(ynorm2))) break;
+      if (stop.converged(change, std::sqrt(ynorm2))) {
+        if (t == 0) summary.stop = RoundStop::Tolerance;
+        break;
+      }
+      if (spent[cur]) {
+        if (t == 0) summary.stop = RoundStop::TimeBudget;
+        break;
+      }
     }
   }
-  AlternatingSummary summary;
-  summary.iterations = rounds;
-  summary.last_change = last;
   return summary;
 }
 
@@ -553,7 +574,8 @@ void constraint_term(const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vec
 // y ends as the plain step from the last accepted iterate.
 AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                    const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                   const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+                                   const AlternatingOptions& options, const detail::StopTest& stop,
+                                   Eigen::Ref<Vector<double>> y) {
   AlternatingSummary summary;
   const bool use_float = options.float_products;
   const bool corrected = M.energy != nullptr;
@@ -582,7 +604,7 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
     W.y_plain = W.y_try;
     summary.last_change = projection.project(W.g, W.y_plain);
     summary.iterations = it + 1;
-    if (options.tolerance > 0 && summary.last_change <= options.tolerance * std::max(1.0, W.y_try.norm())) break;
+    if (stop.done(summary.last_change, W.y_try.norm(), &summary)) break;
     W.anderson.step(W.y_try, W.y_plain, W.y_next);
     extrapolated = W.anderson.history() > 0;
     if (extrapolated) projection.retract(W.y_next);
@@ -607,7 +629,8 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
 // reaches in a few steps what damped rounds need thousands of rounds for.
 AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                     const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                    const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+                                    const AlternatingOptions& options, const detail::StopTest& stop,
+                                    Eigen::Ref<Vector<double>> y) {
   const Index k = M.k(), d = k / 9;
   const MatD& F = M.explicit_rounds.F;  // F_y − A_yᵀΛ_y + D
   const Vector<double>& D = M.proximal_entries;
@@ -655,7 +678,10 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       if (mu < 0.0) mu = 1e-6 * std::max(W.H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
     }
     const double gnorm = W.grad.norm();
-    if (!(gnorm > 0.0)) break;
+    if (!(gnorm > 0.0)) {  // stationary to the last bit
+      summary.stop = RoundStop::Tolerance;
+      break;
+    }
     // (H + μI)ω = −grad, with μ raised until the system is positive definite.
     for (int tries = 0;; ++tries) {
       W.Hmu = W.H;
@@ -682,12 +708,13 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       energy = next;
       mu = std::max(mu / 3.0, 1e-15 * std::abs(W.H(0, 0)));
       hessian_current = false;
-      if (options.tolerance > 0 && summary.last_change <= options.tolerance * std::max(1.0, W.y_try.norm())) break;
+      if (stop.done(summary.last_change, W.y_try.norm(), &summary)) break;
     } else {
       summary.last_change = (W.y_next - W.y_try).norm();  // the step tried: a stalled run does not claim 0
       W.g.swap(W.g_keep);  // g′ of the kept y
       mu *= 4.0;
       ++summary.rejected;
+      if (stop.spent(&summary)) break;
     }
   }
   y = W.y_try;
@@ -697,7 +724,8 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
 
 // The serial rounds.
 AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                              const AlternatingOptions& options, Eigen::Ref<Vector<double>> y) {
+                              const AlternatingOptions& options, const detail::StopTest& stop,
+                              Eigen::Ref<Vector<double>> y) {
   AlternatingSummary summary;
   for (int it = 0; it < options.iterations; ++it) {
     if (options.float_products) W.yf = y.cast<float>();
@@ -705,9 +733,7 @@ AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProje
                   W.scratch_f.data());
     summary.last_change = projection.project(W.g, y);
     summary.iterations = it + 1;
-    if (options.tolerance > 0 &&
-        summary.last_change <= options.tolerance * std::max(1.0, static_cast<double>(y.norm())))
-      break;
+    if (stop.done(summary.last_change, static_cast<double>(y.norm()), &summary)) break;
   }
   return summary;
 }
@@ -947,6 +973,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
         projection.proximal_block_size(), M.block));
   }
   projection.set_proximal_weights(M.proximal);
+  const detail::StopTest stop(options);  // the budget counts from here
   // The products go through the run-time dispatched AVX2/FMA kernels
   // (simd_kernels.h) when the CPU has them.
   detail::gemv(M.Fb, b.data(), W.gb.data(), false);
@@ -957,13 +984,13 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   AlternatingSummary summary;
   if (second_order(projection, options)) {
     prepare_second_order(phase1, k, W);
-    summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, y);
+    summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
   } else if (options.anderson_window > 0) {
     prepare_acceleration(phase1, projection, options, y, W);
-    summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, y);
+    summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
   } else {
-    summary = parallel ? run_parallel(M, W, projection, options, std::min<Index>(threads, q / block), block, y)
-                       : run_serial(M, W, projection, options, y);
+    summary = parallel ? run_parallel(M, W, projection, options, stop, std::min<Index>(threads, q / block), block, y)
+                       : run_serial(M, W, projection, options, stop, y);
   }
   phase1.solve(b, y, z);
   summary.status = Status::Success;

@@ -3,7 +3,8 @@
 # refine converged, lowered the energy, and arap_energy is the refined pose's;
 # with SETTLE (`qpr deform --refine`), the reduced rounds settled first
 # (settle.*) and came closer to their fixed point than the last frame's
-# rounds had.
+# rounds had, or the last frame was at the settle's tolerance already and
+# the settle ran no rounds.
 if(NOT EXISTS "${JSON}")
   message(FATAL_ERROR "no report at ${JSON}")
 endif()
@@ -42,10 +43,16 @@ if(SETTLE)
     endif()
   endforeach()
   string(JSON frame_residual GET "${doc}" fixed_point_residual)
-  if(NOT settle_status STREQUAL "success" OR NOT settle_rounds GREATER 0)
+  string(JSON settle_tolerance GET "${doc}" settle tolerance)
+  if(NOT settle_status STREQUAL "success" OR settle_rounds LESS 0)
     message(FATAL_ERROR "settle: status ${settle_status}, ${settle_rounds} rounds")
   endif()
-  if(NOT settle_fixed_point_residual LESS frame_residual)
+  if(settle_rounds EQUAL 0)
+    if(frame_residual GREATER settle_tolerance OR NOT settle_fixed_point_residual EQUAL frame_residual)
+      message(FATAL_ERROR "settle ran no rounds, but the last frame's residual ${frame_residual} is above its "
+                          "tolerance ${settle_tolerance} (or the settle reports ${settle_fixed_point_residual})")
+    endif()
+  elseif(NOT settle_fixed_point_residual LESS frame_residual)
     message(FATAL_ERROR "settle left the residual at ${settle_fixed_point_residual}, the last frame's was ${frame_residual}")
   endif()
 endif()

@@ -53,7 +53,8 @@ def deform(qpr, scenario, cache, out):
     # A fixed count of rounds (8, no cold start to a tolerance): the poses of
     # two caches then differ by what their subspaces differ by, not by where a
     # tolerance test happened to stop the rounds.
-    p = run([qpr, "deform", *scenario, "--cache", cache, "--out", out, "--cold-start-rounds", "0"])
+    p = run([qpr, "deform", *scenario, "--cache", cache, "--out", out, "--cold-start-rounds", "0", "--iterations", "8",
+             "--tolerance", "0", "--time-budget-ms", "0"])
     if "loaded from" not in p.stdout + p.stderr:
         sys.exit(f"FAILED: qpr deform did not load {cache}:\n{p.stdout}\n{p.stderr}")
     return out

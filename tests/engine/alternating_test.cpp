@@ -850,3 +850,85 @@ TEST_CASE("constraints on y: misuse is refused with the words", "[alternating][c
   CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternatingOptions{}, z, y), Catch::Contains("proximal blocks"));
   CHECK_THROWS_WITH(fused.set_proximal_block_size(-1), Catch::Contains("block size"));
 }
+
+namespace {
+// A clock that advances one second at each reading (AlternatingOptions::clock).
+double fake_seconds = 0.0;
+double fake_clock() { return fake_seconds += 1.0; }
+}  // namespace
+
+TEST_CASE("the time budget ends the rounds of every loop after the round that spends it", "[alternating][budget]") {
+  // The budget's clock is read once at the start and once after each round:
+  // with one second a reading and a budget of 3.5 s the rounds stop after
+  // the fourth, at the iterates of four rounds without a budget.
+  const Index n = 14 * 11, d = 9, k = 12, m = 5;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(14, 11);
+  SubspaceSolver<double> solver;
+  REQUIRE(solver.precompute(H, gen::selection(n, gen::random_subset(n, d, 5)), gen::gaussian_sparse(n, k, 6)).ok());
+  FixedCoordinateSolver<double> phase1;
+  REQUIRE(phase1.set_constraints(solver, gen::selection(n, gen::random_subset(n, m, 71))).ok());
+  const Matrix<double> Gz = 0.3 * gen::gaussian_matrix(k, d, 72), Gy = gen::gaussian_matrix(k, k, 73);
+  const Vector<double> b = gen::gaussian_vector(m, 74), y0 = gen::gaussian_vector(k, 75);
+  FusedAlternation<double> fused;
+  fused.set(phase1, Gz, Gy);
+  BallBlocks proj;
+  for (int threads : {1, 2}) {
+    INFO("threads " << threads);
+    AlternatingOptions o;
+    o.threads = threads;
+    o.parallel_min_entries = 0;
+    o.iterations = 4;
+    Vector<double> z(d), y4 = y0, y = y0;
+    const AlternatingSummary four = fused.run(phase1, proj, b, o, z, y4);
+    CHECK(four.stop == RoundStop::RoundLimit);
+    o.iterations = 1000;
+    o.time_budget = 3.5;
+    o.clock = fake_clock;
+    const AlternatingSummary s = fused.run(phase1, proj, b, o, z, y);
+    CHECK(s.iterations == 4);
+    CHECK(s.stop == RoundStop::TimeBudget);
+    CHECK(std::string(to_string(s.stop)) == "time budget");
+    CHECK((y - y4).norm() <= 1e-12 * (1 + y4.norm()));
+    // The tolerance, when met first, ends them: the same rounds as without
+    // a budget (scaled so that the rounds contract).
+    FusedAlternation<double> contracting;
+    contracting.set(phase1, 0.05 * Gz, 0.05 * Gy);
+    o.time_budget = 1e9;
+    o.tolerance = 1e-9;
+    Vector<double> yt = y0, yn = y0;
+    const AlternatingSummary t = contracting.run(phase1, proj, b, o, z, yt);
+    o.time_budget = 0.0;
+    const AlternatingSummary u = contracting.run(phase1, proj, b, o, z, yn);
+    CHECK(t.iterations < 1000);
+    CHECK(t.stop == RoundStop::Tolerance);
+    CHECK(t.iterations == u.iterations);
+    CHECK(yt == yn);
+  }
+
+  // Accelerated rounds (Anderson with the energy safeguard) on the spheres.
+  SphereModel s;
+  FixedCoordinateSolver<double> p1;
+  FusedAlternation<double> rounds;
+  set_up_rounds(s, &p1, &rounds);
+  UnitBlocks unit;
+  AlternatingOptions aa;
+  aa.anderson_window = 5;
+  aa.iterations = 4;
+  Vector<double> z(s.d), y4 = s.start(), y = s.start();
+  rounds.run(p1, unit, s.b, aa, z, y4);
+  aa.iterations = 1000;
+  aa.time_budget = 3.5;
+  aa.clock = fake_clock;
+  const AlternatingSummary a = rounds.run(p1, unit, s.b, aa, z, y);
+  CHECK(a.iterations == 4);
+  CHECK(a.stop == RoundStop::TimeBudget);
+  CHECK((y - y4).norm() <= 1e-12);
+
+  // Options: a budget must be finite and ≥ 0.
+  std::string why;
+  aa.time_budget = -1.0;
+  CHECK_FALSE(aa.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("time_budget"));
+  aa.time_budget = std::numeric_limits<double>::infinity();
+  CHECK_FALSE(aa.is_valid(&why));
+}

@@ -202,7 +202,7 @@ def test_newton_options_are_exposed_and_checked():
 
 
 def test_the_first_frame_after_set_handles_runs_to_the_cold_start_tolerance():
-    deformer, scenario = make_deformer(cold_start_tolerance=1e-8, cold_start_rounds=2000)
+    deformer, scenario = make_deformer(cold_start_tolerance=1e-8, cold_start_rounds=2000, iterations=8, tolerance=0.0)
     deformer.frame(scenario.frames[-1])
     first = deformer.last_frame
     deformer.frame(scenario.frames[-1])
@@ -210,6 +210,28 @@ def test_the_first_frame_after_set_handles_runs_to_the_cold_start_tolerance():
     assert first.cold_start and not second.cold_start
     assert first.fixed_point_residual <= 1e-8 and first.iterations > deformer.options.iterations
     assert second.iterations <= deformer.options.iterations
+
+
+def test_frames_run_to_the_tolerance_within_the_time_budget():
+    opts = deform.DeformerOptions(**OPTIONS)
+    assert (opts.iterations, opts.tolerance, opts.time_budget) == (1000, 1e-6, 0.004)
+    deformer, scenario = make_deformer(time_budget=1.0)  # a loaded machine can spend 4 ms on these frames
+    for targets in scenario.frames:
+        deformer.frame(targets)
+        summary = deformer.last_frame
+        assert summary.stop == qpreduce.RoundStop.Tolerance and summary.fixed_point_residual <= 1e-6
+    # A budget the first round spends ends every frame after the cold start there.
+    deformer.set_rounds(100000, 1e-14, time_budget=1e-9)
+    deformer.frame(scenario.frames[-1])
+    assert deformer.last_frame.stop == qpreduce.RoundStop.TimeBudget and deformer.last_frame.rounds == 1
+    deformer.set_rounds(8)  # the paper's fixed 8
+    deformer.frame(scenario.frames[0])
+    assert deformer.last_frame.stop == qpreduce.RoundStop.RoundLimit and deformer.last_frame.rounds == 8
+    with pytest.raises(ValueError, match="time_budget"):
+        deformer.set_rounds(8, 0.0, -1.0)
+    V, F, _ = small_cylinder()
+    with pytest.raises(ValueError, match="time_budget must be finite"):
+        deform.Deformer(V, F, deform.DeformerOptions(**{**OPTIONS, "time_budget": float("nan")})).precompute()
 
 
 def test_point_handles_from_vertex_indices_and_weighted_groups():

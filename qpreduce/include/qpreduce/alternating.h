@@ -118,12 +118,28 @@ class FixedCoordinateSolver {
   mutable Vector<double> scratch_;  // μ: R·y in the factored solve
 };
 
+// Why a run's rounds ended (AlternatingSummary::stop).
+enum class RoundStop {
+  RoundLimit,  // AlternatingOptions::iterations rounds ran
+  Tolerance,   // the last round's ‖Δy‖ met AlternatingOptions::tolerance
+  TimeBudget,  // AlternatingOptions::time_budget was spent first
+};
+const char* to_string(RoundStop stop);  // "round limit", "tolerance", "time budget"
+
 struct AlternatingOptions {
   // Phase 1/Phase 2 rounds per call (the paper uses a fixed 8 per frame, so a
-  // frame's cost does not depend on the pose).
+  // frame's cost does not depend on the pose); the cap with `tolerance` or
+  // `time_budget`. ≥ 1.
   int iterations = 8;
   // Stop early when ‖Δy‖ ≤ tolerance·max(1, ‖y‖). 0: always run `iterations`.
   double tolerance = 0.0;
+  // Stop once the rounds have run this many seconds (checked after each
+  // round, or second-order step, so the first always runs and the last may
+  // end past the budget by one round); 0: no budget. Finite and ≥ 0.
+  double time_budget = 0.0;
+  // The clock the budget reads, in seconds from any origin; nullptr:
+  // std::chrono::steady_clock. For tests and simulations.
+  double (*clock)() = nullptr;
   // Form the round's product F_y·y in float (g = F_b·b + F_y·y keeps F_b·b
   // and the sum in double): about twice the SIMD width. Phase 2's input then
   // carries a relative error of ~1e-7·‖F_y‖‖y‖/‖g‖, which a projection onto
@@ -162,6 +178,7 @@ struct AlternatingOptions {
 
 struct AlternatingSummary : Outcome {  // Success after a run
   int iterations = 0;
+  RoundStop stop = RoundStop::RoundLimit;
   double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
   // Accelerated rounds only: the energy (*) of the last accepted y (up to
   // the float rounds' round-off), and how many extrapolations the safeguard
@@ -317,8 +334,10 @@ class FusedAlternation {
   void prepare(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
                FusedPrecision precision = FusedPrecision::Double);
 
-  // options.iterations rounds (fewer with options.tolerance) from the given y
-  // (k, warm start), then z = M_b·b + M_Y·y (d). b: m. No heap allocation.
+  // options.iterations rounds (fewer with options.tolerance or
+  // options.time_budget; AlternatingSummary::stop says which ended them) from
+  // the given y (k, warm start), then z = M_b·b + M_Y·y (d). b: m. No heap
+  // allocation.
   // Throws std::invalid_argument before a `set`, on sizes other than phase1's,
   // and for double rounds after a FusedPrecision::Float set.
   AlternatingSummary run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,

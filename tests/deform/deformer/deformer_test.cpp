@@ -7,6 +7,9 @@
 
 #include <Eigen/Dense>
 
+#include <cmath>
+#include <limits>
+
 using namespace qpreduce;
 using namespace qpreduce::deform;
 
@@ -397,4 +400,123 @@ TEST_CASE("deformer: the Anderson window can change between frames", "[deformer]
   Deformer eq19;
   REQUIRE(eq19.precompute(model, paper).ok());
   CHECK_THROWS_WITH(eq19.set_anderson_window(3), Catch::Contains("rotation_fit Exact"));
+}
+
+TEST_CASE("deformer: a default frame runs to its fixed point, within the time budget", "[deformer][rounds]") {
+  const DeformableMesh model = cylinder_model(6, 12);
+  const Index n = model.V.rows();
+  // The defaults: rounds until the residual is 1e-6, within 4 ms. This small
+  // model takes far less than that, but a sanitizer build on a loaded
+  // machine need not: the frames below have a budget of a second.
+  const DeformerOptions defaults;
+  CHECK(defaults.tolerance == 1e-6);
+  CHECK(defaults.time_budget == 0.004);
+  CHECK(defaults.iterations == 1000);
+  DeformerOptions options;
+  options.time_budget = 1.0;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, options).ok());
+  Handles h;
+  for (Index v : {Index(0), Index(37), n - 1}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  HandleTargets targets = rigid_targets(model.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero());
+  Vertices out;
+  for (int f = 1; f <= 3; ++f) {
+    targets.points.row(2) = model.V.row(n - 1) + f * Eigen::RowVector3d(0.3, 0.1, -0.2);
+    const FrameSummary s = deformer.frame(targets, &out);
+    CAPTURE(f, s.iterations, s.fixed_point_residual, to_string(s.stop));
+    REQUIRE(s.ok());
+    CHECK(s.cold_start == (f == 1));
+    CHECK(s.stop == RoundStop::Tolerance);
+    CHECK(s.fixed_point_residual <= 1e-6);
+  }
+  // The pose at the tolerance is the fixed point that many plain rounds
+  // reach along the same frames.
+  Vertices plain;
+  Deformer other;
+  DeformerOptions paper;
+  paper.anderson_window = 0;
+  REQUIRE(other.precompute(model, paper).ok());
+  REQUIRE(other.set_handles(h).ok());
+  other.set_rounds(50000, 1e-12);
+  HandleTargets path = targets;
+  for (int f = 1; f <= 3; ++f) {
+    path.points.row(2) = model.V.row(n - 1) + f * Eigen::RowVector3d(0.3, 0.1, -0.2);
+    const FrameSummary s = other.frame(path, &plain);
+    CAPTURE(f, s.iterations, s.fixed_point_residual);
+    CHECK(s.stop == RoundStop::Tolerance);
+  }
+  const double scale = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
+  CHECK(std::sqrt((out - plain).rowwise().squaredNorm().mean()) <= 1e-4 * scale);
+
+  // A budget spent in the first round ends the frame after it; the cold
+  // start (the first frame after reset_pose) has none.
+  deformer.set_rounds(100000, 1e-14, 1e-9);
+  deformer.reset_pose();
+  const FrameSummary cold = deformer.frame(targets, &out);
+  CHECK(cold.cold_start);
+  CHECK(cold.stop != RoundStop::TimeBudget);
+  CHECK(cold.iterations > 1);
+  const FrameSummary warm = deformer.frame(targets, &out);
+  CHECK(warm.stop == RoundStop::TimeBudget);
+  CHECK(warm.iterations == 1);
+  // set_rounds(8): the paper's 8 rounds, whatever the pose.
+  deformer.set_rounds(8);
+  targets.points.row(2) += Eigen::RowVector3d(0.2, 0.0, 0.0);
+  const FrameSummary eight = deformer.frame(targets, &out);
+  CHECK(eight.iterations == 8);
+  CHECK(eight.stop == RoundStop::RoundLimit);
+
+  // Bad settings are refused with their names.
+  CHECK_THROWS_WITH(deformer.set_rounds(8, 0.0, -1.0), Catch::Contains("time_budget"));
+  CHECK_THROWS_WITH(deformer.set_rounds(8, 0.0, std::numeric_limits<double>::quiet_NaN()),
+                    Catch::Contains("time_budget"));
+  DeformerOptions bad;
+  bad.time_budget = -0.5;
+  std::string why;
+  CHECK_FALSE(bad.is_valid(&why));
+  CHECK_THAT(why, Catch::Contains("time_budget"));
+  CHECK_THROWS_WITH(Deformer().precompute(model, bad), Catch::Contains("time_budget"));
+}
+
+TEST_CASE("deformer: one default frame takes a rigid jump of handles alone to the rigid pose", "[deformer][rounds]") {
+  // Handles only (no fixed region), at rest for the first frame (the cold
+  // start), then moved by one rigid motion of up to 179° in a single warm
+  // frame: the default rounds (to 1e-6; with a second's budget here, for a
+  // sanitizer build on a loaded machine) end at the rigid pose. Surfaces and tets.
+  const bool tets = GENERATE(false, true);
+  const double degrees = GENERATE(40.0, 120.0, 179.0);
+  CAPTURE(tets, degrees);
+  DeformableMesh model;
+  if (tets) {
+    const TetMesh m = shapes::box_tets(1.0, 1.0, 3.0, 3, 3, 8);
+    model.V = m.V;
+    model.T = m.T;
+  } else {
+    const TriangleMesh m = shapes::capped_cylinder(1.0, 4.0, 16, 12);
+    model.V = m.V;
+    model.F = m.F;
+  }
+  DeformerOptions options;
+  options.rotational_proxies = 12;
+  options.linear_proxies = 16;
+  options.time_budget = 1.0;
+  Deformer deformer;
+  REQUIRE(deformer.precompute(model, options).ok());
+  const Index n = model.V.rows();
+  Handles h;
+  for (Index v : {Index(0), n / 5, 2 * n / 5, 3 * n / 5, 4 * n / 5, n - 1}) h.points.push_back({{v}, {}});
+  REQUIRE(deformer.set_handles(h).ok());
+  Vertices out;
+  REQUIRE(deformer.frame(rigid_targets(model.V, h, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero()), &out).ok());
+  const Eigen::Matrix3d R = rotation(degrees * M_PI / 180.0, Eigen::Vector3d(1, 2, 0.5));
+  const Eigen::Vector3d t(0.5, -1.0, 2.0);
+  const FrameSummary s = deformer.frame(rigid_targets(model.V, h, R, t), &out);
+  CAPTURE(s.iterations, s.fixed_point_residual, to_string(s.stop));
+  REQUIRE(s.ok());
+  CHECK_FALSE(s.cold_start);
+  CHECK(s.stop == RoundStop::Tolerance);
+  const Vertices expected = (model.V * R.transpose()).rowwise() + t.transpose();
+  const double scale = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
+  CHECK((out - expected).rowwise().norm().maxCoeff() <= 1e-5 * scale);
 }

@@ -37,6 +37,9 @@ bool DeformerOptions::is_valid(std::string* why) const {
   if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
     return fail(fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance));
   }
+  if (!(time_budget >= 0.0) || !std::isfinite(time_budget)) {
+    return fail(fmt::format("time_budget must be finite and ≥ 0 seconds (0: none), got {}", time_budget));
+  }
   if (anderson_window < 0 || anderson_window > AndersonAcceleration::kMaxWindow) {
     return fail(fmt::format("anderson_window must be in [0, {}] (0: off), got {}", AndersonAcceleration::kMaxWindow,
                             anderson_window));

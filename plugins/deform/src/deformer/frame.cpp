@@ -102,13 +102,14 @@ void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& f
 
 // The first frame after set_handles runs to DeformerOptions::
 // cold_start_tolerance, within cold_start_rounds rounds (second-order steps
-// count kRoundsPerSecondOrderStep each).
+// count kRoundsPerSecondOrderStep each), without a time budget.
 void cold_start(const detail_deformer::Settings& settings, bool second_order, AlternatingOptions* opts) {
   const int cap = second_order ? std::max(1, settings.cold_start_rounds / DeformerOptions::kRoundsPerSecondOrderStep)
                                : settings.cold_start_rounds;
   opts->iterations = std::max(opts->iterations, cap);
   const double tol = settings.cold_start_tolerance;
   opts->tolerance = opts->tolerance > 0.0 ? std::min(opts->tolerance, tol) : tol;
+  opts->time_budget = 0.0;
 }
 
 }  // namespace
@@ -150,6 +151,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
   if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
   summary.iterations = as.iterations;
+  summary.stop = as.stop;
   summary.last_change = as.last_change;
   summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
   summary.model_energy = as.energy;
@@ -214,14 +216,16 @@ void Deformer::set_round_threads(int threads) {
   state_->settings.alternating.threads = threads;
 }
 
-void Deformer::set_rounds(int iterations, double tolerance) {
-  if (iterations < 1 || !(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+void Deformer::set_rounds(int iterations, double tolerance, double time_budget) {
+  if (iterations < 1 || !(tolerance >= 0.0) || !std::isfinite(tolerance) || !(time_budget >= 0.0) ||
+      !std::isfinite(time_budget)) {
     throw std::invalid_argument(fmt::format(
-        "Deformer::set_rounds: iterations must be ≥ 1 and tolerance finite and ≥ 0, got {} and {}", iterations,
-        tolerance));
+        "Deformer::set_rounds: iterations must be ≥ 1, tolerance and time_budget finite and ≥ 0, got {}, {} and {}",
+        iterations, tolerance, time_budget));
   }
   state_->settings.alternating.iterations = iterations;
   state_->settings.alternating.tolerance = tolerance;
+  state_->settings.alternating.time_budget = time_budget;
 }
 
 void Deformer::set_anderson_window(int window) {

@@ -291,6 +291,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   work.s_local.resize(9 * d);
   settings.alternating.iterations = options.iterations;
   settings.alternating.tolerance = options.tolerance;
+  settings.alternating.time_budget = options.time_budget;
   settings.alternating.anderson_window = options.anderson_window;
   settings.alternating.second_order = options.second_order;
   settings.cold_start_rounds = options.cold_start_rounds;

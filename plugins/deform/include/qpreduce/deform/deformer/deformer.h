@@ -56,12 +56,20 @@ struct DeformerOptions {
   // descent on E′: with an exact subspace the fixed point is the full-space
   // E′ minimiser); PaperPhase2 is Eq. 19 (Q dropped). Same cost per round.
   ClusterRotationFit rotation_fit = ClusterRotationFit::Exact;
-  // Rounds of Phase 1/Phase 2 per frame (the paper uses 8): the cap.
-  int iterations = 8;
-  // Stop a frame's rounds early once the relative fixed-point residual
-  // ‖ΔS‖/‖S‖ (FrameSummary::fixed_point_residual) is at most this; 0: always
-  // run `iterations` rounds (a frame's cost then does not depend on the pose).
-  double tolerance = 0.0;
+  // A frame runs rounds of Phase 1/Phase 2 until its relative fixed-point
+  // residual ‖ΔS‖/‖S‖ (FrameSummary::fixed_point_residual) is at most
+  // `tolerance`, or the rounds have run `time_budget` seconds, or
+  // `iterations` rounds ran, whichever comes first (FrameSummary::stop says
+  // which; the budget is checked after each round). The defaults put each
+  // frame at its fixed point where that takes under 4 ms of rounds and
+  // continue from there in the next frame (docs/deform.md, "Rounds per
+  // frame"). The paper's setting, 8 rounds whatever the pose: iterations 8,
+  // tolerance 0, time_budget 0 (Deformer::set_rounds(8)). The cold start
+  // (below) has no budget. iterations ≥ 1; tolerance and time_budget finite
+  // and ≥ 0 (0: no test).
+  int iterations = 1000;
+  double tolerance = 1e-6;
+  double time_budget = 0.004;
   // Anderson acceleration of the rounds (AlternatingOptions::anderson_window,
   // Peng et al. 2018) with the energy safeguard: 0 off, else the window
   // (1–16). Needs rotation_fit Exact (the safeguard's energy is E′ at the
@@ -162,6 +170,9 @@ struct FrameSummary : Outcome {  // Success after a frame
   // The first frame after set_handles (DeformerOptions::cold_start_rounds):
   // it ran to cold_start_tolerance instead of `iterations` rounds.
   bool cold_start = false;
+  // What ended the rounds: the cap (`iterations`), the tolerance, or the
+  // time budget (DeformerOptions::time_budget).
+  RoundStop stop = RoundStop::RoundLimit;
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
@@ -300,9 +311,11 @@ class Deformer {
   void reset_pose();
   // Changes DeformerOptions::round_threads for the following frames (≥ 0).
   void set_round_threads(int threads);
-  // Changes DeformerOptions::iterations (≥ 1, the cap) and tolerance (finite,
-  // ≥ 0) for the following frames. Throws std::invalid_argument.
-  void set_rounds(int iterations, double tolerance = 0.0);
+  // Replaces DeformerOptions::iterations (≥ 1, the cap), tolerance and
+  // time_budget (seconds; finite, ≥ 0) for the following frames:
+  // set_rounds(8) runs the paper's fixed 8 rounds. Throws
+  // std::invalid_argument.
+  void set_rounds(int iterations, double tolerance = 0.0, double time_budget = 0.0);
   // Changes DeformerOptions::anderson_window (0–16) for the following frames
   // (set_handles forms the energy terms both kinds of rounds read). Throws
   // std::invalid_argument on a window out of range, or a window > 0 with
