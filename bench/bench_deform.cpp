@@ -37,6 +37,9 @@
 //                       the plain read and reconstruct_points one call after
 //                       the other, outside any frame (the team kept busy)
 //   Frame/<M>           a whole frame (8 rounds + reconstruction)
+//   FrameDefault/<M>    a whole frame with the library's default rounds (to
+//                       the tolerance within the time budget; counters
+//                       rounds, budget_stops)
 //   RefineRound/<M>     one round of the full-space finish (refine.h) from
 //                       a frame's reduced pose, under the session's handles
 //                       (single vertices: the per-axis factor), default
@@ -224,6 +227,33 @@ void BM_FramePart(benchmark::State& state, const ModelSpec* spec, Part part, int
   s.deformer.set_round_threads(1);
   s.deformer.set_anderson_window(s.options.anderson_window);
   set_median(state, std::move(samples), part == Part::Iteration ? 1e-6 : 1e-3);
+  set_sizes(state, s);
+}
+
+// Frames with the library's default rounds (to DeformerOptions' tolerance
+// within its time budget; docs/deform.md, "Rounds per frame") instead of
+// Table 1's 8, with the reconstruction: counters rounds (median) and
+// budget_stops (the fraction of frames the budget ended).
+void BM_FrameDefault(benchmark::State& state, const ModelSpec* spec) {
+  Session& s = session(*spec);
+  const DeformerOptions defaults;
+  s.deformer.set_rounds(defaults.iterations, defaults.tolerance, defaults.time_budget);
+  std::vector<double> samples, rounds;
+  int budget_stops = 0;
+  for (auto _ : state) {
+    const FrameSummary f = s.deformer.frame(next_targets(s), &s.out);
+    state.SetIterationTime(f.total_seconds);
+    samples.push_back(f.total_seconds);
+    rounds.push_back(f.iterations);
+    budget_stops += f.stop == RoundStop::TimeBudget ? 1 : 0;
+  }
+  s.deformer.set_rounds(s.options.iterations, s.options.tolerance, s.options.time_budget);
+  if (!rounds.empty()) {
+    std::nth_element(rounds.begin(), rounds.begin() + rounds.size() / 2, rounds.end());
+    state.counters["rounds"] = rounds[rounds.size() / 2];
+    state.counters["budget_stops"] = static_cast<double>(budget_stops) / static_cast<double>(rounds.size());
+  }
+  set_median(state, std::move(samples), 1e-3);
   set_sizes(state, s);
 }
 
@@ -421,6 +451,9 @@ int main(int argc, char** argv) {
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
     benchmark::RegisterBenchmark(("Frame/" + n).c_str(), BM_FramePart, &spec, Part::Frame, 1, -1)
+        ->Unit(benchmark::kMillisecond)
+        ->UseManualTime();
+    benchmark::RegisterBenchmark(("FrameDefault/" + n).c_str(), BM_FrameDefault, &spec)
         ->Unit(benchmark::kMillisecond)
         ->UseManualTime();
     // The same frames with plain rounds (anderson_window 0: the rounds of
