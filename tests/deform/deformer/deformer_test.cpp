@@ -519,4 +519,12 @@ TEST_CASE("deformer: one default frame takes a rigid jump of handles alone to th
   const Vertices expected = (model.V * R.transpose()).rowwise() + t.transpose();
   const double scale = (model.V.colwise().maxCoeff() - model.V.colwise().minCoeff()).norm();
   CHECK((out - expected).rowwise().norm().maxCoeff() <= 1e-5 * scale);
+  // These stiff point-handle sets take second-order steps; a budget spent
+  // in the first step ends the frame after it there too.
+  CHECK(s.second_order);
+  deformer.set_rounds(1000, 1e-14, 1e-9);
+  const FrameSummary spent = deformer.frame(rigid_targets(model.V, h, R.transpose(), -t), &out);
+  CHECK(spent.second_order);
+  CHECK(spent.stop == RoundStop::TimeBudget);
+  CHECK(spent.iterations == 1);
 }
