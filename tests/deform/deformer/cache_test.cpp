@@ -58,9 +58,13 @@ DeformerOptions small_options() {
   DeformerOptions o;
   o.rotational_proxies = 6;
   o.linear_proxies = 5;
-  // A fixed count of rounds every frame (no cold start to a tolerance): the
-  // frames of two models then differ by what the models differ by, not by
-  // the round at which a tolerance test happened to stop.
+  // A fixed count of rounds every frame (8, no cold start to a tolerance, no
+  // time budget): the frames of two models then differ by what the models
+  // differ by, not by the round at which a tolerance test or the clock
+  // happened to stop them.
+  o.iterations = 8;
+  o.tolerance = 0.0;
+  o.time_budget = 0.0;
   o.cold_start_rounds = 0;
   return o;
 }
