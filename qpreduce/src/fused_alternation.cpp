@@ -30,8 +30,8 @@ bool AlternatingOptions::is_valid(std::string* why) const {
     if (why) *why = fmt::format("iterations must be at least 1, got {}", iterations);
     return false;
   }
-  if (!(tolerance >= 0.0)) {
-    if (why) *why = "tolerance must be non-negative";
+  if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
+    if (why) *why = fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance);
     return false;
   }
   if (!(time_budget >= 0.0) || !std::isfinite(time_budget)) {
@@ -604,7 +604,7 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
     W.y_plain = W.y_try;
     summary.last_change = projection.project(W.g, W.y_plain);
     summary.iterations = it + 1;
-    if (stop.done(summary.last_change, W.y_try.norm(), &summary)) break;
+    if (stop.done(summary.last_change, [&] { return W.y_try.norm(); }, &summary)) break;
     W.anderson.step(W.y_try, W.y_plain, W.y_next);
     extrapolated = W.anderson.history() > 0;
     if (extrapolated) projection.retract(W.y_next);
@@ -708,7 +708,7 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       energy = next;
       mu = std::max(mu / 3.0, 1e-15 * std::abs(W.H(0, 0)));
       hessian_current = false;
-      if (stop.done(summary.last_change, W.y_try.norm(), &summary)) break;
+      if (stop.done(summary.last_change, [&] { return W.y_try.norm(); }, &summary)) break;
     } else {
       summary.last_change = (W.y_next - W.y_try).norm();  // the step tried: a stalled run does not claim 0
       W.g.swap(W.g_keep);  // g′ of the kept y
@@ -733,7 +733,7 @@ AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProje
                   W.scratch_f.data());
     summary.last_change = projection.project(W.g, y);
     summary.iterations = it + 1;
-    if (stop.done(summary.last_change, static_cast<double>(y.norm()), &summary)) break;
+    if (stop.done(summary.last_change, [&] { return static_cast<double>(y.norm()); }, &summary)) break;
   }
   return summary;
 }

@@ -25,8 +25,11 @@ class StopTest {
   bool over_budget() const { return budget_ > 0.0 && now() - start_ >= budget_; }
 
   // After a round: true, with summary->stop set, when the rounds end here.
-  bool done(double change, double ynorm, AlternatingSummary* summary) const {
-    if (converged(change, ynorm)) {
+  // ynorm() gives ‖y‖; it is called only when there is a tolerance (O(k)
+  // a round that rounds without one need not pay).
+  template <typename YNorm>
+  bool done(double change, const YNorm& ynorm, AlternatingSummary* summary) const {
+    if (tolerance_ > 0.0 && converged(change, ynorm())) {
       summary->stop = RoundStop::Tolerance;
       return true;
     }

@@ -217,15 +217,13 @@ void Deformer::set_round_threads(int threads) {
 }
 
 void Deformer::set_rounds(int iterations, double tolerance, double time_budget) {
-  if (iterations < 1 || !(tolerance >= 0.0) || !std::isfinite(tolerance) || !(time_budget >= 0.0) ||
-      !std::isfinite(time_budget)) {
-    throw std::invalid_argument(fmt::format(
-        "Deformer::set_rounds: iterations must be ≥ 1, tolerance and time_budget finite and ≥ 0, got {}, {} and {}",
-        iterations, tolerance, time_budget));
-  }
-  state_->settings.alternating.iterations = iterations;
-  state_->settings.alternating.tolerance = tolerance;
-  state_->settings.alternating.time_budget = time_budget;
+  AlternatingOptions rounds = state_->settings.alternating;
+  rounds.iterations = iterations;
+  rounds.tolerance = tolerance;
+  rounds.time_budget = time_budget;
+  std::string why;
+  if (!rounds.is_valid(&why)) throw std::invalid_argument("Deformer::set_rounds: " + why);
+  state_->settings.alternating = rounds;
 }
 
 void Deformer::set_anderson_window(int window) {
