@@ -17,14 +17,7 @@ import time
 import numpy as np
 
 from qpreduce import deform
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def read_off(path):
-    words = open(path).read().split()
-    n = int(words[1])
-    return np.array(words[4:4 + 3 * n], float).reshape(n, 3)
+from rounds_study import ROOT, read_off  # noqa: E402 (scripts/ is the script's own folder)
 
 
 def main():

@@ -88,12 +88,11 @@ void register_demo(CLI::App& app) {
   cmd->add_option("--frames", args->frames, "Frames from rest to the full bend")->check(whole_number_between(1, 10000));
   add_path_option(cmd, PathRole::OutputDirectory, "--out", args->out_dir, "Output folder for the meshes and the report");
   add_path_option(cmd, PathRole::Output, "--report", args->report, "JSON report path (default OUT/report.json)");
+  const qpreduce::deform::DeformerOptions defaults;
   cmd->add_option("--iterations", args->iterations,
                   fmt::format("Phase 1/Phase 2 rounds per frame: the cap (default {}; the rounds stop at a "
                               "fixed-point residual of {:g} or after {:g} ms)",
-                              qpreduce::deform::DeformerOptions{}.iterations,
-                              qpreduce::deform::DeformerOptions{}.tolerance,
-                              1e3 * qpreduce::deform::DeformerOptions{}.time_budget))
+                              defaults.iterations, defaults.tolerance, 1e3 * defaults.time_budget))
       ->check(whole_number_between(1, 1000));
   cmd->add_option("--rotational-proxies", args->rotational, "Rotational clusters")
       ->check(whole_number_between(1, 100000));
