@@ -5,6 +5,7 @@
 #include "blas.h"
 #include "fused_rounds.h"
 #include "phase_one.h"
+#include "round_product.h"
 #include "round_stop.h"
 #include "simd_kernels.h"
 
@@ -69,6 +70,13 @@ namespace {
 
 using detail::FusedModel;
 using detail::FusedWorkspace;
+using detail::double_product;
+using detail::difference_product;
+using detail::kNoChange;
+using detail::near_reference;
+using detail::reference_product;
+using detail::reference_stale;
+using detail::round_product;
 using MatD = Matrix<double>;
 using MatF = Matrix<float>;
 
@@ -236,8 +244,12 @@ MatD form_u(FusedModel& M, const detail::FactoredPhaseOne& phase1, const MatD& G
 void set_factored(FusedModel& M, const detail::FactoredPhaseOne& phase1, MatD U, FusedPrecision precision) {
   detail::FactoredRounds& fr = M.factored_rounds;
   form_factored_base(M);
-  fr.U = std::move(U);  // empty after a Float set
-  if (precision == FusedPrecision::Double) fr.U_f = fr.U.cast<float>();
+  if (precision == FusedPrecision::Double) {
+    fr.U = std::move(U);
+    fr.U_f = fr.U.cast<float>();
+  } else {
+    fr.U = fr.U_f.cast<double>();  // the same operator for the float rounds' double references
+  }
   M.float_set = precision == FusedPrecision::Float;
   fr.R = phase1.R();
   fr.R_f = fr.R.cast<float>();
@@ -438,23 +450,12 @@ void size_workspace(const FusedModel& M, FusedWorkspace& W) {
   W.g.resize(q);
   W.gf.resize(q);
   W.yf.resize(k);
+  W.y_ref.resize(k);
+  W.dy.resize(k);
+  W.Fy_ref.resize(q);
+  W.ref_valid = false;  // the rounds' operator changed
   W.scratch.resize(mu);
   W.scratch_f.resize(mu);
-}
-
-// Rows [r0, r1) of g = g_b + F_y·y, from y, or from its float copy yf when
-// not null (the q × k product in float, accumulated onto g in double).
-void round_product(const FusedModel& M, FusedWorkspace& W, const double* y, const float* yf, Index r0, Index r1,
-                   double* scratch, float* scratch_f) {
-  const Index rows = r1 - r0;
-  if (yf != nullptr) {
-    std::fill(W.gf.data() + r0, W.gf.data() + r1, 0.0f);
-    M.rounds().add_rows(yf, r0, r1, scratch_f, W.gf.data());
-    W.g.segment(r0, rows) = W.gb.segment(r0, rows) + W.gf.segment(r0, rows).cast<double>();
-    return;
-  }
-  W.g.segment(r0, rows) = W.gb.segment(r0, rows);
-  M.rounds().add_rows(y, r0, r1, scratch, W.g.data());
 }
 
 // The rounds on `threads` threads over block ranges (AlternatingOptions::
@@ -466,15 +467,18 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
   const bool use_float = options.float_products;
   W.y2.resize(q, 2);
   W.y2.col(0) = y;
+  // Float rounds: whether the first round moves the reference (every thread
+  // then takes the same decision after each barrier, from the same sums).
+  const bool first_at_reference = use_float && !near_reference(W, y.data(), q, kNoChange);
   if (use_float) {
     W.yf2.resize(q, 2);
-    W.yf2.col(0) = y.cast<float>();
+    W.yf2.col(0) = W.yf;
   }
-  // Per-thread Σ‖Δy_j‖² and ‖y_j‖², by round parity: read after the round's
-  // barrier, next written two rounds later (after the next barrier).
+  // Per-thread Σ‖Δy_j‖², ‖y_j‖² and ‖y_j − y_r,j‖², by round parity: read
+  // after the round's barrier, next written two rounds later (after the next barrier).
   constexpr int kMaxThreads = 64;
   threads = std::min<Index>(threads, kMaxThreads);
-  double change2[2][kMaxThreads] = {}, norm2[2][kMaxThreads] = {};
+  double change2[2][kMaxThreads] = {}, norm2[2][kMaxThreads] = {}, drift2[2][kMaxThreads] = {};
   // Thread 0's reading of the budget, by round parity like the sums, so that
   // every thread takes the same decision.
   bool spent[2] = {false, false};
@@ -487,24 +491,36 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
     const Index r0 = block * (blocks * t / nt), r1 = block * (blocks * (t + 1) / nt), rows = r1 - r0;
     double* scratch = W.scratch_threads.col(t).data();
     float* scratch_f = W.scratch_f_threads.col(t).data();
+    bool at_reference = first_at_reference;
     for (int it = 0; it < options.iterations; ++it) {
       const int cur = it % 2, next = 1 - cur;
-      round_product(M, W, W.y2.col(cur).data(), use_float ? W.yf2.col(cur).data() : nullptr, r0, r1, scratch,
-                    scratch_f);
+      if (!use_float) {
+        double_product(M, W, W.y2.col(cur).data(), r0, r1, scratch);
+      } else if (at_reference) {  // this thread's rows of y_r: no other thread reads them this round
+        reference_product(M, W, W.y2.col(cur).data(), r0, r1, scratch);
+        W.y_ref.segment(r0, rows) = W.y2.col(cur).segment(r0, rows);
+      } else {
+        difference_product(M, W, W.yf2.col(cur).data(), r0, r1, scratch_f);
+      }
       change2[cur][t] = projection.project_blocks(W.g, y, r0 / block, r1 / block);
       norm2[cur][t] = static_cast<double>(y.segment(r0, rows).squaredNorm());
       W.y2.col(next).segment(r0, rows) = y.segment(r0, rows);
-      if (use_float) W.yf2.col(next).segment(r0, rows) = y.segment(r0, rows).cast<float>();
+      if (use_float) {
+        drift2[cur][t] = (y.segment(r0, rows) - W.y_ref.segment(r0, rows)).squaredNorm();
+        W.yf2.col(next).segment(r0, rows) = (y.segment(r0, rows) - W.y_ref.segment(r0, rows)).cast<float>();
+      }
       if (t == 0) spent[cur] = stop.over_budget();
 #pragma omp barrier
       // Only this round's sums are read here: y itself may already be
       // changing in another thread's next round.
-      double total = 0.0, ynorm2 = 0.0;
+      double total = 0.0, ynorm2 = 0.0, drift = 0.0;
       for (Index s = 0; s < nt; ++s) {
         total += change2[cur][s];
         ynorm2 += norm2[cur][s];
+        drift += drift2[cur][s];
       }
       const double change = std::sqrt(total);
+      at_reference = reference_stale(drift, ynorm2, change);
       if (t == 0) {
         summary.iterations = it + 1;
         summary.last_change = change;
@@ -520,12 +536,14 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
       }
     }
   }
+  if (use_float) W.ref_valid = true;
   return summary;
 }
 
 // The energy (*) of alternating.h at y, with g = g(y) in W.g:
 // ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀ(λ_b + Λ_y·y), and a bound on its round-off
-// (`slack`, relative to the terms' sizes: 1e-6 with float rounds, 1e-11 in double).
+// (`slack`, relative to the terms' sizes: 1e-9 with float rounds, whose
+// products are relative to a double reference, 1e-11 in double).
 // With the rounds corrected for constraints on y (proximal weights D, one
 // per entry, g′ = g − A_yᵀλ + D∘y in W.g): ½yᵀN_S y − ½g′ᵀy + ½yᵀDy − ½bᵀλ,
 // the same value. The constraint term is then bᵀλ = bᵀλ_b + (Λ_yᵀb)ᵀy, as
@@ -548,7 +566,7 @@ double reduced_energy(const detail::PhaseOneEnergy& E, FusedWorkspace& W, const 
   }
   const double quadratic = projection.quadratic_term(y), linear = W.g.dot(y);
   const double proximal = corrected ? y.dot(D->cwiseProduct(y)) : 0.0;
-  *slack = (float_rounds ? 1e-6 : 1e-11) *
+  *slack = (float_rounds ? 1e-9 : 1e-11) *
            (std::abs(quadratic) + std::abs(linear) + std::abs(constraint) + std::abs(proximal));
   return quadratic - 0.5 * linear + 0.5 * proximal - 0.5 * constraint;
 }
@@ -580,9 +598,7 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
   const bool use_float = options.float_products;
   const bool corrected = M.energy != nullptr;
   auto product = [&](const Vector<double>& at) {
-    if (use_float) W.yf = at.cast<float>();
-    round_product(M, W, at.data(), use_float ? W.yf.data() : nullptr, 0, M.q(), W.scratch.data(),
-                  W.scratch_f.data());
+    round_product(M, W, at.data(), use_float, summary.iterations == 0 ? kNoChange : summary.last_change);
   };
   constraint_term(E, b, corrected, W);
   W.anderson.restart();
@@ -592,11 +608,12 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
   bool extrapolated = false;  // y_try is an extrapolation (else the plain step itself)
   for (int it = 0; it < options.iterations; ++it) {
     product(W.y_try);
-    double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, corrected ? &M.proximal_entries : nullptr, &slack);
+    const Vector<double>* D = corrected ? &M.proximal_entries : nullptr;
+    double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, D, &slack);
     if (extrapolated && !(energy <= accepted + slack)) {  // the safeguard: back to the plain step
       W.y_try = W.y_plain;
       product(W.y_try);
-      energy = reduced_energy(E, W, projection, b, W.y_try, use_float, corrected ? &M.proximal_entries : nullptr, &slack);
+      energy = reduced_energy(E, W, projection, b, W.y_try, use_float, D, &slack);
       W.anderson.restart();
       ++summary.rejected;
     }
@@ -637,7 +654,7 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
   constraint_term(E, b, true, W);
   double slack = 0.0;
   auto evaluate = [&](const Vector<double>& at) {  // W.g ← g′(at); returns (*)
-    round_product(M, W, at.data(), nullptr, 0, k, W.scratch.data(), W.scratch_f.data());
+    double_product(M, W, at.data(), 0, k, W.scratch.data());
     return reduced_energy(E, W, projection, b, at, false, &D, &slack);
   };
   AlternatingSummary summary;
@@ -728,9 +745,7 @@ AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProje
                               Eigen::Ref<Vector<double>> y) {
   AlternatingSummary summary;
   for (int it = 0; it < options.iterations; ++it) {
-    if (options.float_products) W.yf = y.cast<float>();
-    round_product(M, W, y.data(), options.float_products ? W.yf.data() : nullptr, 0, M.q(), W.scratch.data(),
-                  W.scratch_f.data());
+    round_product(M, W, y.data(), options.float_products, it == 0 ? kNoChange : summary.last_change);
     summary.last_change = projection.project(W.g, y);
     summary.iterations = it + 1;
     if (stop.done(summary.last_change, [&] { return static_cast<double>(y.norm()); }, &summary)) break;

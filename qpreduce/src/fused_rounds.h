@@ -55,7 +55,7 @@ class FactoredRounds final : public RoundOperator {
   Matrix<double> F0;                // C0 + G_y (q × k)
   Matrix<float> F0_f;               // in float
   bool base_valid = false;          // F0 is current for (C0, G_y)
-  Matrix<double> U, R;              // U (q × μ; empty after a Float set), R (μ × k)
+  Matrix<double> U, R;              // U (q × μ; U_f in double after a Float set), R (μ × k)
   Matrix<float> U_f, R_f;           // in float
   Vector<double> shift;             // diag(D)·y added to the rows (q = k; constraints on y), or empty
 
@@ -165,7 +165,11 @@ struct FusedModel {
 // The rounds' vectors (allocated by `set`, reused by every `run`).
 struct FusedWorkspace {
   Vector<double> gb, g;                // F_b·b and g (q)
-  Vector<float> gf, yf;                // float rounds: F_y·y (q) and y (k)
+  Vector<float> gf, yf;                // float rounds: F_y·(y − y_r) (q) and y − y_r (k)
+  // Float rounds' double reference (fused_alternation.cpp, kReferenceDrift):
+  // y_r (k) and F_y·y_r (q), valid until the next `set`.
+  Vector<double> y_ref, Fy_ref, dy;  // dy: y − y_r (k)
+  bool ref_valid = false;
   Vector<double> scratch;              // μ, the factored form's R·y
   Vector<float> scratch_f;
   Matrix<double> scratch_threads;      // μ × threads (parallel rounds)

@@ -269,6 +269,15 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     CHECK((fs.y - f.y).norm() > 0.0);  // G_z·T did change precision
     phase1.solve(b, fs.y, z);
     CHECK((fs.z - z).norm() <= 1e-13 * (1 + z.norm()));
+    // To a tight tolerance the float rounds stop at the double rounds' fixed
+    // point: their products are relative to a double reference, so float
+    // round-off neither moves the fixed point nor leaves a residual floor.
+    const Run dd = run(FusedForm::Factored, false, threads, 1e-12, 2000, 0.05);
+    const Run ff = run(FusedForm::Factored, true, threads, 1e-12, 2000, 0.05);
+    CHECK(dd.s.stop == RoundStop::Tolerance);
+    CHECK(ff.s.stop == RoundStop::Tolerance);
+    CHECK(ff.s.iterations <= dd.s.iterations + 2);
+    CHECK((ff.y - dd.y).norm() <= 1e-9 * (1 + dd.y.norm()));
     // Early exit: the same round on every thread count.
     const Run e1 = run(FusedForm::Factored, false, 1, 1e-9, 200, 0.05);
     const Run e2 = run(FusedForm::Factored, false, threads, 1e-9, 200, 0.05);

@@ -140,11 +140,15 @@ struct AlternatingOptions {
   // The clock the budget reads, in seconds from any origin; nullptr:
   // std::chrono::steady_clock. For tests and simulations.
   double (*clock)() = nullptr;
-  // Form the round's product F_y·y in float (g = F_b·b + F_y·y keeps F_b·b
-  // and the sum in double): about twice the SIMD width. Phase 2's input then
-  // carries a relative error of ~1e-7·‖F_y‖‖y‖/‖g‖, which a projection onto
-  // rotations absorbs; Phase 1's final z = M_b·b + M_Y·y stays in double, so
-  // hard constraints hold to double precision either way.
+  // Form the round's product in float relative to a double reference y_r:
+  // g = F_b·b + F_y·y_r + F_y·(y − y_r), F_y·y_r in double (formed again,
+  // one double product, when ‖y − y_r‖ exceeds 10 % of ‖y‖ or 10⁵ times the
+  // last round's step) and only the last product in float, at about twice
+  // the SIMD width. The float round-off in g stays under 1e-8·‖F_y‖‖y‖ and
+  // shrinks with the steps, so the rounds reach the fixed points of double
+  // rounds and the accelerated rounds' energy safeguard holds to 1e-9.
+  // Phase 1's final z = M_b·b + M_Y·y stays in double, so hard constraints
+  // hold to double precision either way.
   bool float_products = false;
   // OpenMP threads for the rounds when the projection is block-separable
   // (InputProjection::block_size() > 0) and F_y has at least
@@ -249,8 +253,10 @@ enum class FusedForm { Automatic, Explicit, Factored };
 // The precision of the factored form's per-set product G_z·T (q × μ × d
 // multiply-adds, most of a set's cost): Float runs it at about twice the BLAS
 // rate, for rounds with AlternatingOptions::float_products (F_b = G_z·M_b
-// then carries float round-off too; Phase 1's z stays in double). `run` with
-// double rounds after a Float set throws. The explicit form is double either way.
+// then carries float round-off too, and the rounds' double references use
+// the float G_z·T, so a Float set's fixed point is that of the rounded
+// operator; Phase 1's z stays in double). `run` with double rounds after a
+// Float set throws. The explicit form is double either way.
 enum class FusedPrecision { Double, Float };
 
 // Phase 1 folded into Phase 2's input: with z = M_b·b + M_Y·y,

@@ -118,8 +118,9 @@ struct DeformerOptions {
   bool soften_unreachable_handles = true;
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
-  // Phase 2 inputs from a float product in each round
-  // (AlternatingOptions::float_products); the handles still hold to double
+  // Phase 2 inputs from a float product relative to a double reference in
+  // each round (AlternatingOptions::float_products): the fixed points of
+  // double rounds at about a float round's cost; the handles hold to double
   // precision. false: every round in double.
   bool float_rounds = true;
   // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
