@@ -465,10 +465,9 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   if (cs.status != Status::Success && settings.strict)
     throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
   // A set the subspace cannot follow: say what makes it exact.
-  const bool subspace_short = cs.message.find("subspace") != std::string::npos;
   if (cs.status != Status::Success) {
     std::fprintf(stderr, "  warning: %s%s\n", cs.message.c_str(),
-                 subspace_short ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
+                 cs.beyond_subspace ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
                                 : "");
   }
 

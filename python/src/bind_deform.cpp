@@ -50,6 +50,7 @@ struct PyDeformer {
   // end from their targets and warns (or raises under strict).
   bool least_squares = false;
   std::string least_squares_reason;
+  bool least_squares_beyond_subspace = false;  // ConstraintSummary::beyond_subspace of that set
   bool strict = false;
   double diagonal = 0.0;  // of the model's rest bounding box (set with the model)
   std::mutex mutex;
@@ -71,6 +72,7 @@ struct PyDeformer {
     handles_set = false;
     pins_to_check = false;
     least_squares = false;
+    least_squares_beyond_subspace = false;
   }
   std::unique_lock<std::mutex> lock() {
     refuse_reentry();
@@ -81,8 +83,8 @@ struct PyDeformer {
 // What to do about a least-squares handle set: a set the subspace cannot
 // follow needs its vertices named at precompute; a dependent one (a vertex
 // held twice) needs one target per vertex.
-std::string least_squares_advice(const std::string& reason) {
-  if (reason.find("subspace") != std::string::npos) {
+std::string least_squares_advice(bool beyond_subspace) {
+  if (beyond_subspace) {
     return "Name point-handle vertices at precompute to meet them exactly: deform.ArapSolver(V, F, b)";
   }
   return "Give each vertex one target (its targets are averaged now)";
@@ -93,11 +95,11 @@ std::string least_squares_advice(const std::string& reason) {
 // saying how far.
 void warn_if_off_target(PyDeformer& self, const RowMap<double>& pose, py::handle summary) {
   const double diagonal = self.diagonal;
-  const double off = handle_residual(self.model, self.handles, self.targets, Vertices(pose));
+  const double off = handle_residual(self.model, self.handles, self.targets, pose);
   if (!(off > 1e-6 * diagonal)) return;
   warn_or_raise(fmt::format("Deformer.frame: the handles end {:.2e} of the bounding-box diagonal from their targets "
                             "(the set holds only in the least-squares sense: {}). {}",
-                            off / diagonal, self.least_squares_reason, least_squares_advice(self.least_squares_reason)),
+                            off / diagonal, self.least_squares_reason, least_squares_advice(self.least_squares_beyond_subspace)),
                 self.strict, self.last_frame, summary);
 }
 
@@ -371,11 +373,12 @@ void bind_deformer_class(py::module_& m) {
               self.pins_to_check = pins_to_check(self.model, self.handles);
               self.least_squares = summary.status == Status::ConstraintsLeastSquares;
               self.least_squares_reason = summary.message;
+              self.least_squares_beyond_subspace = summary.beyond_subspace;
             }
             py::object result = py::cast(checked(summary));
             if (self.least_squares) {
               warn_or_raise("Deformer.set_handles: the frames will meet these handles only in the least-squares "
-                            "sense (" + summary.message + "). " + least_squares_advice(summary.message),
+                            "sense (" + summary.message + "). " + least_squares_advice(summary.beyond_subspace),
                             self.strict, summary, result);
             }
             return result;

@@ -143,6 +143,8 @@ void bind_summaries(py::module_& m) {
       .ro("fast_path", &ConstraintSummary::fast_path, "The answer came from the fast path.")
       .ro("factored", &ConstraintSummary::factored, "... with M_q kept factored.")
       .ro("dropped", &ConstraintSummary::dropped, "Entries of A_r zeroed by drop_tolerance.")
+      .ro("beyond_subspace", &ConstraintSummary::beyond_subspace,
+          "The subspace cannot meet these rows as the full space can (set by the deformer).")
       .ro("seconds", &ConstraintSummary::seconds, "Seconds.")
       .repr();
 

@@ -265,9 +265,11 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
     for soften in (True, False):
         deformer = deform.Deformer(V, F, deform.DeformerOptions(**OPTIONS, soften_unreachable_handles=soften))
         deformer.precompute()
-        with pytest.warns(qpreduce.QpreduceWarning, match="least-squares sense"):
+        with pytest.warns(qpreduce.QpreduceWarning, match="least-squares sense") as caught:
             summary = deformer.set_handles(handles)
         assert summary.status == qpreduce.Status.ConstraintsLeastSquares and summary.usable()
+        assert summary.beyond_subspace  # the subspace's doing: naming the vertices at precompute makes it exact
+        assert any("Name point-handle vertices at precompute" in str(w.message) for w in caught)
         if soften:
             assert "cannot meet these handles" in summary.message
             assert "rank 54 in the full space but 30 in the subspace" in summary.message
@@ -292,6 +294,7 @@ def test_handles_the_subspace_cannot_meet_are_met_softly_and_said_so():
         summary = deformer.set_handles(few + [(np.array(few[:2]), np.array([0.5, 0.5])), handles[-1]])
     assert summary.status == qpreduce.Status.ConstraintsLeastSquares
     assert "least-squares sense" in summary.message and "soft" not in summary.message
+    assert not summary.beyond_subspace
     Vp = deformer.frame(np.ascontiguousarray(np.vstack([V[few], V[few[:2]].mean(axis=0), targets[-1]])))
     assert deformer.handle_residual(Vp) < 1e-6
 

@@ -85,6 +85,12 @@ struct ConstraintSummary : Outcome {
   bool fast_path = false; // the answer came from the precomputed fast path
   bool factored = false;  // ... with M_q kept factored (no p×p operator formed)
   Index dropped = 0;      // entries of A_r zeroed by drop_tolerance (set_constraints)
+  // Set by a caller that knows the full-space problem (the deformer, for a
+  // least-squares set): the subspace cannot meet these rows as the full
+  // space can (their rank is lower in the subspace, or their condition there
+  // is too high for the float basis). More basis directions through the
+  // constrained entries (e.g. proxies at the held vertices) make it exact.
+  bool beyond_subspace = false;
   double seconds = 0.0;
 };
 

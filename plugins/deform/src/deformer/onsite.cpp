@@ -307,6 +307,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
           onsite.phase1.set_reduced_constraints(model.solver, As.leftCols(model.nx), As.rightCols(9 * model.d), soft);
       if (ss.ok()) {
         ss.status = Status::ConstraintsLeastSquares;
+        ss.beyond_subspace = true;
         ss.message = fmt::format(
             "the subspace cannot meet these handles reliably: {}; they are met as soft constraints (Eq. 18, δ = "
             "{:.3g}), the closest fit at bounded energy",
@@ -321,6 +322,10 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     }
   }
   const bool reduced = !softened && reduce_dependent_rows(model, layout, Ar, options, &onsite, &cs);
+  // A least-squares set neither softened nor reduced to its independent rows:
+  // is it the subspace's doing (a lower rank than in the full space)?
+  if (cs.status == Status::ConstraintsLeastSquares && !softened && !reduced)
+    cs.beyond_subspace = cs.rank < full_space_rows(layout).rank;
   make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
   // A softened set has at most as many rows as the subspace has coordinates
