@@ -102,16 +102,16 @@ void bind_arap_solver(py::module_& m) {
             py::array_t<double> result = out.is_none() ? py::array_t<double>(std::vector<py::ssize_t>{n, 3})
                                                        : py::reinterpret_borrow<py::array_t<double>>(out);
             auto view = matrix_view<double>("out", result, {n, "n"}, {3, "3"}, true);
-            Vertices U;
             RefineSummary finish;
             {
               py::gil_scoped_release release;
               if (refine) {
+                Vertices U;
                 finish = self.solver.refine(targets, &U);
-              } else {
-                self.last_solve = self.solver.solve(targets, &U);
+                if (U.rows() == n) view = U;
+              } else {  // straight into the array
+                self.last_solve = self.solver.solve(targets, Eigen::Map<Vertices>(view.data(), n, 3));
               }
-              if (U.rows() == n) view = U;
             }
             if (refine) {
               self.last_refine = py::cast(finish);

@@ -116,6 +116,23 @@ TEST_CASE("ArapSolver: handles named at precompute are met exactly, on a surface
   }
 }
 
+TEST_CASE("ArapSolver: solve into the caller's buffer equals solve into a matrix", "[arap]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 12, 16);
+  const std::vector<Index> b = random_vertices(m.V.rows(), 20, 31u);
+  const Vertices bc = bent_targets(m.V, b, 0.01, 3);
+  ArapSolver a, c;
+  REQUIRE(a.precompute(m.V, m.F, b).ok());
+  REQUIRE(c.precompute(m.V, m.F, b).ok());
+  Vertices U;
+  REQUIRE(a.solve(bc, &U).ok());
+  std::vector<double> buffer(static_cast<size_t>(3 * m.V.rows()), -1.0);
+  REQUIRE(c.solve(bc, Eigen::Map<Vertices>(buffer.data(), m.V.rows(), 3)).ok());
+  CHECK(Eigen::Map<Vertices>(buffer.data(), m.V.rows(), 3) == U);  // the same frame, written in place
+  CHECK(c.reconstruction_handle_error() == a.reconstruction_handle_error());
+  CHECK_THROWS_WITH(c.solve(bc, Eigen::Map<Vertices>(buffer.data(), m.V.rows() - 1, 3)),
+                    Catch::Matchers::Contains("rows"));
+}
+
 TEST_CASE("ArapSolver: handles named at precompute are met exactly, on tets", "[arap]") {
   const TetMesh m = box_tets(1.0, 1.0, 4.0, 3, 3, 12);
   for (const Index count : {Index(4), Index(40)}) {

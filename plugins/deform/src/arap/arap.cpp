@@ -142,6 +142,12 @@ PrecomputeSummary ArapSolver::precompute(const Vertices& V, const ElementsRef& F
 FrameSummary ArapSolver::solve(const Vertices& bc, Vertices* U) {
   if (!ready()) throw std::invalid_argument("ArapSolver::solve: call precompute first (and check its summary)");
   if (U == nullptr) throw std::invalid_argument("ArapSolver::solve: U is null");
+  if (U->rows() != vertex_count()) U->resize(vertex_count(), 3);
+  return solve(bc, Eigen::Map<Vertices>(U->data(), U->rows(), 3));
+}
+
+FrameSummary ArapSolver::solve(const Vertices& bc, Eigen::Map<Vertices> U) {
+  if (!ready()) throw std::invalid_argument("ArapSolver::solve: call precompute first (and check its summary)");
   State& st = *state_;
   check_targets(bc, st.b.size(), "ArapSolver::solve");
   st.targets.points = bc;
@@ -149,8 +155,8 @@ FrameSummary ArapSolver::solve(const Vertices& bc, Vertices* U) {
   if (summary.ok() && st.handle_summary.ok()) {
     double worst = 0.0;
     for (size_t i = 0; i < st.b.size(); ++i) {
-      worst = std::max(worst, (U->row(st.b[i]) - bc.row(static_cast<Index>(i))).norm());
-      U->row(st.b[i]) = bc.row(static_cast<Index>(i));
+      worst = std::max(worst, (U.row(st.b[i]) - bc.row(static_cast<Index>(i))).norm());
+      U.row(st.b[i]) = bc.row(static_cast<Index>(i));
     }
     st.reconstruction_error = worst;
   }

@@ -12,7 +12,7 @@
 namespace qpreduce::deform {
 
 double handle_residual(const DeformableMesh& m, const Handles& handles, const HandleTargets& targets,
-                       const Vertices& deformed) {
+                       const Eigen::Ref<const Vertices>& deformed) {
   check_size("handle_residual: deformed vertex count", m.V.rows(), deformed.rows());
   check_size("handle_residual: deformed columns", 3, deformed.cols());
   detail_deformer::check_patch_labels(m, "handle_residual");
@@ -52,6 +52,11 @@ double handle_residual(const DeformableMesh& m, const Handles& handles, const Ha
 
 LinearProxies exact_handle_proxies(const DeformableMesh& model, const Handles& handles, Index more) {
   const Index n = model.V.rows();
+  try {
+    detail_deformer::check_handles(handles, n, model.patch_types);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("exact handles: ") + e.what());
+  }
   std::vector<Index> seeds;
   std::vector<char> seen(static_cast<size_t>(n), 0);
   for (size_t h = 0; h < handles.points.size(); ++h) {
@@ -63,9 +68,6 @@ LinearProxies exact_handle_proxies(const DeformableMesh& model, const Handles& h
           h, ph.vertices.size()));
     }
     const Index v = ph.vertices[0];
-    if (v < 0 || v >= n) {
-      throw std::invalid_argument(fmt::format("exact handles: point handle {} holds vertex {} outside [0, {})", h, v, n));
-    }
     const bool in_patch = !model.patch_of_vertex.empty() && model.patch_of_vertex[static_cast<size_t>(v)] >= 0;
     if (in_patch || seen[static_cast<size_t>(v)]++) continue;
     seeds.push_back(v);

@@ -80,6 +80,10 @@ class ArapSolver {
   // std::invalid_argument before a successful precompute, or on bc not
   // h × 3 or not finite.
   FrameSummary solve(const Vertices& bc, Vertices* U);
+  // The same, into the caller's n × 3 buffer (a NumPy array) in place: no
+  // copy, no allocation. Throws std::invalid_argument when `U` does not have
+  // n rows.
+  FrameSummary solve(const Vertices& bc, Eigen::Map<Vertices> U);
   // solve(bc), then the full-space finish from that shape to converged
   // classic ARAP (Refiner). Throws as solve.
   RefineSummary refine(const Vertices& bc, Vertices* U);

@@ -64,7 +64,7 @@ struct HandleTargets {
 // where `targets` put them: point handles by their weighted point, patch
 // handles by every vertex of the patch, Fixed patches by every vertex at rest.
 double handle_residual(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
-                       const Vertices& deformed);
+                       const Eigen::Ref<const Vertices>& deformed);
 
 // Linear proxies that make `handles` exact (docs/deform.md, "Exact handles"):
 // every single-vertex point handle's vertex its own proxy (once, however
