@@ -37,29 +37,44 @@ seeds_of() {
 mkdir -p "$build/findings"
 export QPR_FUZZ_TMP="$build/tmp"  # the targets' scratch files, removed at the end
 rm -rf "$QPR_FUZZ_TMP" && mkdir -p "$QPR_FUZZ_TMP"
-trap 'rm -rf "$QPR_FUZZ_TMP"' EXIT
+trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$QPR_FUZZ_TMP"' EXIT
 export ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=0"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-for t in "${targets[@]}"; do
-  bin="$build/tests/fuzz/fuzz_$t"
-  corpus="$root/tests/fuzz/corpus/$t"
-  work="$build/corpus/$t"
+# One target: its corpus replayed, then fuzzed; its lines printed together
+# when it ends (targets run $jobs at a time, each on one core).
+fuzz_target() {
+  local t="$1"
+  local bin="$build/tests/fuzz/fuzz_$t"
+  local corpus="$root/tests/fuzz/corpus/$t"
+  local work="$build/corpus/$t"
   mkdir -p "$work"
-  echo "== fuzz_$t: replay $(ls "$corpus" | wc -l) inputs"
+  local head="== fuzz_$t: replay $(ls "$corpus" | wc -l) inputs, then ${seconds} s"
   "$bin" -runs=0 -rss_limit_mb=2048 -malloc_limit_mb=256 "$corpus" >"$build/findings/$t.replay.log" 2>&1 ||
-    { tail -40 "$build/findings/$t.replay.log"; exit 1; }
+    { echo "$head"; tail -40 "$build/findings/$t.replay.log"; return 1; }
+  local ext extra=()
   ext="$(seeds_of "$t")"
-  extra=()
   if [ -n "$ext" ] && [ -d "$root/../shared/data" ]; then
-    seed_dir="$build/seeds/$t"
+    local seed_dir="$build/seeds/$t"
     mkdir -p "$seed_dir"
     find "$root/../shared/data" -iname "*.$ext" -size -4M -exec cp -t "$seed_dir" {} + 2>/dev/null || true
     extra=("$seed_dir")
   fi
-  echo "== fuzz_$t: ${seconds} s"
   "$bin" -max_total_time="$seconds" -max_len=16384 -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=256 \
     -print_final_stats=1 -artifact_prefix="$build/findings/$t-" "$work" "$corpus" "${extra[@]}" \
-    >"$build/findings/$t.log" 2>&1 || { tail -60 "$build/findings/$t.log"; exit 1; }
-  grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "$build/findings/$t.log" | tr '\n' ' '
-  echo
+    >"$build/findings/$t.log" 2>&1 || { echo "$head"; tail -60 "$build/findings/$t.log"; return 1; }
+  echo "$head: $(grep -E "stat::number_of_executed_units|stat::peak_rss_mb" "$build/findings/$t.log" | tr '\n' ' ')"
+}
+
+running=0
+for t in "${targets[@]}"; do
+  if [ "$running" -ge "$jobs" ]; then
+    wait -n  # a failed target ends the script (set -e)
+    running=$((running - 1))
+  fi
+  fuzz_target "$t" &
+  running=$((running + 1))
+done
+while [ "$running" -gt 0 ]; do
+  wait -n
+  running=$((running - 1))
 done

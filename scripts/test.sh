@@ -14,11 +14,12 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 jobs="$(nproc 2>/dev/null || echo 2)"
 bash "$root/scripts/build.sh"
+echo "   (the Release build done at ${SECONDS}s)"
 
-echo "== tests (Release)"
+echo "== tests (Release) (${SECONDS}s since the start)"
 ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
 
-echo "== tests (ASan + UBSan)"
+echo "== tests (ASan + UBSan) (${SECONDS}s since the start)"
 # -O1 -g1: line tables for the reports at less compile time than -O2 -g
 # (NDEBUG as in RelWithDebInfo: the sanitizers check, not Eigen's asserts).
 cmake -S "$root" -B "$root/build-asan" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
@@ -26,10 +27,11 @@ cmake -S "$root" -B "$root/build-asan" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DQPREDUCE_SANITIZE=ON \
   -DQPREDUCE_BUILD_BENCH=OFF -DQPREDUCE_BUILD_EXAMPLES=OFF >/dev/null
 cmake --build "$root/build-asan" -j "$jobs"
+echo "   (the sanitizer build done at ${SECONDS}s)"
 ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1 \
   ctest --test-dir "$root/build-asan" --output-on-failure -j "$jobs"
 
-echo "== installed package consumers"
+echo "== installed package consumers (${SECONDS}s since the start)"
 # consumer: the engine and the deformer, with Ceres hidden from find_package
 # (they must not need it); reference_consumer: the optional reference component.
 prefix="$root/build/install-test"
@@ -53,7 +55,7 @@ if grep -q '^QPREDUCE_WITH_MPI:BOOL=ON$' "$root/build/CMakeCache.txt"; then
     "$mpiexec" --oversubscribe -np 2 "$root/build/distributed_consumer/distributed_consumer"
 fi
 
-echo "== installed Python package"
+echo "== installed Python package (${SECONDS}s since the start)"
 # The package `cmake --install` put under the prefix (the interpreter's
 # site-packages layout), imported from outside the checkout with nothing of
 # the build tree on the path: the solver, deformer and refine tests and the
@@ -69,5 +71,6 @@ site="$(dirname "$(dirname "$module")")"
   "$python" -m pytest -q -p no:cacheprovider "$root/tests/python/test_solver.py" \
   "$root/tests/python/test_deform.py" "$root/tests/python/test_refine.py" "$root/tests/python/test_examples.py")
 
-echo "== fuzzing the readers (libFuzzer, ASan + UBSan)"
+echo "== fuzzing the readers (libFuzzer, ASan + UBSan) (${SECONDS}s since the start)"
 bash "$root/scripts/fuzz.sh"
+echo "== scripts/test.sh done in ${SECONDS}s"
