@@ -12,26 +12,20 @@ clusters; docs/deform.md, "How many clusters").
         [--clusters 10,27,50,100,200] [--qpr build/bin/qpr] [--data ../shared/data]
         [--work /tmp/qpreduce-curve] [--threads 2]
 """
-import argparse
 import json
 import os
 import sys
 
 import numpy as np
 
-from rounds_study import ROOT, read_off, run  # noqa: E402 (scripts/ is the script's own folder)
+from rounds_study import read_off, run, suite_arguments  # noqa: E402 (scripts/ is the script's own folder)
 
 CONVERGED = ["--iterations", "20000", "--tolerance", "1e-9", "--time-budget-ms", "0"]
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--models", default="cylinder,cactus,bar,bumpy_plane")
+    ap = suite_arguments(__doc__.split("\n\n")[0], "/tmp/qpreduce-curve", 2)
     ap.add_argument("--clusters", default="10,27,50,100,200")
-    ap.add_argument("--qpr", default=os.path.join(ROOT, "build", "bin", "qpr"))
-    ap.add_argument("--data", default=os.path.join(os.path.dirname(ROOT), "shared", "data"))
-    ap.add_argument("--work", default="/tmp/qpreduce-curve")
-    ap.add_argument("--threads", type=int, default=2)
     a = ap.parse_args()
     os.makedirs(a.work, exist_ok=True)
     folder = os.path.join(a.data, "meshes", "botsch-sorkine")

@@ -43,14 +43,19 @@ def run(cmd, threads):
         sys.exit("failed (%d): %s\n%s%s" % (p.returncode, " ".join(cmd), p.stdout, p.stderr))
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def suite_arguments(description, work, threads):
+    """The options the suite studies share (--models, --qpr, --data, --work, --threads)."""
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("--models", default="cylinder,cactus,bar,bumpy_plane")
     ap.add_argument("--qpr", default=os.path.join(ROOT, "build", "bin", "qpr"))
     ap.add_argument("--data", default=os.path.join(os.path.dirname(ROOT), "shared", "data"))
-    ap.add_argument("--work", default="/tmp/qpreduce-rounds")
-    ap.add_argument("--threads", type=int, default=1)
-    a = ap.parse_args()
+    ap.add_argument("--work", default=work)
+    ap.add_argument("--threads", type=int, default=threads)
+    return ap
+
+
+def main():
+    a = suite_arguments(__doc__.split("\n\n")[0], "/tmp/qpreduce-rounds", 1).parse_args()
     os.makedirs(a.work, exist_ok=True)
     folder = os.path.join(a.data, "meshes", "botsch-sorkine")
     print("| model | " + " | ".join(name for name, _ in SETTINGS) + " | rounds per frame (defaults) |")
