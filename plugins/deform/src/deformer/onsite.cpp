@@ -124,14 +124,15 @@ void set_fused(const Model& model, bool tied, int threads, FusedPrecision precis
 // column norm. A row that is an exact combination of others (a vertex held
 // twice, a group over handled vertices) leaves a pivot of round-off size;
 // rows of distinct vertices are orthogonal, so the factorization stays as
-// sparse as A even for thousands of handles. `independent`, when given,
-// receives `rank` columns of A that span the others (ascending). Only
-// called for sets the subspace solved in the least-squares sense.
+// sparse as A even for thousands of handles. `independent`: `rank` columns
+// of A that span the others (ascending). Formed once per set, and only for
+// sets the subspace solved in the least-squares sense.
 struct FullSpaceRows {
   SparseMatrix<double> A;
   Index rank = 0;
+  std::vector<Index> independent;
 };
-FullSpaceRows full_space_rows(const ConstraintLayout& layout, std::vector<Index>* independent = nullptr) {
+FullSpaceRows full_space_rows(const ConstraintLayout& layout) {
   FullSpaceRows out;
   if (layout.cols == 0) return out;
   Index rows = 0;
@@ -147,11 +148,8 @@ FullSpaceRows full_space_rows(const ConstraintLayout& layout, std::vector<Index>
   qr.compute(out.A);
   if (qr.info() != Eigen::Success) return out;
   out.rank = qr.rank();
-  if (independent) {
-    independent->clear();
-    for (Index i = 0; i < out.rank; ++i) independent->push_back(qr.colsPermutation().indices()(i));
-    std::sort(independent->begin(), independent->end());
-  }
+  for (Index i = 0; i < out.rank; ++i) out.independent.push_back(qr.colsPermutation().indices()(i));
+  std::sort(out.independent.begin(), out.independent.end());
   return out;
 }
 
@@ -178,9 +176,9 @@ Matrix<double> target_projection(const SparseMatrix<double>& A, const std::vecto
 // basis's round-off, 6·10⁻⁸ relative, times the condition then passes 1 %).
 constexpr double kSoftCondition = 1e5;
 
-std::string unreachable_reason(const ConstraintLayout& layout, const ConstraintSummary& cs) {
+std::string unreachable_reason(const FullSpaceRows& full, const ConstraintSummary& cs) {
   if (cs.status == Status::ConstraintsLeastSquares) {
-    const Index full_rank = full_space_rows(layout).rank;
+    const Index full_rank = full.rank;
     if (cs.rank >= full_rank && cs.condition > kSoftCondition) {  // dependent, and ill-conditioned in the subspace
       return fmt::format(
           "their {} constraint rows (rank {}, as in the full space) have condition {:.3g} in the subspace, above "
@@ -236,11 +234,11 @@ void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* o
 // each frame (target_projection). The rounds then step on E′ as for any
 // exact set, where the least-squares form runs uncorrected rounds that need
 // not converge. Returns false (and changes nothing) when it does not apply.
-bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, const RowMatrixD& Ar,
-                           const ConstraintOptions& options, OnSite* onsite, ConstraintSummary* cs) {
+bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, const FullSpaceRows& full,
+                           const RowMatrixD& Ar, const ConstraintOptions& options, OnSite* onsite,
+                           ConstraintSummary* cs) {
   if (cs->status != Status::ConstraintsLeastSquares || options.soft || !layout.tied.empty()) return false;
-  std::vector<Index> independent;
-  const FullSpaceRows full = full_space_rows(layout, &independent);
+  const std::vector<Index>& independent = full.independent;
   if (full.rank == 0 || full.rank >= layout.cols || cs->rank < full.rank) return false;
   RowMatrixD ArI(full.rank, Ar.cols());
   for (Index i = 0; i < full.rank; ++i) ArI.row(i) = Ar.row(independent[static_cast<size_t>(i)]);
@@ -282,10 +280,12 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   ConstraintSummary cs =
       onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
   onsite.target_projection.resize(0, 0);
+  const FullSpaceRows full =
+      cs.status == Status::ConstraintsLeastSquares ? full_space_rows(layout) : FullSpaceRows{};
   bool softened = false;
   // (Not with ties: a free Rigid patch's tie to its cluster must hold exactly.)
   if (st.settings.soften_unreachable_handles && !options.soft && layout.tied.empty()) {
-    const std::string why = unreachable_reason(layout, cs);
+    const std::string why = unreachable_reason(full, cs);
     if (!why.empty()) {
       // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
       ConstraintOptions soft = options;
@@ -321,11 +321,11 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       }
     }
   }
-  const bool reduced = !softened && reduce_dependent_rows(model, layout, Ar, options, &onsite, &cs);
+  const bool reduced = !softened && reduce_dependent_rows(model, layout, full, Ar, options, &onsite, &cs);
   // A least-squares set neither softened nor reduced to its independent rows:
   // is it the subspace's doing (a lower rank than in the full space)?
   if (cs.status == Status::ConstraintsLeastSquares && !softened && !reduced)
-    cs.beyond_subspace = cs.rank < full_space_rows(layout).rank;
+    cs.beyond_subspace = cs.rank < full.rank;
   make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
   // A softened set has at most as many rows as the subspace has coordinates
