@@ -28,7 +28,7 @@ def tube():
 
 
 def scene(V):
-    top = [(RINGS - 1) * AROUND + a for a in range(0, AROUND, AROUND // 8 if AROUND >= 8 else 1)][:8]
+    top = [(RINGS - 1) * AROUND + a for a in range(8)]
     handles = []
     for k, v in enumerate(top):
         x, y, z = V[v]
