@@ -5,7 +5,6 @@
 
 #include <fmt/format.h>
 
-#include <cmath>
 #include <stdexcept>
 
 namespace qpreduce {
@@ -24,31 +23,27 @@ constexpr Index kInterleavedMaxBytes = Index(32) << 20;
 // How far ahead (bytes) the interleaved order prefetches each row.
 constexpr Index kPrefetchBytes = 4096;
 
-void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, double scale,
-                     const Eigen::Vector3d& offset) {
+void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R) {
   if (B.rows() % 3 != 0)
     throw std::invalid_argument(
         fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
   check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
   check_finite("reconstruct_points: w", w);
   check_finite("reconstruct_points: R", R);
-  if (!std::isfinite(scale)) throw std::invalid_argument(fmt::format("reconstruct_points: scale is {}", scale));
-  check_finite("reconstruct_points: offset", offset);
 }
 
 }  // namespace
 
-void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out,
-                        double scale, const Eigen::Vector3d& offset) {
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out) {
   if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
-  check_arguments(B, w, R, scale, offset);
+  check_arguments(B, w, R);
   if (X_out->rows() != B.rows() / 3) X_out->resize(B.rows() / 3, 3);
-  reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3), scale, offset);
+  reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3));
 }
 
 void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
-                        Eigen::Map<Points3d> X_out, double scale, const Eigen::Vector3d& offset) {
-  check_arguments(B, w, R, scale, offset);
+                        Eigen::Map<Points3d> X_out) {
+  check_arguments(B, w, R);
   const Index n = B.rows() / 3, p = B.cols();
   check_size("reconstruct_points: X_out rows (B's rows / 3)", n, X_out.rows());
   const float* base = B.data();
@@ -63,7 +58,7 @@ void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Ei
     for (Index v = 0; v < n; ++v) {
       Eigen::Vector3f q;
       rows3_dot(base + 3 * v * p, q.data());
-      Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (scale * (R * q).cast<double>() + offset).transpose();
+      Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (R * q).cast<double>().transpose();
     }
   };
 #ifdef QPREDUCE_HAVE_AVX2_KERNELS

@@ -1021,10 +1021,6 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
       z.swap(gz);
     }
     const auto [reference_test, refine_test] = end_round(next);
-    // At the reference test the steps are at round-off, where the
-    // estimate's Rayleigh quotient is noise: the distance left is about the
-    // last move (as after a converged Newton solve above).
-    if (reference_test) summary.estimated_distance = summary.last_step / m.diagonal;
     // The distance test holds once the estimate has stayed within the
     // tolerance for half the rounds so far (at least kHoldRounds): early on
     // the fast modes' progress can hide a slow one from the estimate.
