@@ -325,7 +325,8 @@ void BM_ReconstructionBackToBack(benchmark::State& state, const ModelSpec* spec)
   std::vector<double> samples;
   for (auto _ : state) {
     const qpreduce::Timer t;
-    reconstruct_points(s.deformer.reconstruction_basis(), s.deformer.reduced_coordinates(), r0, &s.out);
+    reconstruct_points(s.deformer.reconstruction_basis(), s.deformer.reduced_coordinates(), r0, &s.out,
+                       s.deformer.normalization().scale, s.deformer.normalization().centre);
     const double seconds = t.seconds();
     state.SetIterationTime(seconds);
     samples.push_back(seconds);

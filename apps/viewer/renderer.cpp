@@ -27,11 +27,13 @@ namespace {
 enum Unit : int { kBasisUnit = 0, kCoordsUnit = 1, kPositionsUnit = 2, kRingOffsetsUnit = 3, kRingUnit = 4 };
 
 const char* kReconstructVs = R"(#version 330 core
-// p_v = r0 · (B[3v .. 3v+2, :] · w), B stored as `texels` RGBA texels per row.
+// p_v = centre + r0 · (B[3v .. 3v+2, :] · w), B stored as `texels` RGBA texels
+// per row; r0 carries the normalisation's scale (Deformer::normalization).
 uniform samplerBuffer basis;
 uniform samplerBuffer coords;
 uniform int texels;
 uniform mat3 r0;
+uniform vec3 centre;
 out vec4 position;
 void main() {
   int row = 3 * gl_VertexID * texels;
@@ -42,7 +44,7 @@ void main() {
     p.y += dot(texelFetch(basis, row + texels + k), w);
     p.z += dot(texelFetch(basis, row + 2 * texels + k), w);
   }
-  position = vec4(r0 * p, 1.0);
+  position = vec4(centre + r0 * p, 1.0);
 }
 )";
 
@@ -432,7 +434,7 @@ bool MeshRenderer::upload_basis(const RowMatrixF& B, std::string* why) {
   return true;
 }
 
-void MeshRenderer::reconstruct_gpu(const Eigen::VectorXf& w, const Eigen::Matrix3f& r0) {
+void MeshRenderer::reconstruct_gpu(const Eigen::VectorXf& w, const Eigen::Matrix3f& r0, const Eigen::Vector3f& centre) {
   if (!has_basis()) throw std::logic_error("reconstruct_gpu: no basis uploaded");
   if (w.size() > static_cast<Eigen::Index>(w_padded_.size()) || w.size() + 4 <= static_cast<Eigen::Index>(w_padded_.size()))
     throw std::invalid_argument(fmt::format("reconstruct_gpu: expected {} reduced coordinates, got {}",
@@ -452,6 +454,7 @@ void MeshRenderer::reconstruct_gpu(const Eigen::VectorXf& w, const Eigen::Matrix
   glUniform1i(uniform(reconstruct_prog_, "coords"), kCoordsUnit);
   glUniform1i(uniform(reconstruct_prog_, "texels"), basis_texels_);
   glUniformMatrix3fv(uniform(reconstruct_prog_, "r0"), 1, GL_FALSE, r0.data());
+  glUniform3fv(uniform(reconstruct_prog_, "centre"), 1, centre.data());
   glBindBufferBase(GL_TRANSFORM_FEEDBACK_BUFFER, 0, position_buf_);
   glBeginTransformFeedback(GL_POINTS);
   glDrawArrays(GL_POINTS, 0, static_cast<GLsizei>(n_));

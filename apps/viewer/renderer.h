@@ -88,8 +88,9 @@ class MeshRenderer {
   // then uses the CPU path. Throws std::invalid_argument when B has not 3n rows.
   bool upload_basis(const RowMatrixF& B, std::string* why);
   bool has_basis() const { return basis_texels_ > 0; }
-  // Positions and normals from w (p entries) and r₀, computed on the GPU.
-  void reconstruct_gpu(const Eigen::VectorXf& w, const Eigen::Matrix3f& r0);
+  // Positions c + M·(B_v·w) and normals from w (p entries), M (σ·r₀) and c
+  // (Deformer::normalization), computed on the GPU.
+  void reconstruct_gpu(const Eigen::VectorXf& w, const Eigen::Matrix3f& M, const Eigen::Vector3f& centre);
 
   // ---- CPU path ----
   // Uploads V (n × 3) and normals computed on the CPU.

@@ -279,7 +279,9 @@ FrameStats Session::step(MeshRenderer* renderer) {
   if (path_ == Reconstruction::Gpu) {
     rounds(deformer_->frame(targets_, nullptr));
     const Timer t;
-    renderer->reconstruct_gpu(deformer_->reduced_coordinates(), deformer_->global_rotation().cast<float>());
+    const auto& frame = deformer_->normalization();
+    renderer->reconstruct_gpu(deformer_->reduced_coordinates(),
+                              (frame.scale * deformer_->global_rotation()).cast<float>(), frame.centre.cast<float>());
     glFinish();  // honest timing: wait for the GPU
     stats.reconstruction_ms = 1e3 * t.seconds();
   } else {
@@ -323,7 +325,9 @@ Vertices Session::cpu_reconstruction() const {
   const Eigen::VectorXd w = deformer_->reduced_coordinates().cast<double>();
   const Eigen::VectorXd flat = B.cast<double>() * w;
   Vertices V(B.rows() / 3, 3);
-  for (Index v = 0; v < V.rows(); ++v) V.row(v) = (deformer_->global_rotation() * flat.segment<3>(3 * v)).transpose();
+  const auto& frame = deformer_->normalization();
+  const Eigen::Matrix3d M = frame.scale * deformer_->global_rotation();
+  for (Index v = 0; v < V.rows(); ++v) V.row(v) = (frame.centre + M * flat.segment<3>(3 * v)).transpose();
   return V;
 }
 

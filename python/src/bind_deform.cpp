@@ -501,7 +501,17 @@ void bind_deformer_class(py::module_& m) {
             return Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>(
                 s.deformer.reconstruction_basis());
           },
-          "A copy of B = P·[N UD] (3n, p) float32: V′ = r₀·(B·w) (for a GPU reconstruction).")
+          "A copy of B = P·[N UD] (3n, p) float32 in the normalised frame: V′ = c + σ·r₀·(B·w) with (c, σ) = "
+          "normalization (for a GPU reconstruction).")
+      .def_property_readonly(
+          "normalization",
+          [](PyDeformer& s) {
+            const auto lock = s.lock();
+            const auto& f = s.deformer.normalization();
+            return py::make_tuple(Eigen::Vector3d(f.centre), f.scale);
+          },
+          "(centre (3,) float64, scale): the deformer computes on (V − centre)/scale, scale the rest pose's "
+          "bounding-box diagonal, so that no result depends on the mesh's units.")
       .def_property_readonly(
           "reduced_coordinates",
           [](PyDeformer& s) { return s.lock(), Eigen::VectorXf(s.deformer.reduced_coordinates()); },

@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <stdexcept>
 
 namespace qpreduce {
@@ -23,27 +24,31 @@ constexpr Index kInterleavedMaxBytes = Index(32) << 20;
 // How far ahead (bytes) the interleaved order prefetches each row.
 constexpr Index kPrefetchBytes = 4096;
 
-void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R) {
+void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, double scale,
+                     const Eigen::Vector3d& offset) {
   if (B.rows() % 3 != 0)
     throw std::invalid_argument(
         fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
   check_size("reconstruct_points: w size (B's columns)", B.cols(), w.size());
   check_finite("reconstruct_points: w", w);
   check_finite("reconstruct_points: R", R);
+  if (!std::isfinite(scale)) throw std::invalid_argument(fmt::format("reconstruct_points: scale is {}", scale));
+  check_finite("reconstruct_points: offset", offset);
 }
 
 }  // namespace
 
-void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out) {
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out,
+                        double scale, const Eigen::Vector3d& offset) {
   if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
-  check_arguments(B, w, R);
+  check_arguments(B, w, R, scale, offset);
   if (X_out->rows() != B.rows() / 3) X_out->resize(B.rows() / 3, 3);
-  reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3));
+  reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3), scale, offset);
 }
 
 void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
-                        Eigen::Map<Points3d> X_out) {
-  check_arguments(B, w, R);
+                        Eigen::Map<Points3d> X_out, double scale, const Eigen::Vector3d& offset) {
+  check_arguments(B, w, R, scale, offset);
   const Index n = B.rows() / 3, p = B.cols();
   check_size("reconstruct_points: X_out rows (B's rows / 3)", n, X_out.rows());
   const float* base = B.data();
@@ -58,7 +63,7 @@ void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Ei
     for (Index v = 0; v < n; ++v) {
       Eigen::Vector3f q;
       rows3_dot(base + 3 * v * p, q.data());
-      Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (R * q).cast<double>().transpose();
+      Eigen::Map<Eigen::RowVector3d>(out + 3 * v) = (scale * (R * q).cast<double>() + offset).transpose();
     }
   };
 #ifdef QPREDUCE_HAVE_AVX2_KERNELS

@@ -2,7 +2,7 @@
 """Every numeric option of every qpr subcommand states its range and refuses
 what lies outside it (docs/robustness.md).
 
-    option_ranges.py QPR
+    option_ranges.py QPR [--sample]
 
 Generated from the command-line definitions: `qpr CMD --help` shows each
 numeric option's type with its range in interval notation ("INT:[1, 10000]",
@@ -12,6 +12,11 @@ in, values just below its minimum and above its maximum (when finite), NaN,
 ±infinity, an overflowing literal, a fraction for whole numbers and text:
 each must end qpr with CLI11's option-check exit code (105) and a message
 naming the option, before any work starts.
+
+--sample (the sanitizer build, where each start of qpr costs ~0.5 s) gives
+each option the first two of its values: NaN and, for a finite range, the
+nearest value outside it (else infinity). The parsing code is the same for
+every value; the Release build runs the whole set.
 """
 import math
 import re
@@ -54,23 +59,27 @@ def hostile_values(kind, interval):
         return None
     lo_open, lo, hi, hi_open = m.group(1) == "(", float(m.group(2)), float(m.group(3)), m.group(4) == ")"
     whole = kind in ("INT", "UINT")
-    values = ["nan", "inf", "-inf", "1e999", "abc", "3x"]
+    outside = []
     if whole:
-        values.append("1.5")
         if math.isfinite(lo):
-            values.append(str(int(lo) - 1))
+            outside.append(str(int(lo) - 1))
         if math.isfinite(hi):
-            values.append(str(int(hi) + 1))
+            outside.append(str(int(hi) + 1))
     else:
         if math.isfinite(lo):
-            values.append(repr(lo) if lo_open else repr(lo - max(abs(lo) * 1e-3, 1e-9)))
+            outside.append(repr(lo) if lo_open else repr(lo - max(abs(lo) * 1e-3, 1e-9)))
         if math.isfinite(hi):
-            values.append(repr(hi) if hi_open else repr(hi + max(abs(hi) * 1e-3, 1e-9)))
-    return values
+            outside.append(repr(hi) if hi_open else repr(hi + max(abs(hi) * 1e-3, 1e-9)))
+    # The order matters for --sample: NaN and the nearest value outside first.
+    values = ["nan", *(outside or ["inf"]), "inf", "-inf", "1e999", "abc", "3x", *outside]
+    if whole:
+        values.append("1.5")
+    return list(dict.fromkeys(values))
 
 
 def main(argv):
-    if len(argv) != 2:
+    sample = "--sample" in argv[2:]
+    if len(argv) not in (2, 3) or (len(argv) == 3 and not sample):
         sys.exit(__doc__)
     qpr = argv[1]
     problems, tried = [], 0
@@ -84,7 +93,7 @@ def main(argv):
                 problems.append(f"qpr {cmd} {option} ({kind}) shows no range in --help: add a check "
                                 f"(apps/qpr/validators.h)")
                 continue
-            for v in values:
+            for v in values[:2] if sample else values:
                 tried += 1
                 p = subprocess.run([qpr, cmd, *REQUIRED.get(cmd, []), f"{option}={v}"], capture_output=True,
                                    text=True, timeout=60)

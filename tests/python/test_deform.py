@@ -156,6 +156,21 @@ def test_frame_into_out_equals_a_new_array_bit_for_bit():
         assert np.array_equal(out, fresh)
 
 
+def test_the_reconstruction_basis_gives_the_frame_through_the_normalization():
+    deformer, scenario = make_deformer()
+    V = deformer.frame(scenario.frames[-1])
+    centre, scale = deformer.normalization
+    rest = scenario.model.V
+    lo, hi = rest.min(axis=0), rest.max(axis=0)
+    assert np.allclose(centre, 0.5 * (lo + hi), rtol=0, atol=1e-12 * np.abs(rest).max())
+    assert math.isclose(scale, np.linalg.norm(hi - lo), rel_tol=1e-12)
+    B = deformer.reconstruction_basis.astype(np.float64)
+    w = deformer.reduced_coordinates.astype(np.float64)
+    mine = centre + scale * (B @ w).reshape(-1, 3) @ deformer.global_rotation.T
+    # Float basis and coordinates: p products of size ~1 in the unit frame.
+    assert np.abs(mine - V).max() <= 10 * w.size * FLOAT_EPS * scale
+
+
 def test_frames_hold_the_handles_and_report_the_quality_readout():
     deformer, scenario = make_deformer()
     for targets in scenario.frames:

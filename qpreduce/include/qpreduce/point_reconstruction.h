@@ -5,11 +5,13 @@
 // coordinates of point v are X's entries 3v, 3v + 1, 3v + 2) and a global
 // rotation R applied after it (Appendix, global rotation adaptation):
 //
-//   X_out.row(v) = (R · B.middleRows<3>(3v) · w)ᵀ        v = 0 … n − 1
+//   X_out.row(v) = (scale · R · B.middleRows<3>(3v) · w + offset)ᵀ   v = 0 … n − 1
 //
 //   B      3n × p   float, row-major (each point's three rows contiguous)
 //   w      p        float, the reduced coordinates [z; y]
 //   R      3 × 3    float
+//   scale, offset    a map back from a normalised frame (Deformer::
+//                    normalization), applied in double; 1 and 0 by default
 //   X_out  n × 3    double, row-major (resized when its row count differs;
 //                   the Map overload writes into the caller's n × 3 buffer,
 //                   which must have n rows)
@@ -21,7 +23,8 @@
 // order p·2⁻²⁴·Σ|B_aj·w_j|.
 //
 // Preconditions (std::invalid_argument otherwise, naming the argument):
-// B.rows() divisible by 3; w.size() == B.cols(); w and R finite. B's entries
+// B.rows() divisible by 3; w.size() == B.cols(); w, R, scale and offset
+// finite. B's entries
 // are not scanned (O(n·p) per call); a non-finite B gives non-finite points.
 #pragma once
 
@@ -32,8 +35,10 @@ namespace qpreduce {
 using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using Points3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
 
-void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out);
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out,
+                        double scale = 1.0, const Eigen::Vector3d& offset = Eigen::Vector3d::Zero());
 void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
-                        Eigen::Map<Points3d> X_out);
+                        Eigen::Map<Points3d> X_out, double scale = 1.0,
+                        const Eigen::Vector3d& offset = Eigen::Vector3d::Zero());
 
 }  // namespace qpreduce

@@ -150,7 +150,11 @@ TEST_CASE("refine: the default stop is within its estimate of the converged shap
     const double rms = rms_distance(out, converged) / diag;
     CAPTURE(rms);
     CHECK(rms <= options.distance_tolerance);
-    CHECK(s.estimated_distance >= 0.5 * rms);  // the estimate does not claim much less than the distance
+    // The estimate does not claim much less than the distance, down to the
+    // round-off where `converged` itself stopped (its reference test: moves
+    // below 1e-10 of the diagonal); a run that also ends there is as close
+    // as the comparison can tell.
+    CHECK((s.estimated_distance >= 0.5 * rms || rms <= 1e-9));
   }
   options.distance_tolerance = -1.0;
   CHECK_THROWS_WITH(refiner.set_options(options), Catch::Contains("distance_tolerance must be finite and ≥ 0"));

@@ -1,6 +1,6 @@
 // Deformer::save / Deformer::load — the precomputed model on disk.
 //
-// Layout (little-endian, version 4; docs/formats.md):
+// Layout (little-endian, version 5; docs/formats.md):
 //   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
 //   payload  records in a fixed order (below): integers as i64, labels as i32,
 //            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
@@ -46,7 +46,7 @@ using detail_deformer::Model;
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
 // 2: the model's name and parameters, Q kept or not; 3: the rotation step;
 // 4: the float basis in row blocks instead of the double N, UD
-constexpr std::uint32_t kVersion = 4;
+constexpr std::uint32_t kVersion = 5;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
 constexpr std::streamoff kTrailerBytes = 8 + 4;
@@ -510,10 +510,12 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& 
   Reader r(path);
   auto st = std::make_unique<State>();
   Model& model = st->model;
-  model.set_topology(mesh);
+  model.frame = normalization_of(mesh.V);
+  const DeformableMesh local = normalised(mesh, model.frame);
+  model.set_topology(local);
   st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
-  read_inputs(r, path, mesh, options, model);
-  read_results(r, path, mesh, options, model);
+  read_inputs(r, path, local, options, model);
+  read_results(r, path, local, options, model);
   st->finish(options);
   state_ = std::move(st);
   reset_pose();

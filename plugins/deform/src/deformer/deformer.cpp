@@ -74,7 +74,7 @@ Index Deformer::patch_count() const { return state_->model.s; }
 Index Deformer::handle_rows() const { return state_->onsite.rows; }
 const std::vector<int>& Deformer::clusters() const { return state_->model.clusters; }
 const std::vector<int>& Deformer::patch_of_vertex() const { return state_->model.patch_of_vertex; }
-const RotationElements& Deformer::elements() const { return state_->model.elements; }
+const RotationElements& Deformer::elements() const { return state_->model.given_elements; }
 const Eigen::VectorXd& Deformer::rotations() const { return state_->pose.S; }
 Eigen::VectorXd Deformer::cluster_scales() const {
   const Index d = state_->model.d;
@@ -96,7 +96,15 @@ Eigen::Matrix<double, 3, 4> Deformer::patch_transform(Index p) const {
     for (int c = 0; c < 3; ++c) T(a, c) = pose.x(base + 3 * a + c);
     T(a, 3) = pose.x(base + 9 + a);
   }
-  return pose.r0 * T;
+  // [A | t] in the normalised frame maps x to σ·(A·(x − c)/σ + t) + c.
+  const Normalization& f = model.frame;
+  T = pose.r0 * T;
+  T.col(3) = f.scale * T.col(3) + f.centre - T.leftCols<3>() * f.centre;
+  return T;
+}
+const Deformer::Normalization& Deformer::normalization() const {
+  static const Normalization identity;
+  return state_ ? state_->model.frame : identity;
 }
 const Eigen::Matrix3d& Deformer::global_rotation() const { return state_->pose.r0; }
 const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis() const {

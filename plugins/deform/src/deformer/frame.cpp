@@ -72,17 +72,21 @@ Eigen::Matrix3d global_rotation_of(const Model& model, const Eigen::VectorXd& S,
   return fit_rotation(G);
 }
 
-// b in the frame rotated by r₀ᵀ: the point targets, the Fixed patches at
-// rest, then the prescribed patches' transforms (the ties' rows stay zero).
+// b in the normalised frame (Deformer::Normalization: x̂ = (x − c)/σ) rotated
+// by r₀ᵀ: the point targets, the Fixed patches at rest, then the prescribed
+// patches' transforms, x ↦ A·x + t becoming x̂ ↦ A·x̂ + (A·c + t − c)/σ (the
+// ties' rows stay zero).
 void fill_targets(const Model& model, const HandleTargets& targets, const Eigen::Matrix3d& r0t, Eigen::VectorXd* b) {
+  const Eigen::Vector3d& c = model.frame.centre;
+  const double inv_scale = 1.0 / model.frame.scale;
   Index row = 0;
   for (Index h = 0; h < targets.points.rows(); ++h) {
-    b->segment<3>(row) = r0t * targets.points.row(h).transpose();
+    b->segment<3>(row) = r0t * ((targets.points.row(h).transpose() - c) * inv_scale);
     row += 3;
   }
   auto put_patch = [&](const Eigen::Matrix<double, 3, 4>& T) {
     const Eigen::Matrix3d A = r0t * T.leftCols<3>();
-    const Eigen::Vector3d tr = r0t * T.col(3);
+    const Eigen::Vector3d tr = r0t * ((T.leftCols<3>() * c + T.col(3) - c) * inv_scale);
     for (int a = 0; a < 3; ++a)
       for (int c = 0; c < 3; ++c) (*b)(row + 3 * a + c) = A(a, c);
     b->segment<3>(row + 9) = tr;
@@ -154,7 +158,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   summary.stop = as.stop;
   summary.last_change = as.last_change;
   summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
-  summary.model_energy = as.energy;
+  summary.model_energy = as.energy * model.energy_unit;
   summary.rejected_steps = as.rejected;
   summary.second_order = as.second_order;
   if (!onsite.plain_reason.empty() && st.settings.alternating.anderson_window > 0) {
@@ -185,7 +189,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
     summary.total_seconds = total.seconds();
     return summary;
   }
-  reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out);
+  reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out, model.frame.scale, model.frame.centre);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds = total.seconds();
   return summary;
@@ -195,7 +199,9 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Eigen::Map<Vertices> 
   if (state_->ready) check_size("Deformer::frame: out rows (vertices)", state_->model.n, out.rows());
   FrameSummary summary = frame(targets, nullptr);
   const Timer t;
-  reconstruct_points(state_->model.basis, state_->pose.wf, state_->pose.r0.cast<float>(), out);
+  const Model& model = state_->model;
+  reconstruct_points(model.basis, state_->pose.wf, state_->pose.r0.cast<float>(), out, model.frame.scale,
+                     model.frame.centre);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds += summary.reconstruct_seconds;
   return summary;

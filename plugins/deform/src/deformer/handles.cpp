@@ -7,9 +7,48 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 
 namespace qpreduce::deform {
+
+Normalization normalization_of(const Vertices& V) {
+  Normalization frame;
+  if (V.rows() == 0 || !V.allFinite()) return frame;
+  const Eigen::RowVector3d lo = V.colwise().minCoeff(), hi = V.colwise().maxCoeff();
+  const double diagonal = (hi - lo).stableNorm();  // no overflow near the largest doubles
+  if (!(diagonal > 0.0) || !std::isfinite(diagonal)) return frame;
+  frame.centre = (0.5 * lo + 0.5 * hi).transpose();
+  frame.scale = diagonal;
+  return frame;
+}
+
+DeformableMesh normalised(const DeformableMesh& mesh, const Normalization& frame) {
+  DeformableMesh out = mesh;
+  out.V = (mesh.V.rowwise() - frame.centre.transpose()) / frame.scale;
+  return out;
+}
+
+double energy_unit(const Normalization& frame, bool tet) {
+  return tet ? frame.scale * frame.scale * frame.scale : frame.scale * frame.scale;
+}
+
+RotationElements in_given_units(RotationElements elements, const Normalization& frame) {
+  if (!elements.is_surface) {
+    for (double& w : elements.weight) w *= frame.scale;
+  }
+  elements.measure *= elements.is_surface ? frame.scale * frame.scale : frame.scale * frame.scale * frame.scale;
+  return elements;
+}
+
+HandleTargets normalised(const HandleTargets& targets, const Normalization& frame) {
+  HandleTargets out = targets;
+  out.points = (targets.points.rowwise() - frame.centre.transpose()) / frame.scale;
+  for (auto& T : out.patch_transforms) {
+    T.col(3) = (T.leftCols<3>() * frame.centre + T.col(3) - frame.centre) / frame.scale;
+  }
+  return out;
+}
 
 double handle_residual(const DeformableMesh& m, const Handles& handles, const HandleTargets& targets,
                        const Eigen::Ref<const Vertices>& deformed) {

@@ -862,7 +862,10 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
   Model& model = st->model;
   PrecomputeSummary summary;
   Assembled as;
-  if (!assemble(mesh, options, progress, model, &st->inputs, &summary, &as, partition, sum)) return summary;
+  const Normalization frame = normalization_of(mesh.V);
+  const DeformableMesh local = normalised(mesh, frame);
+  if (!assemble(local, options, progress, model, &st->inputs, &summary, &as, partition, sum)) return summary;
+  model.frame = frame;
 
   report("subspace", 0.2);
   // The assembly's freed temporaries (about 300 MB on the Bumpy Plane) would

@@ -284,6 +284,8 @@ void describe(const Model& model, PrecomputeSummary* summary) {
 
 void Deformer::State::finish(const DeformerOptions& options) {
   model.finish_reduction();
+  model.given_elements = in_given_units(model.elements, model.frame);
+  model.energy_unit = energy_unit(model.frame, !model.elements.is_surface);
   const Index d = model.d, nx = model.nx;
   pose.S.resize(9 * d);
   pose.x = Eigen::VectorXd::Zero(nx);

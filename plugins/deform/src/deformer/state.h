@@ -54,6 +54,9 @@ struct Inputs {
 
 // What precompute (or load) builds; constant afterwards.
 struct Model {
+  Normalization frame;              // rest = (V − c)/σ (normalization_of the given V)
+  RotationElements given_elements;  // `elements` in the given units (Deformer::elements)
+  double energy_unit = 1.0;         // an energy of the frame times this is in the given units
   // Topology (set_topology).
   Vertices rest;
   RotationElements elements;

@@ -704,6 +704,12 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G) {
   // roots). Scaling by ‖G‖ rather than ∛det G costs no cube root and makes
   // the same test the bound.
   const double norm = G.norm();
+  // The polar factor of c·G (c > 0) is that of G: a G of extreme magnitude
+  // (a covariance of a mesh in light-years or nanometres, up to ‖G‖⁴ below)
+  // is scaled by a power of two first, exactly, so nothing overflows or
+  // underflows.
+  if (std::isfinite(norm) && norm > 0.0 && (norm > 1e50 || norm < 1e-50))
+    return fit_rotation(std::ldexp(1.0, -std::ilogb(norm)) * G);
   const double det = G.determinant();
   if (!(det > kSingularDet * norm * norm * norm)) return fit_rotation_svd(G);
   const Eigen::Matrix3d M = G.transpose() * G;

@@ -255,13 +255,10 @@ void read_ceres_summary(const ceres::Solver::Summary& cs, bool finite, Reference
   }
 }
 
-}  // namespace
-
-bool has_ceres_reference() { return true; }
-
-ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
-                                       const HandleTargets& targets, const ReferenceOptions& options,
-                                       ReferenceSolution* out, const Vertices& initial) {
+// The solve in the frame solve_ceres_reference gives it.
+ReferenceSummary solve_ceres_in_frame(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
+                                      const ReferenceOptions& options, ReferenceSolution* out,
+                                      const Vertices& initial) {
   const Timer setup;
   const PreparedModel m = detail_reference::prepare_model(model, options);
   detail_reference::check_handles(m, handles);
@@ -321,6 +318,23 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
   if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
   summary.handle_residual = handle_residual(targets_model, handles, targets, out->V);
   return summary;
+}
+
+}  // namespace
+
+bool has_ceres_reference() { return true; }
+
+ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handles& handles,
+                                       const HandleTargets& targets, const ReferenceOptions& options,
+                                       ReferenceSolution* out, const Vertices& initial) {
+  // In the units-free frame (reference_internal.h): Ceres' gradient
+  // tolerance, for one, is absolute.
+  return detail_reference::solve_in_frame(model, targets, initial, out,
+                                          [&](const DeformableMesh& local_model, const HandleTargets& local_targets,
+                                              const Vertices& local_initial, ReferenceSolution* local_out) {
+                                            return solve_ceres_in_frame(local_model, handles, local_targets, options,
+                                                                        local_out, local_initial);
+                                          });
 }
 
 }  // namespace qpreduce::deform

@@ -1021,6 +1021,10 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
       z.swap(gz);
     }
     const auto [reference_test, refine_test] = end_round(next);
+    // At the reference test the steps are at round-off, where the
+    // estimate's Rayleigh quotient is noise: the distance left is about the
+    // last move (as after a converged Newton solve above).
+    if (reference_test) summary.estimated_distance = summary.last_step / m.diagonal;
     // The distance test holds once the estimate has stayed within the
     // tolerance for half the rounds so far (at least kHoldRounds): early on
     // the fast modes' progress can hide a slow one from the estimate.
@@ -1081,21 +1085,26 @@ const ReferenceOptions& LocalGlobalArap::options() const { return state_->option
 ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial) {
-  const Timer setup;
-  LocalGlobalArap lg;
-  lg.precompute(model, options);
-  const HandleSetSummary hs = lg.set_handles(handles);
-  ReferenceSummary summary;
-  if (!hs.ok()) {
-    summary.status = hs.status;
-    summary.message = hs.message;
-    summary.setup_seconds = setup.seconds();
+  // In the units-free frame (reference_internal.h), as the Refiner.
+  const auto solve = [&](const DeformableMesh& local_model, const HandleTargets& local_targets,
+                         const Vertices& local_initial, ReferenceSolution* local_out) {
+    const Timer setup;
+    LocalGlobalArap lg;
+    lg.precompute(local_model, options);
+    const HandleSetSummary hs = lg.set_handles(handles);
+    ReferenceSummary summary;
+    if (!hs.ok()) {
+      summary.status = hs.status;
+      summary.message = hs.message;
+      summary.setup_seconds = setup.seconds();
+      return summary;
+    }
+    const double setup_seconds = setup.seconds();
+    summary = lg.solve(local_targets, local_out, local_initial);
+    summary.setup_seconds = setup_seconds;
     return summary;
-  }
-  const double setup_seconds = setup.seconds();
-  summary = lg.solve(targets, out, initial);
-  summary.setup_seconds = setup_seconds;
-  return summary;
+  };
+  return detail_reference::solve_in_frame(model, targets, initial, out, solve);
 }
 
 }  // namespace qpreduce::deform

@@ -7,6 +7,7 @@
 #include <qpreduce/anderson.h>
 #include <qpreduce/support.h>
 
+#include "qpreduce/deform/deformer/handles.h"
 #include "qpreduce/deform/mesh/mesh.h"
 
 #include <Eigen/Dense>
@@ -160,6 +161,23 @@ double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& V
   return kind == ReferenceEnergy::ClassicArap
              ? arap_energy(m.V, m.elements, Vp)
              : modified_arap_energy(m.V, m.elements, m.clusters, m.parameters, Vp, Q, S);
+}
+
+ReferenceSummary solve_in_frame(const DeformableMesh& model, const HandleTargets& targets, const Vertices& initial,
+                                ReferenceSolution* out, const FrameSolve& solve) {
+  if (out == nullptr) throw std::invalid_argument("reference: out is null");
+  const Normalization f = normalization_of(model.V);
+  const Vertices local_initial =
+      initial.size() > 0 ? Vertices((initial.rowwise() - f.centre.transpose()) / f.scale) : Vertices();
+  ReferenceSummary s = solve(normalised(model, f), normalised(targets, f), local_initial, out);
+  if (out->V.size() > 0) out->V = (out->V * f.scale).rowwise() + f.centre.transpose();
+  const double unit = energy_unit(f, model.is_tet());
+  s.initial_energy *= unit;
+  s.energy *= unit;
+  for (double& e : s.round_energy) e *= unit;
+  s.handle_residual *= f.scale;
+  s.last_step *= f.scale;
+  return s;
 }
 
 }  // namespace detail_reference

@@ -5,6 +5,7 @@
 #include "qpreduce/deform/mesh/geometry.h"
 #include "qpreduce/deform/reference/reference.h"
 
+#include <functional>
 #include <vector>
 
 namespace qpreduce::deform::detail_reference {
@@ -56,5 +57,14 @@ void rotations_to_world(const Eigen::Matrix3d& frame, Eigen::VectorXd* S);
 // Energy of a pose in the solve frame: arap_energy (classic) or E′.
 double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& Vp, const Eigen::VectorXd& Q,
                  const Eigen::VectorXd& S);
+
+// Runs `solve` on the scene in the units-free frame of the rest pose
+// (handles.h: centred, unit bounding-box diagonal) and maps its result to
+// the given units: out->V, the energies, the handle residual and the last
+// step. `initial` may be empty (the rest pose).
+using FrameSolve = std::function<ReferenceSummary(const DeformableMesh& model, const HandleTargets& targets,
+                                                  const Vertices& initial, ReferenceSolution* out)>;
+ReferenceSummary solve_in_frame(const DeformableMesh& model, const HandleTargets& targets, const Vertices& initial,
+                                ReferenceSolution* out, const FrameSolve& solve);
 
 }  // namespace qpreduce::deform::detail_reference

@@ -292,8 +292,8 @@ class Deformer {
   // One frame: alternation warm-started from the previous frame, then
   // reconstruction into *out (n × 3, resized once). With out == nullptr the
   // reconstruction is left to the caller (e.g. a GPU, paper Fig. 5 step 5):
-  // V′ = r₀·(B·w) with B = reconstruction_basis(), w = reduced_coordinates(),
-  // r₀ = global_rotation().
+  // V′ = c + σ·r₀·(B·w) with B = reconstruction_basis(), w =
+  // reduced_coordinates(), r₀ = global_rotation(), (c, σ) = normalization().
   // When the rounds produce NaN or infinities the summary says
   // Status::NumericalFailure and the pose stays the last good one: *out is
   // not written, rotations(), reduced_coordinates() and global_rotation()
@@ -342,13 +342,24 @@ class Deformer {
   // The model in use (name(), parameters()); null before precompute.
   const std::shared_ptr<const DeformationModel>& model() const;
   const Eigen::Matrix3d& global_rotation() const;
+  // The frame the deformer computes in: the rest pose minus the centre c of
+  // its bounding box, divided by σ, the box's diagonal. Every length, energy
+  // and condition inside (and the automatic proxies) is then free of the
+  // mesh's units, and a model in millimetres or light-years gets the same
+  // pose (docs/robustness.md, "Units"). Targets
+  // are mapped in and the pose out (frame, patch_transform); what stays in
+  // this frame: reconstruction_basis(), reduced_coordinates() (V′ = c +
+  // σ·r₀·(B·w)) and the rows of a saved cache.
+  using Normalization = deform::Normalization;  // handles.h
+  const Normalization& normalization() const;
   // The reconstruction basis B = P·[N UD] in float, 3n × p row-major with
-  // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v.
+  // p = 3m + 12s + 9d: row 3v + a gives coordinate a (x, y, z) of vertex v
+  // in the normalised frame (normalization()).
   // Empty before precompute, and after precompute_part with more than one
   // process (its rows basis_rows() come from basis_block).
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
   // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
-  // and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
+  // (normalised, normalization()) and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
   // cluster, each 3 × 3 column-major). Valid after the first frame().
   const Eigen::VectorXf& reduced_coordinates() const;
 

@@ -3,6 +3,7 @@
 // one frame.
 #pragma once
 
+#include "qpreduce/deform/energy/arap_energy.h"
 #include "qpreduce/deform/mesh/mesh.h"
 #include "qpreduce/deform/proxies/proxies.h"
 
@@ -59,6 +60,31 @@ struct HandleTargets {
   // One per prescribed patch: p ↦ A·p + t, stored as [A | t] (3 × 4).
   std::vector<Eigen::Matrix<double, 3, 4>> patch_transforms;
 };
+
+// A frame free of the mesh's units (Deformer::normalization, Refiner): a
+// point x is x̂ = (x − centre)/scale there, with centre the middle of the
+// rest pose's bounding box and scale its diagonal.
+struct Normalization {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  double scale = 1.0;
+};
+// The frame of rest positions V (n × 3); the identity frame (centre 0, scale
+// 1) when V is empty, not finite or a single point (the mesh checks then
+// refuse it with their own words).
+Normalization normalization_of(const Vertices& V);
+// `mesh` with V̂ = (V − centre)/scale, everything else as given.
+DeformableMesh normalised(const DeformableMesh& mesh, const Normalization& frame);
+// What a length-dependent quantity of the frame is in the given units:
+// classic ARAP and E′ energies are homogeneous in the lengths, of degree 2
+// on triangles (cotangent weights have no unit) and 3 on tets (weights are
+// lengths): an energy of the frame times energy_unit is in the given units.
+double energy_unit(const Normalization& frame, bool tet);
+// Rotation elements built on the normalised rest pose, in the given units
+// (weights × σ on tets, measures × σ² or σ³, normals as they are).
+RotationElements in_given_units(RotationElements elements, const Normalization& frame);
+// `targets` in the frame: points x̂ = (x − centre)/scale, patch transforms
+// x ↦ A·x + t as x̂ ↦ A·x̂ + (A·centre + t − centre)/scale.
+HandleTargets normalised(const HandleTargets& targets, const Normalization& frame);
 
 // Largest distance between where the handles are in `deformed` (n × 3) and
 // where `targets` put them: point handles by their weighted point, patch

@@ -250,13 +250,19 @@ class LocalGlobalArap {
 // One-off local-global solve: LocalGlobalArap's precompute(model, options),
 // set_handles(handles) and solve(targets, out, initial), with their inputs,
 // outputs and errors. A failed set_handles comes back as the summary's status.
+// It runs on the rest pose centred and scaled to a unit bounding-box
+// diagonal (normalization_of, handles.h) and reports the pose, energies,
+// handle residual and last step in the given units: a scene scaled by any
+// power of ten gives the same answer scaled.
 ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial = {});
 
 // Ceres full-space minimiser of the chosen energy, as a sum of squared
 // residuals that equals it exactly (docs/deform.md, "The Ceres residuals").
-// Constrained vertices are constant parameter blocks.
+// Constrained vertices are constant parameter blocks. Like
+// solve_local_global it runs in the units-free frame (so Ceres' absolute
+// gradient tolerance is relative to the mesh) and reports in the given units.
 //   model, handles, targets, options, initial  as for solve_local_global
 //   out  V (n × 3), the rotations and, for E′, Q (ReferenceSolution)
 // Throws std::invalid_argument on the unsupported constraints named above
