@@ -21,10 +21,11 @@ ctest --test-dir "$root/build" --output-on-failure -j "$jobs"
 
 echo "== tests (ASan + UBSan) (${SECONDS}s since the start)"
 # -O1 -g1: line tables for the reports at less compile time than -O2 -g
-# (NDEBUG as in RelWithDebInfo: the sanitizers check, not Eigen's asserts).
+# (NDEBUG as in RelWithDebInfo: the sanitizers check, not Eigen's asserts);
+# a unity build, as scripts/build.sh.
 cmake -S "$root" -B "$root/build-asan" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-  -DQPREDUCE_SANITIZE=ON \
+  -DQPREDUCE_SANITIZE=ON -DCMAKE_UNITY_BUILD=ON \
   -DQPREDUCE_BUILD_BENCH=OFF -DQPREDUCE_BUILD_EXAMPLES=OFF >/dev/null
 cmake --build "$root/build-asan" -j "$jobs"
 echo "   (the sanitizer build done at ${SECONDS}s)"

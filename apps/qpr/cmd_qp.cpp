@@ -69,11 +69,11 @@ using Vec = qpreduce::Vector<double>;
 using json = nlohmann::json;
 
 // The subcommand's help line.
-constexpr const char* kAbout =
+constexpr const char* kQpAbout =
     "Solve many demands (A, b, q) of one QP min ½XᵀHX − qᵀX s.t. AᵀX = b from Matrix Market files through the "
     "variational subspace of (H, C, D). Exit code 1: bound violated; 2: bad input; 3: numerical failure.";
 
-struct Options {
+struct QpOptions {
   std::string H, C, D, demands, report, out;
   double soft = 0.0;  // 0: hard constraints
   bool check_full = false;
@@ -268,7 +268,7 @@ struct Problem {
 // rows_of: empty, the whole H and D; else rows_of(n) = [first, end), the
 // rows of them to keep (each file is still read and checked whole:
 // qpreduce::read_market_sparse_rows).
-Problem read_problem(const Options& opt, const std::function<std::pair<Index, Index>(Index n)>& rows_of = {}) {
+Problem read_problem(const QpOptions& opt, const std::function<std::pair<Index, Index>(Index n)>& rows_of = {}) {
   Problem p;
   qpreduce::MarketReadOptions oh;
   oh.require_symmetric = true;
@@ -324,7 +324,7 @@ struct Solvers {
 
 
 // Sets up the Theorem 4.10 checker when --check-full asks for it and it applies.
-void setup_theorem(const Options& opt, const Problem& p, Solvers& s) {
+void setup_theorem(const QpOptions& opt, const Problem& p, Solvers& s) {
   if (!opt.check_full) s.theorem_skipped = "needs --check-full";
   else if (s.copt.soft) s.theorem_skipped = "soft constraints (Theorem 4.10 is about hard constraints)";
   else if (p.n() > opt.theorem_max_n)
@@ -414,7 +414,7 @@ void run_baseline(const Demand& d, const Vec& q, const Problem& p, Solvers& s, W
 
 // Solves one demand in the subspace (and in full, and by the baseline, when
 // asked), prints its row and returns its record.
-json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
+json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
   json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
   const qpreduce::Timer t0;
   // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
@@ -516,7 +516,7 @@ json run_demand(const Demand& d, const Options& opt, const Problem& p, Solvers& 
   return r;
 }
 
-json report_json(const Options& opt, const Problem& p, const Solvers& s, const qpreduce::SubspaceSummary& pre,
+json report_json(const QpOptions& opt, const Problem& p, const Solvers& s, const qpreduce::SubspaceSummary& pre,
                  const Tally& tally, const json& records) {
   json doc = {{"command", "qpr qp"},
               {"H", opt.H},
@@ -541,7 +541,7 @@ json report_json(const Options& opt, const Problem& p, const Solvers& s, const q
   return doc;
 }
 
-int run_qp(const Options& opt) {
+int run_qp(const QpOptions& opt) {
   if (!opt.report.empty()) qpreduce::check_destination(opt.report, "report");
   if (!opt.out.empty()) {
     qpr::run_files().create_directories(opt.out);
@@ -617,7 +617,7 @@ int run_qp(const Options& opt) {
 }  // namespace
 
 void register_qp(CLI::App& app) {
-  auto [cmd, opt] = add_command<Options>(app, "qp", kAbout);
+  auto [cmd, opt] = add_command<QpOptions>(app, "qp", kQpAbout);
   add_path_option(cmd, PathRole::Input, "--H", opt->H, "H.mtx: n×n symmetric PSD Hessian")->required();
   add_path_option(cmd, PathRole::Input, "--C", opt->C, "C.mtx: n×d constraint design space")->required();
   add_path_option(cmd, PathRole::Input, "--D", opt->D, "D.mtx: n×k linear-term design space (optional)");

@@ -44,11 +44,11 @@ const std::vector<qpreduce::Index> kSizes = {40, 64, 100, 150};
 constexpr int kMaxTrials = 1000000;
 
 // The subcommand's help line.
-constexpr const char* kAbout =
+constexpr const char* kTheoremAbout =
     "Check the error bound of Theorem 4.10 on seeded trials (families × ε). Exit code 1 if the bound is violated, "
     "2 if a trial failed, 3 if an output file cannot be written.";
 
-struct Options {
+struct TheoremOptions {
   int trials = 200;
   std::uint64_t seed = 1;
   std::string json, csv;
@@ -167,7 +167,7 @@ std::string csv_table(const std::vector<Record>& records) {
 
 // The trials: groups over (family, size, seed), each sweeping kEpsilons with
 // one checker (H factored once). `first_failure` names the first failed trial.
-std::vector<Record> run_trials(const Options& opt, const std::vector<gen::TheoremFamily>& families,
+std::vector<Record> run_trials(const TheoremOptions& opt, const std::vector<gen::TheoremFamily>& families,
                                std::string* first_failure) {
   std::vector<Record> records;  // grows with the trials run (a huge --trials must not reserve up front)
   const int per_group = static_cast<int>(kEpsilons.size());
@@ -206,7 +206,7 @@ std::vector<Record> run_trials(const Options& opt, const std::vector<gen::Theore
 }
 
 // The summary table per family and overall (stdout).
-void print_table(const Options& opt, const std::vector<gen::TheoremFamily>& families,
+void print_table(const TheoremOptions& opt, const std::vector<gen::TheoremFamily>& families,
                  std::map<gen::TheoremFamily, Stats>& by_family, const Stats& all, double seconds) {
   std::string eps_list;
   for (double e : kEpsilons) eps_list += (eps_list.empty() ? "" : ", ") + fmt::format("{:g}", e);
@@ -234,7 +234,7 @@ void print_table(const Options& opt, const std::vector<gen::TheoremFamily>& fami
 }
 
 // --json, --csv; false when one could not be written.
-bool write_files(const Options& opt, const std::vector<Record>& records,
+bool write_files(const TheoremOptions& opt, const std::vector<Record>& records,
                  const std::vector<gen::TheoremFamily>& families, std::map<gen::TheoremFamily, Stats>& by_family,
                  const Stats& all, double seconds) {
   bool written = true;
@@ -256,7 +256,7 @@ bool write_files(const Options& opt, const std::vector<Record>& records,
   return written;
 }
 
-int run_theorem(const Options& opt) {
+int run_theorem(const TheoremOptions& opt) {
   // The outputs are checked before the trials, which may run for hours.
   try {
     for (const auto& [path, what] : {std::pair{&opt.json, "--json"}, {&opt.csv, "--csv"}})
@@ -296,7 +296,7 @@ int run_theorem(const Options& opt) {
 }  // namespace
 
 void register_theorem(CLI::App& app) {
-  auto [cmd, opt] = add_command<Options>(app, "theorem", kAbout);
+  auto [cmd, opt] = add_command<TheoremOptions>(app, "theorem", kTheoremAbout);
   cmd->add_option("--trials", opt->trials, "number of trials (groups of 10 values of ε share H, C, D)")
       ->check(whole_number_between(1, kMaxTrials))
       ->capture_default_str();

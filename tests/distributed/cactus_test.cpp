@@ -9,6 +9,7 @@
 #include <catch2/catch.hpp>
 
 #include "../shared_data.h"
+#include "relative_difference.h"
 
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/mesh_io.h"
@@ -26,9 +27,7 @@ namespace {
 using namespace qpreduce;
 using MatD = Matrix<double>;
 
-double relative_difference(const MatD& A, const MatD& B) {
-  return (A - B).norm() / std::max(B.norm(), 1e-300);
-}
+using testing_distributed::relative_difference;
 
 }  // namespace
 

@@ -4,6 +4,7 @@
 // on every rank. Run under mpirun -np 1 and -np 2 (tests/distributed/CMakeLists.txt).
 #include <catch2/catch.hpp>
 
+#include "relative_difference.h"
 #include "qpreduce/distributed/mumps_subspace.h"
 #include "qpreduce/problems/families.h"
 #include "qpreduce/subspace_solver.h"
@@ -40,9 +41,7 @@ double relative_difference_by_rows(const MatD& A, const MatD& B) {
   return std::sqrt(diff / std::max(ref, 1e-300));
 }
 
-double relative_difference(const MatD& A, const MatD& B) {
-  return (A - B).norm() / std::max(B.norm(), 1e-300);
-}
+using testing_distributed::relative_difference;
 
 // Every rank's status equals rank 0's.
 bool same_status_everywhere(Status s) {

@@ -20,7 +20,7 @@ namespace gen = qpreduce::generators;
 
 namespace {
 
-constexpr double kEps = std::numeric_limits<double>::epsilon();
+constexpr double kMachineEpsilon = std::numeric_limits<double>::epsilon();
 
 std::string fmt_trial(gen::TheoremFamily family, Index size, double eps, std::uint64_t seed) {
   return fmt::format("theorem_problem({}, {}, {}, {})", gen::to_string(family), size, eps, seed);
@@ -87,9 +87,9 @@ TEST_CASE("ε = 0: the reduced solution reproduces the exact one and every bound
       PsdFactor f;
       const FactorSummary fs = factor_psd(t.H, {}, &f);
       const double whiten_norm = 1.0 / std::sqrt(fs.lambda_min_kept);
-      CHECK(c.bound.q_residual <= 100 * r * kEps * whiten_norm * t.q.norm());
-      CHECK(c.bound.A_residual <= 100 * r * kEps * whiten_norm * Matrix<double>(t.A).norm());
-      CHECK(c.bound.rho <= 100 * r * kEps * c.bound.omega);
+      CHECK(c.bound.q_residual <= 100 * r * kMachineEpsilon * whiten_norm * t.q.norm());
+      CHECK(c.bound.A_residual <= 100 * r * kMachineEpsilon * whiten_norm * Matrix<double>(t.A).norm());
+      CHECK(c.bound.rho <= 100 * r * kMachineEpsilon * c.bound.omega);
       CHECK(c.bound.bound <= 1e-10 * c.exact_norm);
     }
   }
