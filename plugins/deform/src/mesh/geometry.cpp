@@ -48,12 +48,12 @@ void check_elements(const char* what, const char* kind, Index n, const ElementsR
   }
 }
 
-Vec3 row(const VerticesRef& V, int i) { return V.row(i).transpose(); }
+Vec3 vertex_at(const VerticesRef& V, int i) { return V.row(i).transpose(); }
 
 // Twice the area of triangle f, after the degeneracy check.
 double checked_double_area(const char* what, const VerticesRef& V, const ElementsRef& F, Index f,
                            double tolerance, Vec3* cross = nullptr) {
-  const Vec3 a = row(V, F(f, 0)), b = row(V, F(f, 1)), c = row(V, F(f, 2));
+  const Vec3 a = vertex_at(V, F(f, 0)), b = vertex_at(V, F(f, 1)), c = vertex_at(V, F(f, 2));
   const Vec3 n = (b - a).cross(c - a);
   const double twice_area = n.norm();
   const double lmax2 = std::max({(b - a).squaredNorm(), (c - b).squaredNorm(), (a - c).squaredNorm()});
@@ -68,12 +68,13 @@ double checked_double_area(const char* what, const VerticesRef& V, const Element
 // Edge matrix [b − a, c − a, d − a] of tet t and 6·|volume|, after the check.
 double checked_six_volume(const char* what, const VerticesRef& V, const ElementsRef& T, Index t,
                           double tolerance, Eigen::Matrix3d* edges) {
-  const Vec3 a = row(V, T(t, 0));
+  const Vec3 a = vertex_at(V, T(t, 0));
   Eigen::Matrix3d E;
-  for (int k = 0; k < 3; ++k) E.col(k) = row(V, T(t, k + 1)) - a;
+  for (int k = 0; k < 3; ++k) E.col(k) = vertex_at(V, T(t, k + 1)) - a;
   double lmax2 = 0.0;
   for (int i = 0; i < 4; ++i) {
-    for (int j = i + 1; j < 4; ++j) lmax2 = std::max(lmax2, (row(V, T(t, i)) - row(V, T(t, j))).squaredNorm());
+    for (int j = i + 1; j < 4; ++j)
+      lmax2 = std::max(lmax2, (vertex_at(V, T(t, i)) - vertex_at(V, T(t, j))).squaredNorm());
   }
   const double six_volume = std::abs(E.determinant());
   if (!std::isfinite(six_volume) || !(six_volume > tolerance * lmax2 * std::sqrt(lmax2))) {
@@ -148,7 +149,7 @@ SparseMatrix<double> cotangent_laplacian(const VerticesRef& V, const ElementsRef
       // cot of the angle at corner c = (u·v)/|u×v|, u, v the two edges leaving it;
       // it weighs the opposite edge (i, j).
       const int o = F(f, c), i = F(f, (c + 1) % 3), j = F(f, (c + 2) % 3);
-      const Vec3 u = row(V, i) - row(V, o), v = row(V, j) - row(V, o);
+      const Vec3 u = vertex_at(V, i) - vertex_at(V, o), v = vertex_at(V, j) - vertex_at(V, o);
       weights.emplace_back(i, j, 0.5 * u.dot(v) / twice_area);
     }
   });
