@@ -347,6 +347,19 @@ TEST_CASE("units: the full-space references (qpr compare's) answer the same at a
       CHECK(distance_back(base_lg.V, o.V, g) <= 1e-9);
       CHECK(std::abs(s.energy / unit - lg.energy) <= 1e-9 * lg.energy);
       CHECK(s.handle_residual / g.s <= 1e-9 * diagonal(scene.model.V));
+      {
+        // The class itself (the Refiner's engine), from a given pose: its
+        // energies, elements and pose in the given units.
+        LocalGlobalArap direct;
+        direct.precompute(scaled.model, ro);
+        REQUIRE(direct.set_handles(scaled.handles).ok());
+        ReferenceSolution od;
+        const ReferenceSummary d = direct.solve(scaled.frames.back(), &od, scaled.model.V);
+        CHECK(d.iterations == lg.iterations);
+        CHECK(distance_back(base_lg.V, od.V, g) <= 1e-9);
+        CHECK(std::abs(d.energy / unit - lg.energy) <= 1e-9 * lg.energy);
+        CHECK(std::abs(arap_energy(scaled.model.V, direct.elements(), od.V) - d.energy) <= 1e-9 * d.energy);
+      }
       if (!has_ceres_reference()) continue;
       const ReferenceSummary c =
           solve_ceres_reference(scaled.model, scaled.handles, scaled.frames.back(), ReferenceOptions{}, &o);

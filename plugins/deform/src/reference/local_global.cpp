@@ -26,6 +26,11 @@ using Triplets = std::vector<Eigen::Triplet<double>>;
 // one handle set's split and factorization (set_handles).
 struct LocalGlobalState {
   ReferenceOptions options;
+  // m is the given model in the units-free frame (handles.h); everything
+  // below computes there, solve maps targets in and results out.
+  Normalization units;
+  double energy_unit = 1.0;         // an energy of the frame times this is in the given units
+  RotationElements given_elements;  // m.elements in the given units (elements())
   PreparedModel m;
   Index n = 0, nu = 0, s = 0;
   std::vector<Index> control_of_free;  // first control row of a free vertex, −1 in a patch
@@ -574,13 +579,16 @@ LocalGlobalArap::~LocalGlobalArap() = default;
 LocalGlobalArap::LocalGlobalArap(LocalGlobalArap&&) noexcept = default;
 LocalGlobalArap& LocalGlobalArap::operator=(LocalGlobalArap&&) noexcept = default;
 
-const RotationElements& LocalGlobalArap::elements() const { return state_->m.elements; }
+const RotationElements& LocalGlobalArap::elements() const { return state_->given_elements; }
 
 void LocalGlobalArap::precompute(const DeformableMesh& model, const ReferenceOptions& options) {
   auto owned = std::make_unique<State>();
   State& st = *owned;
-    st.options = options;
-  st.m = detail_reference::prepare_model(model, options);
+  st.options = options;
+  st.units = normalization_of(model.V);
+  st.m = detail_reference::prepare_model(normalised(model, st.units), options);
+  st.energy_unit = energy_unit(st.units, st.m.tet);
+  st.given_elements = in_given_units(st.m.elements, st.units);
   st.n = st.m.V.rows();
   st.s = static_cast<Index>(st.m.patch_types.size());
   st.control_of_free.assign(static_cast<size_t>(st.n), -1);
@@ -861,24 +869,15 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
   return out;
 }
 
-}  // namespace
-
-ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial,
-                                        const std::function<bool()>& cancel) {
-  const State& st = *state_;
-  if (!st.has_handles) throw std::invalid_argument("LocalGlobalArap::solve: call precompute and set_handles first");
-  if (out == nullptr) throw std::invalid_argument("LocalGlobalArap::solve: out is null");
-  detail_reference::check_targets(st.handles, targets);
+// LocalGlobalArap::solve in the units-free frame: targets and `initial`
+// (checked; empty: the rest pose) are in it, and so is what it returns.
+ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& targets, ReferenceSolution* out,
+                            const Vertices& initial, const std::function<bool()>& cancel) {
   const PreparedModel& m = st.m;
-  if (initial.size() > 0) {
-    ::qpreduce::check_size("LocalGlobalArap::solve: initial guess rows", st.n, initial.rows());
-    ::qpreduce::check_finite("LocalGlobalArap::solve: initial guess", initial);
-  }
   const bool classic = st.options.energy == ReferenceEnergy::ClassicArap;
   const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : st.options.frame;
   const Eigen::Matrix3d Ft = frame.transpose();
   const DeformableMesh targets_model = detail_reference::targets_model(m);
-  vertex_targets(targets_model, st.handles, targets, 1e-9 * m.diagonal);  // throws on conflicts
 
   const Timer timer;
   ReferenceSummary summary;
@@ -1054,14 +1053,38 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   } else if (summary.status == Status::Success) {
     summary.message = fmt::format("converged in {} rounds", it);
   }
+  return summary;
+}
+
+}  // namespace
+
+ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceSolution* out, const Vertices& initial,
+                                        const std::function<bool()>& cancel) {
+  const State& st = *state_;
+  if (!st.has_handles) throw std::invalid_argument("LocalGlobalArap::solve: call precompute and set_handles first");
+  if (out == nullptr) throw std::invalid_argument("LocalGlobalArap::solve: out is null");
+  detail_reference::check_targets(st.handles, targets);
+  if (initial.size() > 0) {
+    ::qpreduce::check_size("LocalGlobalArap::solve: initial guess rows", st.n, initial.rows());
+    ::qpreduce::check_finite("LocalGlobalArap::solve: initial guess", initial);
+  }
+  const Normalization& f = st.units;
+  DeformableMesh given = detail_reference::targets_model(st.m);
+  given.V = (given.V * f.scale).rowwise() + f.centre.transpose();
+  vertex_targets(given, st.handles, targets, 1e-9 * f.scale);  // throws on conflicts, in the given units
+  ReferenceSummary summary = run_rounds(
+      st, normalised(targets, f), out,
+      initial.size() > 0 ? Vertices((initial.rowwise() - f.centre.transpose()) / f.scale) : Vertices(), cancel);
+  detail_reference::to_given_units(f, st.energy_unit, &summary, out);
+  const bool accelerate = st.options.anderson_window > 0;
   summary.solver_report = fmt::format(
       "local-global ({}{}): {} rounds, energy {:.12g} -> {:.12g}, {}", to_string(st.options.energy),
       (accelerate ? fmt::format(", Anderson window {}, {} rejected", st.options.anderson_window, summary.rejected_steps)
                   : std::string()) +
-          (summary.newton_steps > 0 ? fmt::format(", {} Newton steps ({} CG products, {} fell back)", summary.newton_steps,
-                                                  summary.cg_iterations, summary.newton_fallbacks)
+          (summary.newton_steps > 0 ? fmt::format(", {} Newton steps ({} CG products, {} fell back)",
+                                                  summary.newton_steps, summary.cg_iterations, summary.newton_fallbacks)
                                     : std::string()),
-      it, summary.initial_energy, summary.energy, summary.message);
+      summary.iterations, summary.initial_energy, summary.energy, summary.message);
   return summary;
 }
 
@@ -1085,26 +1108,22 @@ const ReferenceOptions& LocalGlobalArap::options() const { return state_->option
 ReferenceSummary solve_local_global(const DeformableMesh& model, const Handles& handles,
                                     const HandleTargets& targets, const ReferenceOptions& options,
                                     ReferenceSolution* out, const Vertices& initial) {
-  // In the units-free frame (reference_internal.h), as the Refiner.
-  const auto solve = [&](const DeformableMesh& local_model, const HandleTargets& local_targets,
-                         const Vertices& local_initial, ReferenceSolution* local_out) {
-    const Timer setup;
-    LocalGlobalArap lg;
-    lg.precompute(local_model, options);
-    const HandleSetSummary hs = lg.set_handles(handles);
-    ReferenceSummary summary;
-    if (!hs.ok()) {
-      summary.status = hs.status;
-      summary.message = hs.message;
-      summary.setup_seconds = setup.seconds();
-      return summary;
-    }
-    const double setup_seconds = setup.seconds();
-    summary = lg.solve(local_targets, local_out, local_initial);
-    summary.setup_seconds = setup_seconds;
+  if (out == nullptr) throw std::invalid_argument("reference: out is null");
+  const Timer setup;
+  LocalGlobalArap lg;  // in the units-free frame itself
+  lg.precompute(model, options);
+  const HandleSetSummary hs = lg.set_handles(handles);
+  ReferenceSummary summary;
+  if (!hs.ok()) {
+    summary.status = hs.status;
+    summary.message = hs.message;
+    summary.setup_seconds = setup.seconds();
     return summary;
-  };
-  return detail_reference::solve_in_frame(model, targets, initial, out, solve);
+  }
+  const double setup_seconds = setup.seconds();
+  summary = lg.solve(targets, out, initial);
+  summary.setup_seconds = setup_seconds;
+  return summary;
 }
 
 }  // namespace qpreduce::deform

@@ -170,14 +170,17 @@ ReferenceSummary solve_in_frame(const DeformableMesh& model, const HandleTargets
   const Vertices local_initial =
       initial.size() > 0 ? Vertices((initial.rowwise() - f.centre.transpose()) / f.scale) : Vertices();
   ReferenceSummary s = solve(normalised(model, f), normalised(targets, f), local_initial, out);
-  if (out->V.size() > 0) out->V = (out->V * f.scale).rowwise() + f.centre.transpose();
-  const double unit = energy_unit(f, model.is_tet());
-  s.initial_energy *= unit;
-  s.energy *= unit;
-  for (double& e : s.round_energy) e *= unit;
-  s.handle_residual *= f.scale;
-  s.last_step *= f.scale;
+  to_given_units(f, energy_unit(f, model.is_tet()), &s, out);
   return s;
+}
+
+void to_given_units(const Normalization& frame, double energy_unit, ReferenceSummary* summary, ReferenceSolution* out) {
+  if (out->V.size() > 0) out->V = (out->V * frame.scale).rowwise() + frame.centre.transpose();
+  summary->initial_energy *= energy_unit;
+  summary->energy *= energy_unit;
+  for (double& e : summary->round_energy) e *= energy_unit;
+  summary->handle_residual *= frame.scale;
+  summary->last_step *= frame.scale;
 }
 
 }  // namespace detail_reference

@@ -58,10 +58,16 @@ void rotations_to_world(const Eigen::Matrix3d& frame, Eigen::VectorXd* S);
 double energy_of(const PreparedModel& m, ReferenceEnergy kind, const Vertices& Vp, const Eigen::VectorXd& Q,
                  const Eigen::VectorXd& S);
 
+// Maps what a solve in the units-free frame `frame` (handles.h) returned to
+// the given units: out->V, the energies (times `energy_unit`, handles.h),
+// the handle residual and the last step. Rotations, Q and the relative
+// figures have no unit.
+void to_given_units(const Normalization& frame, double energy_unit, ReferenceSummary* summary, ReferenceSolution* out);
+
 // Runs `solve` on the scene in the units-free frame of the rest pose
 // (handles.h: centred, unit bounding-box diagonal) and maps its result to
-// the given units: out->V, the energies, the handle residual and the last
-// step. `initial` may be empty (the rest pose).
+// the given units (to_given_units). `initial` may be empty (the rest pose).
+// Ceres' reference runs through it; LocalGlobalArap keeps its own frame.
 using FrameSolve = std::function<ReferenceSummary(const DeformableMesh& model, const HandleTargets& targets,
                                                   const Vertices& initial, ReferenceSolution* out)>;
 ReferenceSummary solve_in_frame(const DeformableMesh& model, const HandleTargets& targets, const Vertices& initial,

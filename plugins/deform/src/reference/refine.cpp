@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 namespace qpreduce::deform {
 
@@ -56,11 +57,8 @@ bool RefineOptions::is_valid(std::string* why) const {
 
 struct Refiner::State {
   RefineOptions options;
-  LocalGlobalArap lg;  // on the normalised rest pose
-  Vertices rest;       // as given
-  Normalization frame;
-  RotationElements given_elements;  // lg's elements in the given units (elements())
-  double energy_unit = 1.0;         // an energy of the normalised frame times this is in the given units
+  LocalGlobalArap lg;  // computes in the units-free frame (handles.h) itself
+  Vertices rest;
   double diagonal = 0.0;
   Handles handles;
   bool has_handles = false;
@@ -76,12 +74,7 @@ void Refiner::precompute(const DeformableMesh& model, const RefineOptions& optio
   check_options(options);
   auto st = std::make_unique<State>();
   st->options = options;
-  // Computed in the units-free frame (handles.h), mapped back: no length,
-  // energy or condition inside depends on the mesh's units.
-  st->frame = normalization_of(model.V);
-  st->lg.precompute(normalised(model, st->frame), reference_options(options));
-  st->energy_unit = energy_unit(st->frame, model.is_tet());
-  st->given_elements = in_given_units(st->lg.elements(), st->frame);
+  st->lg.precompute(model, reference_options(options));
   st->rest = model.V;
   st->diagonal = bounding_box_diagonal(model.V);
   state_ = std::move(st);
@@ -102,7 +95,7 @@ void Refiner::set_options(const RefineOptions& options) {
 
 const RefineOptions& Refiner::options() const { return state_->options; }
 
-const RotationElements& Refiner::elements() const { return state_->given_elements; }
+const RotationElements& Refiner::elements() const { return state_->lg.elements(); }
 
 RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targets, const Vertices& pose, Vertices* out,
                               const std::function<bool()>& cancel) {
@@ -132,10 +125,7 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
   }
   summary.axis_separable = st.axis_separable;
   ReferenceSolution solution;
-  const Normalization& f = st.frame;
-  const Vertices local_pose =
-      pose.size() > 0 ? Vertices((pose.rowwise() - f.centre.transpose()) / f.scale) : Vertices();
-  const ReferenceSummary rs = st.lg.solve(normalised(targets, f), &solution, local_pose, cancel);
+  const ReferenceSummary rs = st.lg.solve(targets, &solution, pose, cancel);
   summary.status = rs.status;
   summary.message = rs.message;
   summary.rounds = rs.iterations;
@@ -145,16 +135,15 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
   summary.newton_steps = rs.newton_steps;
   summary.cg_iterations = rs.cg_iterations;
   summary.seconds = rs.solve_seconds;
-  summary.initial_energy = rs.initial_energy * st.energy_unit;
-  summary.energy = rs.energy * st.energy_unit;
+  summary.initial_energy = rs.initial_energy;
+  summary.energy = rs.energy;
   summary.fixed_point_residual = rs.fixed_point_residual;
   summary.estimated_distance = rs.estimated_distance;
-  summary.handle_residual = rs.handle_residual * f.scale;
+  summary.handle_residual = rs.handle_residual;
   summary.round_energy = rs.round_energy;
-  for (double& e : summary.round_energy) e *= st.energy_unit;
   summary.round_seconds = rs.round_seconds;
-  *out = (solution.V * f.scale).rowwise() + f.centre.transpose();
-  summary.arap_energy = arap_energy(st.rest, st.given_elements, *out);
+  *out = std::move(solution.V);
+  summary.arap_energy = arap_energy(st.rest, st.lg.elements(), *out);
   const Eigen::VectorXd d = (*out - input).rowwise().norm();
   summary.rms_from_input = std::sqrt(d.squaredNorm() / static_cast<double>(d.size())) / st.diagonal;
   summary.max_from_input = d.maxCoeff() / st.diagonal;

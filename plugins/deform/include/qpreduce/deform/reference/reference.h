@@ -200,7 +200,10 @@ class LocalGlobalArap {
   LocalGlobalArap(LocalGlobalArap&&) noexcept;
   LocalGlobalArap& operator=(LocalGlobalArap&&) noexcept;
 
-  // Builds the rotation elements and the energy matrices of both energies.
+  // Builds the rotation elements and the energy matrices of both energies,
+  // on the rest pose in its units-free frame (Normalization, handles.h):
+  // solve maps targets and the initial pose in, and returns poses, energies,
+  // residuals and elements() in the given units.
   //   model    rest pose V (n × 3), its elements, patches and, for
   //            ModifiedArap, the rotational clusters
   //   options  the energy, its parameters and the solver settings
