@@ -1,30 +1,28 @@
 #!/usr/bin/env bash
 # Fuzzes every reader with libFuzzer under AddressSanitizer + UBSan:
-#   1. builds the targets of tests/fuzz (clang-14) in ./build-fuzz;
+#   1. builds tests/fuzz's fuzz_readers (one binary; QPR_FUZZ_TARGET names
+#      the reader) in ./build-asan, the clang-14 sanitizer build of
+#      scripts/build-sanitize.sh (scripts/test.sh builds it all first);
 #   2. replays tests/fuzz/corpus/<target>/ (seeds and the inputs that once
 #      crashed: regressions) — any failure stops the script;
 #   3. fuzzes each target for QPR_FUZZ_SECONDS seconds (default 6) from that
 #      corpus and ../shared/data files of its kind, with allocations capped
 #      (a reader must not reserve what its file cannot hold).
-# A finding is written to build-fuzz/findings/<target>-crash-*; copy it into
-# tests/fuzz/corpus/<target>/ once fixed. Usage: scripts/fuzz.sh [target ...]
+# A finding is written to build-asan/fuzz/findings/<target>-crash-*; replay
+# it with QPR_FUZZ_TARGET=<target> build-asan/tests/fuzz/fuzz_readers <file>
+# and copy it into tests/fuzz/corpus/<target>/ once fixed.
+# Usage: scripts/fuzz.sh [target ...]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 jobs="$(nproc 2>/dev/null || echo 2)"
 seconds="${QPR_FUZZ_SECONDS:-6}"
-build="$root/build-fuzz"
+bin="$root/build-asan/tests/fuzz/fuzz_readers"
+build="$root/build-asan/fuzz"  # findings, grown corpora, seeds, scratch files
 all=(off obj ply medit tetgen sel def id anim scene mtx_sparse mtx_dense manifest cache)
 targets=("$@")
 [ $# -eq 0 ] && targets=("${all[@]}")
 
-launcher=()
-command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
-cmake -S "$root" -B "$build" -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
-  -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG" \
-  -DQPREDUCE_SANITIZE=ON -DCMAKE_UNITY_BUILD=ON -DQPREDUCE_FUZZ=ON -DQPREDUCE_BUILD_TESTS=OFF -DQPREDUCE_BUILD_BENCH=OFF \
-  -DQPREDUCE_BUILD_APPS=OFF -DQPREDUCE_BUILD_EXAMPLES=OFF -DQPREDUCE_BUILD_VIEWER=OFF \
-  -DQPREDUCE_BUILD_PYTHON=OFF "${launcher[@]}" >/dev/null
-cmake --build "$build" -j "$jobs" --target "${targets[@]/#/fuzz_}"
+bash "$root/scripts/build-sanitize.sh" fuzz_readers
 
 # Files of ../shared/data a target takes as seeds (by extension).
 seeds_of() {
@@ -44,7 +42,7 @@ export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 # when it ends (targets run $jobs at a time, each on one core).
 fuzz_target() {
   local t="$1"
-  local bin="$build/tests/fuzz/fuzz_$t"
+  export QPR_FUZZ_TARGET="$t"
   local corpus="$root/tests/fuzz/corpus/$t"
   local work="$build/corpus/$t"
   mkdir -p "$work"

@@ -78,7 +78,9 @@ void Interactive::frame_panel() {
   ImGui::SetNextWindowSize(ImVec2(340, 0), ImGuiCond_FirstUseEver);
   ImGui::Begin("Frame");
   int path = wanted_ == Reconstruction::Gpu ? 0 : 1;
-  if (ImGui::RadioButton("GPU", &path, 0) | ImGui::RadioButton("CPU", &path, 1)) {
+  bool path_changed = ImGui::RadioButton("GPU", &path, 0);  // both buttons drawn every frame
+  path_changed |= ImGui::RadioButton("CPU", &path, 1);
+  if (path_changed) {
     wanted_ = path == 0 ? Reconstruction::Gpu : Reconstruction::Cpu;
     cancel_refine();  // back to reduced frames on the new path
     if (ready_) session_.set_reconstruction(wanted_, &renderer_);

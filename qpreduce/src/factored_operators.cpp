@@ -88,8 +88,10 @@ bool factored_operators(const RangeSpace& rs, const MatD& P0, const MatD& lift_b
 
   // Φ = Σ⁻¹·YᵀBᵀD with YᵀBᵀD = [A_r·P0; LᵀBᵀD] (M0 symmetric).
   MatD Psi(q, k);
-  Psi.topRows(m) = At.transpose() * P0;
-  Psi.bottomRows(nu) = lift_btd;
+  if (k > 0) {  // no blocks of an empty matrix: its data pointer is null
+    Psi.topRows(m) = At.transpose() * P0;
+    Psi.bottomRows(nu) = lift_btd;
+  }
   out->PhiNeg.resize(q, k);
   out->PhiNeg.noalias() = -(Sinv * Psi);
   return Y.allFinite() && out->PhiNeg.allFinite();

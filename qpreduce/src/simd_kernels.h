@@ -246,6 +246,10 @@ __attribute__((target("avx2,fma"))) inline float row_dot_avx2(const float* r, In
 //   (docs/performance.md, "Reconstruction kernels").
 __attribute__((target("avx2,fma"))) inline void rows3_dot_avx2(const float* B, Index p, const float* w, float* out,
                                                                RowOrder order, Index prefetch) {
+  if (p == 0) {  // B may be null: no pointer arithmetic on it
+    out[0] = out[1] = out[2] = 0.0f;
+    return;
+  }
   const float* r0 = B;
   const float* r1 = B + p;
   const float* r2 = B + 2 * p;

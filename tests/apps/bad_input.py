@@ -792,8 +792,8 @@ def run_case(qpr, c):
             problems.append("took %.1f s (at most %g)" % (seconds, c["max_seconds"]))
         intact = c.get("intact") or []
         for rel in [intact] if isinstance(intact, str) else intact:
-            with open(os.path.join(work, rel), encoding="utf-8") as f:
-                if f.read() != files[rel]:
+            with open(os.path.join(work, rel), "rb") as f:  # a failed case may leave any bytes
+                if f.read() != files[rel].encode("utf-8"):
                     problems.append("the earlier %s was changed" % rel)
         for rel in c.get("absent", []):
             if os.path.exists(os.path.join(work, rel)):
@@ -804,6 +804,12 @@ def run_case(qpr, c):
         return problems, " ".join(args)[:300], p.returncode, err[-1500:]
     finally:
         shutil.rmtree(work, ignore_errors=True)
+
+
+# Writers whose whole output is under 1 KiB (main: LLVM's libomp).
+FITS_IN_1KIB = {"qp --report under a file-size limit", "check --report under a file-size limit",
+                "qp --out under a file-size limit", "view --screenshot under a file-size limit",
+                "view --stats under a file-size limit", "view --window-screenshot under a file-size limit"}
 
 
 def main():
@@ -821,6 +827,18 @@ def main():
     if os.environ.get("QPREDUCE_SANITIZER_BUILD") and any(c.get("vlimit") for c in cases):
         print("skipped [memory]: an address-space limit leaves AddressSanitizer no room for its shadow memory")
         cases = [c for c in cases if not c.get("vlimit")]
+    # LLVM's OpenMP runtime (a clang build: the sanitizer build) registers
+    # itself in a 1 KiB shared-memory file at the first parallel region and
+    # aborts when a file-size limit forbids it: there the limit is 1 KiB, and
+    # the writers whose output fits in 1 KiB are left to a libgomp build
+    # (the Release suite runs them all at 16 bytes).
+    ldd = shutil.which("ldd")
+    if ldd and "libomp" in subprocess.run([ldd, a.qpr], capture_output=True, text=True).stdout:
+        small = [c for c in cases if c.get("fsize") and c["name"] in FITS_IN_1KIB]
+        for c in small:
+            print("skipped [%s] %s: its output fits under the 1 KiB file-size limit that LLVM's libomp needs "
+                  "(run by a libgomp build)" % (c["group"], c["name"]))
+        cases = [dict(c, fsize=max(c["fsize"], 1024)) if c.get("fsize") else c for c in cases if c not in small]
     if any(c.get("display") for c in cases):
         if subprocess.run([a.qpr, "view", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
             print("skipped [view]: %s has no `view` command (built with QPREDUCE_BUILD_VIEWER=OFF)" % a.qpr)

@@ -1,10 +1,12 @@
-// libFuzzer targets, one per reader (QPR_FUZZ_TARGET picks it at compile
-// time; tests/fuzz/CMakeLists.txt builds them all). Each writes the input to
-// a file with the reader's extension and reads it back: the reader may
-// throw its documented errors (qpreduce::FileError and its IoError /
-// MatrixMarketError, std::invalid_argument); anything else — a crash, a
-// sanitizer report, another exception, an allocation past libFuzzer's
-// -malloc_limit_mb — is a finding. scripts/fuzz.sh builds and runs them.
+// One libFuzzer binary for every reader; the environment variable
+// QPR_FUZZ_TARGET names the reader it fuzzes (off, obj, ply, medit, tetgen,
+// sel, def, id, anim, scene, mtx_sparse, mtx_dense, manifest, cache). Each
+// input is written to a file with the reader's extension and read back: the
+// reader may throw its documented errors (qpreduce::FileError and its
+// IoError / MatrixMarketError, std::invalid_argument); anything else — a
+// crash, a sanitizer report, another exception, an allocation past
+// libFuzzer's -malloc_limit_mb — is a finding. scripts/fuzz.sh builds and
+// runs it.
 #include <qpreduce/deform/deformer/deformer.h>
 #include <qpreduce/deform/io/handles_io.h>
 #include <qpreduce/deform/io/json_keys.h>
@@ -15,6 +17,8 @@
 #include <qpreduce/problems/matrix_market.h>
 #include <qpreduce/support.h>
 
+#include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -25,14 +29,15 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#ifndef QPR_FUZZ_TARGET
-#error "QPR_FUZZ_TARGET must name the reader (off, obj, ply, medit, tetgen, sel, def, id, anim, scene, mtx_sparse, mtx_dense, manifest, cache)"
-#endif
-
 namespace {
 
 using namespace qpreduce;
 using namespace qpreduce::deform;
+
+constexpr std::array<const char*, 14> kReaders = {"off",        "obj",       "ply",      "medit", "tetgen",
+                                                  "sel",        "def",       "id",       "anim",  "scene",
+                                                  "mtx_sparse", "mtx_dense", "manifest", "cache"};
+std::string reader;  // QPR_FUZZ_TARGET, checked by LLVMFuzzerInitialize
 
 // A per-process scratch file "$QPR_FUZZ_TMP/qpr_fuzz_<pid>/input<ext>"
 // (QPR_FUZZ_TMP defaults to /tmp; scripts/fuzz.sh points it into build-fuzz
@@ -55,12 +60,12 @@ void write(const std::string& path, const uint8_t* data, size_t size) {
 
 // The reader under test, on `path`.
 void read_one(const uint8_t* data, size_t size) {
-#define QPR_CASE(name, ext, call)                           \
-  if (std::string(QPR_FUZZ_TARGET) == name) {               \
-    const std::string path = scratch(ext);                  \
-    write(path, data, size);                                \
-    call;                                                   \
-    return;                                                 \
+#define QPR_CASE(name, ext, call)          \
+  if (reader == name) {                    \
+    const std::string path = scratch(ext); \
+    write(path, data, size);               \
+    call;                                  \
+    return;                                \
   }
   QPR_CASE("off", ".off", read_off(path))
   QPR_CASE("obj", ".obj", read_obj(path))
@@ -106,10 +111,22 @@ void read_one(const uint8_t* data, size_t size) {
     (void)deformer.load(path, model);
   })
 #undef QPR_CASE
-  __builtin_trap();  // an unknown target name
+  __builtin_trap();  // not reached: LLVMFuzzerInitialize checked the name
 }
 
 }  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int* /*argc*/, char*** /*argv*/) {
+  const char* name = std::getenv("QPR_FUZZ_TARGET");
+  reader = name ? name : "";
+  if (std::find_if(kReaders.begin(), kReaders.end(), [](const char* r) { return reader == r; }) == kReaders.end()) {
+    std::string list;
+    for (const char* r : kReaders) list += std::string(list.empty() ? "" : ", ") + r;
+    std::fprintf(stderr, "fuzz_readers: set QPR_FUZZ_TARGET to one of %s (got '%s')\n", list.c_str(), reader.c_str());
+    std::exit(2);
+  }
+  return 0;
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {

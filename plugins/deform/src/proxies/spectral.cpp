@@ -14,7 +14,6 @@
 #include <fmt/format.h>
 
 #include <algorithm>
-#include <cassert>
 #include <cstdint>
 #include <cmath>
 #include <limits>
@@ -57,7 +56,11 @@ class ShiftInvertOp {
 
   Index rows() const { return n_; }
   Index cols() const { return n_; }
-  void set_shift(const double& sigma) { assert(sigma == sigma_); (void)sigma; }
+  void set_shift(const double& sigma) {
+    if (sigma != sigma_) {
+      throw std::logic_error(fmt::format("ShiftInvertOp: factored for the shift {}, asked for {}", sigma_, sigma));
+    }
+  }
   void deflate(const Matrix<double>* Q) { Q_ = Q; }
 
   void perform_op(const double* x_in, double* y_out) const {
