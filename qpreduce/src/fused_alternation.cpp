@@ -661,7 +661,10 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
   summary.second_order = true;
   W.y_try = y;
   double energy = evaluate(W.y_try);
-  double mu = -1.0;  // set from the Hessian's scale at the first step
+  // μ is set from the Hessian's scale at the first step: the largest
+  // ‖H_aa‖_F, which a rotation of the scene (H_aa ↦ G·H_aa·Gᵀ) keeps, so that
+  // the damping, and with it the steps, do not depend on the axes.
+  double mu = -1.0, scale = 0.0;
   bool hessian_current = false;
   for (int it = 0; it < options.iterations; ++it) {
     summary.iterations = it + 1;
@@ -692,7 +695,11 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       W.H *= 0.5;
       for (Index a = 0; a < d; ++a) W.H.block<3, 3>(3 * a, 3 * a) += W.curvature[static_cast<size_t>(a)];
       hessian_current = true;
-      if (mu < 0.0) mu = 1e-6 * std::max(W.H.diagonal().cwiseAbs().maxCoeff(), 1e-300);
+      if (mu < 0.0) {
+        for (Index a = 0; a < d; ++a) scale = std::max(scale, W.H.block<3, 3>(3 * a, 3 * a).norm());
+        scale = std::max(scale, 1e-300);
+        mu = 1e-6 * scale;
+      }
     }
     const double gnorm = W.grad.norm();
     if (!(gnorm > 0.0)) {  // stationary to the last bit
@@ -705,7 +712,7 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       W.Hmu.diagonal().array() += mu;
       W.ldlt.compute(W.Hmu);
       if (W.ldlt.info() == Eigen::Success && W.ldlt.isPositive() && (W.ldlt.vectorD().array() > 0.0).all()) break;
-      mu = std::max(4.0 * mu, 1e-12);
+      mu = std::max(4.0 * mu, 1e-12 * scale);
       if (tries > 60) return summary;  // cannot happen for finite H; keeps y
     }
     W.omega = W.ldlt.solve(-W.grad);
@@ -723,7 +730,7 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       summary.last_change = (W.y_next - W.y_try).norm();
       W.y_try.swap(W.y_next);
       energy = next;
-      mu = std::max(mu / 3.0, 1e-15 * std::abs(W.H(0, 0)));
+      mu = std::max(mu / 3.0, 1e-15 * scale);
       hessian_current = false;
       if (stop.done(summary.last_change, [&] { return W.y_try.norm(); }, &summary)) break;
     } else {

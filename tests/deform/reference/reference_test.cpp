@@ -555,7 +555,6 @@ TEST_CASE("a stiff point-handle set with more than 28 clusters takes Newton step
   // without which the fused rounds are explicit anyway.
   c.constraints.factored_cost_ratio = 1e-6;
   c.model.clusters.clear();  // 32 automatic clusters instead of the case's 4 slabs
-  const double diag = bounding_box_diagonal(c.model.V);
   DeformerOptions options;
   options.linear_proxies = 16;
   options.rotational_proxies = 32;
@@ -576,10 +575,16 @@ TEST_CASE("a stiff point-handle set with more than 28 clusters takes Newton step
   const Converged newton = converge_reduced(c, options);
   options.second_order = false;
   const Converged rounds = converge_reduced(c, options);
-  CAPTURE(newton.rounds, rounds.rounds);
+  CAPTURE(newton.rounds, rounds.rounds, newton.last.model_energy, rounds.last.model_energy);
+  // Both end at fixed points of E′. This set's E′ has several minima near
+  // the start (E′ = 64.998, 65.057, 65.097): which one the Newton steps
+  // reach depends on where their damping starts (μ₀ from 0.3× to 100× of
+  // the default gives each of them), the rounds end at the highest. So the
+  // Newton steps are asked to converge, to need fewer rounds, and to end
+  // no higher, not to meet the rounds' point.
   CHECK(rounds.last.fixed_point_residual < 1e-10);
-  CHECK(max_distance(rounds.V, newton.V) < 1e-6 * diag);
-  CHECK(newton.last.model_energy == Approx(rounds.last.model_energy).epsilon(1e-9));
+  CHECK(newton.last.fixed_point_residual < 1e-10);
+  CHECK(newton.last.model_energy <= rounds.last.model_energy * (1.0 + 1e-9));
   CHECK(newton.rounds < rounds.rounds);
 }
 
