@@ -824,6 +824,19 @@ def main():
             print("%-8s %s" % (c["group"], c["name"]))
         print("%d cases" % len(cases))
         return 0
+    if any(c.get("display") for c in cases):
+        if subprocess.run([a.qpr, "view", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
+            print("skipped [view]: %s has no `view` command (built with QPREDUCE_BUILD_VIEWER=OFF)" % a.qpr)
+            cases = [c for c in cases if not c.get("display")]
+        elif not os.environ.get("DISPLAY"):
+            xvfb = shutil.which("xvfb-run")
+            if not xvfb:
+                print("FAIL: the view cases need a display and xvfb-run is not installed (scripts/install-deps.sh)")
+                return 1
+            # Again under a virtual X server (before anything is printed, so
+            # that the skips below are said once); only qpr gets the cases'
+            # file-size limits, not the server.
+            return subprocess.run([xvfb, "-a", sys.executable] + sys.argv).returncode
     if os.environ.get("QPREDUCE_SANITIZER_BUILD") and any(c.get("vlimit") for c in cases):
         print("skipped [memory]: an address-space limit leaves AddressSanitizer no room for its shadow memory")
         cases = [c for c in cases if not c.get("vlimit")]
@@ -839,17 +852,6 @@ def main():
             print("skipped [%s] %s: its output fits under the 1 KiB file-size limit that LLVM's libomp needs "
                   "(run by a libgomp build)" % (c["group"], c["name"]))
         cases = [dict(c, fsize=max(c["fsize"], 1024)) if c.get("fsize") else c for c in cases if c not in small]
-    if any(c.get("display") for c in cases):
-        if subprocess.run([a.qpr, "view", "--help"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode:
-            print("skipped [view]: %s has no `view` command (built with QPREDUCE_BUILD_VIEWER=OFF)" % a.qpr)
-            cases = [c for c in cases if not c.get("display")]
-        elif not os.environ.get("DISPLAY"):
-            xvfb = shutil.which("xvfb-run")
-            if not xvfb:
-                print("FAIL: the view cases need a display and xvfb-run is not installed (scripts/install-deps.sh)")
-                return 1
-            # Again under a virtual X server; only qpr gets the cases' file-size limits, not the server.
-            return subprocess.run([xvfb, "-a", sys.executable] + sys.argv).returncode
     failed = 0
     for c in cases:
         problems, cmd, code, err = run_case(a.qpr, c)

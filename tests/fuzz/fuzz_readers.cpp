@@ -40,8 +40,8 @@ constexpr std::array<const char*, 14> kReaders = {"off",        "obj",       "pl
 std::string reader;  // QPR_FUZZ_TARGET, checked by LLVMFuzzerInitialize
 
 // A per-process scratch file "$QPR_FUZZ_TMP/qpr_fuzz_<pid>/input<ext>"
-// (QPR_FUZZ_TMP defaults to /tmp; scripts/fuzz.sh points it into build-fuzz
-// and removes it afterwards).
+// (QPR_FUZZ_TMP defaults to /tmp; scripts/fuzz.sh points it to
+// build-asan/fuzz/tmp and removes it afterwards).
 std::string scratch(const char* ext) {
   static const std::string dir = [] {
     const char* root = std::getenv("QPR_FUZZ_TMP");

@@ -32,6 +32,10 @@ struct LocalGlobalState {
   double energy_unit = 1.0;         // an energy of the frame times this is in the given units
   RotationElements given_elements;  // m.elements in the given units (elements())
   PreparedModel m;
+  // The rest pose and patches that the handle residual (frame_targets) and
+  // the conflict test of solve's targets (given_targets, the given units)
+  // read, built once here rather than per solve.
+  DeformableMesh frame_targets, given_targets;
   Index n = 0, nu = 0, s = 0;
   std::vector<Index> control_of_free;  // first control row of a free vertex, −1 in a patch
   SparseMatrix<double> P;              // 3n × n_u
@@ -589,6 +593,9 @@ void LocalGlobalArap::precompute(const DeformableMesh& model, const ReferenceOpt
   st.m = detail_reference::prepare_model(normalised(model, st.units), options);
   st.energy_unit = energy_unit(st.units, st.m.tet);
   st.given_elements = in_given_units(st.m.elements, st.units);
+  st.frame_targets = detail_reference::targets_model(st.m);
+  st.given_targets = st.frame_targets;
+  st.given_targets.V = model.V;
   st.n = st.m.V.rows();
   st.s = static_cast<Index>(st.m.patch_types.size());
   st.control_of_free.assign(static_cast<size_t>(st.n), -1);
@@ -877,7 +884,6 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
   const bool classic = st.options.energy == ReferenceEnergy::ClassicArap;
   const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : st.options.frame;
   const Eigen::Matrix3d Ft = frame.transpose();
-  const DeformableMesh targets_model = detail_reference::targets_model(m);
 
   const Timer timer;
   ReferenceSummary summary;
@@ -1044,7 +1050,7 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
   out->rotations = rounds.R;
   if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
   summary.energy = energy;  // of the returned (V′, R) or (V′, Q, S)
-  summary.handle_residual = handle_residual(targets_model, st.handles, targets, out->V);
+  summary.handle_residual = handle_residual(st.frame_targets, st.handles, targets, out->V);
   if (summary.status == Status::Success && summary.cancelled) {
     summary.message = fmt::format("cancelled after {} rounds", it);
   } else if (summary.status == Status::Success && !summary.converged) {
@@ -1069,9 +1075,7 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
     ::qpreduce::check_finite("LocalGlobalArap::solve: initial guess", initial);
   }
   const Normalization& f = st.units;
-  DeformableMesh given = detail_reference::targets_model(st.m);
-  given.V = (given.V * f.scale).rowwise() + f.centre.transpose();
-  vertex_targets(given, st.handles, targets, 1e-9 * f.scale);  // throws on conflicts, in the given units
+  vertex_targets(st.given_targets, st.handles, targets, 1e-9 * f.scale);  // throws on conflicts, in the given units
   ReferenceSummary summary = run_rounds(
       st, normalised(targets, f), out,
       initial.size() > 0 ? Vertices((initial.rowwise() - f.centre.transpose()) / f.scale) : Vertices(), cancel);
