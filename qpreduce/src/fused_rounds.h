@@ -9,7 +9,7 @@
 //                   G_z and G_y stay the same) and, per constraint set,
 //                   U (q × μ) and R (μ × k): F_y·y = F₀·y − U·(R·y), with
 //                   U = G_z·T, or G_z·T + A_yᵀ·K when the rounds correct for
-//                   constraints on y (fused_alternation.cpp, form_u).
+//                   constraints on y (fused_form.cpp, form_u).
 #pragma once
 
 #include "phase_one.h"
@@ -166,7 +166,7 @@ struct FusedModel {
 struct FusedWorkspace {
   Vector<double> gb, g;                // F_b·b and g (q)
   Vector<float> gf, yf;                // float rounds: F_y·(y − y_r) (q) and y − y_r (k)
-  // Float rounds' double reference (fused_alternation.cpp, kReferenceDrift):
+  // Float rounds' double reference (round_product.h, kReferenceDrift):
   // y_r (k) and F_y·y_r (q), valid until the next `set`.
   Vector<double> y_ref, Fy_ref, dy;  // dy: y − y_r (k)
   bool ref_valid = false;

@@ -1,6 +1,6 @@
 // Private to the engine: the rounds' product g = g_b + F_y·y (fused_rounds.h),
 // in double or as float rounds relative to a double reference, for every
-// loop of fused_alternation.cpp.
+// loop of fused_steps.h.
 //
 // Float rounds (AlternatingOptions::float_products) form
 //     g = g_b + F_y·y_r + F_y·(y − y_r)
@@ -12,7 +12,7 @@
 // stays under a tenth of a plain float product's and shrinks with the
 // steps, so the rounds stop where double rounds stop (a plain float product
 // left a residual floor near 1e-7), and Anderson's energy safeguard can take
-// a slack of 1e-9 (fused_alternation.cpp, reduced_energy; with plain float
+// a slack of 1e-9 (fused_accelerated_rounds.cpp, reduced_energy; with plain float
 // products it needed 1e-6, and accepted rises that added up over hundreds of
 // rounds). kReferenceStep: 1e3 moved the reference so often that default
 // frames cost 10–25 % more; 1e5 costs what plain float products did

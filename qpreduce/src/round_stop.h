@@ -1,6 +1,6 @@
 // The one stop test of the alternation's rounds (AlternatingOptions:
 // iterations, tolerance, time_budget), shared by the plain, parallel,
-// accelerated and second-order loops of fused_alternation.cpp.
+// accelerated and second-order loops of fused_steps.h.
 #pragma once
 
 #include "qpreduce/alternating.h"
