@@ -2,7 +2,10 @@
 // handle set (FusedAlternation::set and prepare, fused_alternation.cpp):
 // the explicit or the factored form of F_y, the corrections for
 // constraints on y and their proximal weights, and the workspace's sizes.
-// Each is a step of `set` in the order fused_alternation.cpp calls them.
+// `set` calls keep_inputs, start_correction, then set_fast_rounds (fast
+// path: form_c0 first) or set_explicit_plain and finish_correction, and
+// size_workspace last; `prepare` forms C0, G_z's float copy, F₀ and the
+// curvature test ahead of the first set.
 #pragma once
 
 #include "fused_rounds.h"
@@ -55,6 +58,8 @@ void finish_correction(FusedModel& M, const Matrix<double>* U, const Matrix<doub
 void set_fast_rounds(FusedModel& M, const FactoredPhaseOne& fast, const PhaseOneEnergy* E, bool factored,
                      FusedPrecision precision);
 
+// Sizes the rounds' vectors for this model (allocates only when q, k or the
+// scratch size change).
 void size_workspace(const FusedModel& M, FusedWorkspace& W);
 
 }  // namespace qpreduce::detail
