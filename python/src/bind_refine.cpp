@@ -49,9 +49,11 @@ void bind_refine_options(py::module_& m) {
       .rw("energy", &RefineOptions::energy, "ReferenceEnergy.ClassicArap (default) or ModifiedArap (E′).")
       .rw("parameters", &RefineOptions::parameters, "EnergyParameters of E′ (ModifiedArap only).")
       .rw("backend", &RefineOptions::backend,
-          "Factorization of the global step. Default Backend.Auto: SimplicialLDLT when it separates by axis "
-          "(classic ARAP, whole vertices and patches held), CHOLMOD otherwise.")
-      .rw("threads", &RefineOptions::threads, "Threads for the rounds; 0 (default): all. The pose does not depend on it.")
+          "Factorization of the global step. Default Backend.Auto: CHOLMOD's simplicial LDLᵀ when it separates "
+          "by axis (classic ARAP, whole vertices and patches held; the three axes in one sweep), CHOLMOD's "
+          "supernodal LLᵀ otherwise.")
+      .rw("threads", &RefineOptions::threads,
+          "Threads for the rounds; 0 (default): all. The pose does not depend on it.")
       .repr()
       .keyword_init<RefineOptions>();
   def_validate<decltype(options), RefineOptions>(options);

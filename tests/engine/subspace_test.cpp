@@ -237,6 +237,20 @@ TEST_CASE("blocked concurrent solves do not change the subspace", "[subspace][bl
   }
 }
 
+namespace {
+
+// factor⁻¹·B solved in place in column blocks of `block`, on `threads` threads.
+Matrix<double> solved_on(const SparseFactorization& factor, const Matrix<double>& B, int threads, Index block) {
+  const int previous = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  Matrix<double> X = B;
+  factor.solveInPlace(X, block);
+  omp_set_num_threads(previous);
+  return X;
+}
+
+}  // namespace
+
 TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorization][blocks]") {
   // A fill-reducing permutation that is far from the identity (2D grid), and
   // column blocks that do not divide the column count.
@@ -257,12 +271,39 @@ TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorizati
   const int threads = GENERATE(1, 2);
   const Index block = GENERATE(1, 8, 64);
   CAPTURE(threads, block);
-  const int previous = omp_get_max_threads();
-  omp_set_num_threads(threads);
-  Matrix<double> X = B;
-  factor->solveInPlace(X, block);
-  omp_set_num_threads(previous);
-  CHECK((X - expected).norm() <= 1e-12 * expected.norm());
+  CHECK((solved_on(*factor, B, threads, block) - expected).norm() <= 1e-12 * expected.norm());
+}
+
+TEST_CASE("CHOLMOD's simplicial LDLT solves match a dense solve and refuse a matrix that is not positive definite",
+          "[factorization][blocks]") {
+  const SparseMatrix<double> A = gen::grid_laplacian_2d(17, 13, 0.3);
+  const Matrix<double> B = Matrix<double>::Random(A.rows(), 11);
+  const Matrix<double> expected = Matrix<double>(A).llt().solve(B);
+  auto factor = make_cholmod_simplicial_factorization();
+  factor->compute(A);
+  REQUIRE(factor->info() == Eigen::Success);
+  CHECK(factor->backend() == Backend::Cholmod);
+  CHECK(factor->factorNonZeros() > A.rows());
+  // Blocks of one, three (a round's axes), more than CHOLMOD's four columns
+  // at once, and all; on one thread and two.
+  const int threads = GENERATE(1, 2);
+  const Index block = GENERATE(1, 3, 5, 64);
+  CAPTURE(threads, block);
+  CHECK((solved_on(*factor, B, threads, block) - expected).norm() <= 1e-12 * expected.norm());
+
+  // LDLT factors an indefinite matrix; the inertia of D refuses it, and a
+  // singular one (the grid Laplacian without its ridge: constants in the kernel).
+  const SparseMatrix<double> L = gen::grid_laplacian_2d(9, 7, 0.0);
+  SparseMatrix<double> shifted = L;
+  for (Index i = 0; i < L.rows(); ++i) shifted.coeffRef(i, i) -= 0.5;
+  auto indefinite = make_cholmod_simplicial_factorization();
+  indefinite->compute(shifted);
+  CHECK(indefinite->info() == Eigen::NumericalIssue);
+  CHECK_THAT(indefinite->message(), Catch::Contains("not positive definite"));
+  auto singular = make_cholmod_simplicial_factorization();
+  singular->compute(L);
+  CHECK(singular->info() == Eigen::NumericalIssue);
+  CHECK_THAT(singular->message(), Catch::Contains("CHOLMOD"));
 }
 
 TEST_CASE("ordering groups give the same subspace and reject bad groups", "[subspace][ordering]") {

@@ -64,4 +64,13 @@ class SparseFactorization {
 // definite gives NumericalIssue with a message naming the failure.
 std::unique_ptr<SparseFactorization> make_factorization(Backend backend);
 
+// CHOLMOD's simplicial LDLᵀ, for many solves of a few right-hand sides each
+// (a local-global round's three axes): its solve sweeps the factor once for
+// up to four columns together, where Eigen's SimplicialLDLT sweeps it once
+// per column and CHOLMOD's supernodal solve spends more on its per-supernode
+// BLAS calls than on the arithmetic. Symmetric positive definite (a matrix
+// that is not gives NumericalIssue, as SimplicialLDLT's inertia test);
+// backend() reports Backend::Cholmod.
+std::unique_ptr<SparseFactorization> make_cholmod_simplicial_factorization();
+
 }  // namespace qpreduce

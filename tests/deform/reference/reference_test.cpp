@@ -286,7 +286,8 @@ TEST_CASE("local-global: one factor for the three axes, and the thread count, le
           "[reference]") {
   // Classic ARAP with whole patches and vertices held separates by axis
   // (K = K_s ⊗ I₃); with a weighted point handle too (its rows act on each
-  // axis alone). The per-axis factor by CHOLMOD and by SimplicialLDLT, and
+  // axis alone). The per-axis factor by CHOLMOD (supernodal LLT, and the
+  // simplicial LDLT that Backend::Auto takes) and by SimplicialLDLT, and
   // the rounds on 1 or 2 threads, reach the same pose: bit for bit across
   // thread counts (element energies are summed in order), to the solver's
   // round-off across factorizations. E′ couples the axes and does not separate.
@@ -312,6 +313,10 @@ TEST_CASE("local-global: one factor for the three axes, and the thread count, le
   const Vertices a = run(Backend::Cholmod, 1, ReferenceEnergy::ClassicArap, &sep1);
   const Vertices b = run(Backend::Auto, 1, ReferenceEnergy::ClassicArap, &sep2);
   const Vertices b2 = run(Backend::Auto, 2, ReferenceEnergy::ClassicArap, &sep3);
+  bool sep_eigen = false;
+  const Vertices e = run(Backend::SimplicialLDLT, 1, ReferenceEnergy::ClassicArap, &sep_eigen);
+  CHECK(sep_eigen);
+  CHECK(max_distance(b, e) < 1e-9);
   run(Backend::Auto, 1, ReferenceEnergy::ModifiedArap, &sep_modified);
   CHECK(sep1);
   CHECK(sep2);

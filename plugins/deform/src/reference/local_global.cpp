@@ -223,14 +223,14 @@ class AxisSeparableFactorization final : public SparseFactorization {
   Index n_;
 };
 
-// Backend::Auto for the per-axis factor: Eigen's SimplicialLDLT. A round
-// solves three right-hand sides, and CHOLMOD's supernodal sweep makes a few
-// BLAS calls per supernode, which on meshes (many small supernodes) cost more
-// than the arithmetic: on Bumpy Plane (37k free vertices) 13 ms a solve
-// against 7.4 ms, on the 7.9k-vertex solid cylinder 3.4 against 2.2 ms
-// (docs/quality.md, "Refine"). Any other backend is taken as given.
-Backend separable_backend(Backend requested) {
-  return requested == Backend::Auto ? Backend::SimplicialLDLT : requested;
+// The per-axis factor. Backend::Auto: CHOLMOD's simplicial LDLᵀ, whose solve
+// sweeps the factor once for a round's three right-hand sides (Eigen's
+// SimplicialLDLT sweeps it three times; CHOLMOD's supernodal solve spends
+// more on its per-supernode BLAS calls than on the arithmetic on meshes:
+// docs/performance.md, "The per-axis solve"). Any other backend is taken
+// as given.
+std::unique_ptr<SparseFactorization> separable_factorization(Backend requested) {
+  return requested == Backend::Auto ? make_cholmod_simplicial_factorization() : make_factorization(requested);
 }
 
 // K_s when K (free × free) is K_s ⊗ I₃ over free vertices numbered x, y, z
@@ -668,8 +668,7 @@ HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
   const SparseMatrix<double> Ks = axis_block(st, K);
   if (Ks.rows() > 0) {
     K = SparseMatrix<double>();  // free it before the factorization
-    st.factor = std::make_unique<AxisSeparableFactorization>(make_factorization(separable_backend(st.options.backend)),
-                                                              Ks.rows());
+    st.factor = std::make_unique<AxisSeparableFactorization>(separable_factorization(st.options.backend), Ks.rows());
     st.factor->compute(Ks);
   } else {
     st.factor = make_factorization(st.options.backend);

@@ -106,9 +106,11 @@ struct ReferenceOptions {
   int newton_after = 0;
   // Local-global with ModifiedArap: which rotation step (see above).
   ClusterRotationFit cluster_fit = ClusterRotationFit::Exact;
-  // Factorization of the global step (local-global). Auto: CHOLMOD, or
-  // Eigen's SimplicialLDLT for a per-axis factor (HandleSetSummary::
-  // axis_separable), whose three-column solves it does faster on meshes.
+  // Factorization of the global step (local-global). Auto: CHOLMOD's
+  // supernodal LLᵀ, or for a per-axis factor (HandleSetSummary::
+  // axis_separable) CHOLMOD's simplicial LDLᵀ, which solves the three axes
+  // in one sweep of the factor (make_cholmod_simplicial_factorization).
+  // Cholmod, SimplicialLDLT: that backend for either factor.
   Backend backend = Backend::Cholmod;
   // Threads for Ceres' Jacobian evaluation and linear algebra, and for the
   // local step and linear term of classic local-global (elements and

@@ -60,9 +60,10 @@ struct RefineOptions {
   // model then needs its rotational clusters).
   ReferenceEnergy energy = ReferenceEnergy::ClassicArap;
   EnergyParameters parameters;
-  // The global step's factorization. Auto: Eigen's SimplicialLDLT when the
-  // step separates into one factor for the three axes (classic ARAP with
-  // whole vertices and patches held, reference.h), CHOLMOD otherwise.
+  // The global step's factorization. Auto: CHOLMOD's simplicial LDLᵀ when
+  // the step separates into one factor for the three axes (classic ARAP
+  // with whole vertices and patches held; reference.h), CHOLMOD's
+  // supernodal LLᵀ otherwise.
   Backend backend = Backend::Auto;
   // Threads for the rounds (ReferenceOptions::threads); 0: all
   // (omp_get_max_threads()). The refined pose does not depend on it.
