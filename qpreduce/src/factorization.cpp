@@ -32,6 +32,27 @@ const char* to_string(Backend backend) {
 
 namespace {
 
+// The inertia test of an LDLᵀ factorization (which succeeds on indefinite
+// matrices): an SPD matrix has only positive pivots, none within 1e3·ε of
+// the largest. `pivot(j)` is D(j) for j < n; `who` names the backend in the
+// message. Empty when the test holds, else why not.
+template <typename Pivot>
+std::string ldlt_inertia_failure(Index n, const Pivot& pivot, const char* who) {
+  double scale = 0.0;
+  Index negative = 0;
+  for (Index j = 0; j < n; ++j) {
+    scale = std::max(scale, std::abs(pivot(j)));
+    if (!(pivot(j) >= 0.0)) ++negative;
+  }
+  if (negative > 0)
+    return fmt::format("{}: matrix is not positive definite ({} negative pivots of {})", who, negative, n);
+  Index tiny = 0;
+  for (Index j = 0; j < n; ++j)
+    if (std::abs(pivot(j)) <= 1e3 * Eigen::NumTraits<double>::epsilon() * scale) ++tiny;
+  if (tiny > 0) return fmt::format("{}: matrix is numerically singular ({} pivots below 1e3·ε·max)", who, tiny);
+  return {};
+}
+
 // Column blocks for a multi-right-hand-side solve: at most block_size wide,
 // and (when threads > 1) a multiple of `threads` blocks of equal width so that
 // no thread idles at the end.
@@ -208,28 +229,15 @@ class CholmodFactorization final : public SparseFactorization {
     v.dtype = CHOLMOD_DOUBLE;
     return v;
   }
-  // A simplicial LDLᵀ succeeds on indefinite matrices: the inertia of D says
-  // whether A was positive definite (the same test as SimplicialLDLT's).
+  // A simplicial LDLᵀ succeeds on indefinite matrices: the inertia of D
+  // (the first entry of each column of the factor) says whether A was
+  // positive definite.
   void check_ldlt_pivots() {
     const auto* p = static_cast<const int*>(factor_->p);
     const auto* x = static_cast<const double*>(factor_->x);
-    const Index n = static_cast<Index>(factor_->n);
-    double scale = 0.0;
-    Index negative = 0;
-    for (Index j = 0; j < n; ++j) {  // D(j) is the first entry of column j
-      scale = std::max(scale, std::abs(x[p[j]]));
-      if (!(x[p[j]] >= 0.0)) ++negative;
-    }
-    Index tiny = 0;
-    for (Index j = 0; j < n; ++j)
-      if (std::abs(x[p[j]]) <= 1e3 * Eigen::NumTraits<double>::epsilon() * scale) ++tiny;
-    if (negative > 0) {
-      set_info(Eigen::NumericalIssue,
-               fmt::format("CHOLMOD LDLᵀ: matrix is not positive definite ({} negative pivots of {})", negative, n));
-    } else if (tiny > 0) {
-      set_info(Eigen::NumericalIssue,
-               fmt::format("CHOLMOD LDLᵀ: matrix is numerically singular ({} pivots below 1e3·ε·max)", tiny));
-    }
+    std::string why = ldlt_inertia_failure(
+        static_cast<Index>(factor_->n), [&](Index j) { return x[p[j]]; }, "CHOLMOD LDLᵀ");
+    if (!why.empty()) set_info(Eigen::NumericalIssue, std::move(why));
   }
   // The simplicial factor's solve: cholmod_solve2 per column block, with
   // each thread's own workspace (X, Y, E), copied back into B.
@@ -376,22 +384,10 @@ class SimplicialFactorization final : public SparseFactorization {
       message_ = "SimplicialLDLT: zero pivot (matrix is singular)";
       return;
     }
-    // Inertia from the pivots: an SPD matrix has only positive ones.
     const Eigen::VectorXd d = ldlt_.vectorD();
-    const double scale = d.cwiseAbs().maxCoeff();
-    const Index negative = (d.array() < 0.0).count();
-    const Index tiny = (d.array().abs() <= 1e3 * Eigen::NumTraits<double>::epsilon() * scale).count();
-    if (negative > 0) {
-      info_ = Eigen::NumericalIssue;
-      message_ = fmt::format("SimplicialLDLT: matrix is not positive definite ({} negative pivots of {})",
-                             negative, d.size());
-    } else if (tiny > 0) {
-      info_ = Eigen::NumericalIssue;
-      message_ = fmt::format("SimplicialLDLT: matrix is numerically singular ({} pivots below 1e3·ε·max)", tiny);
-    } else {
-      info_ = Eigen::Success;
-      message_.clear();
-    }
+    message_ = ldlt_inertia_failure(
+        d.size(), [&](Index j) { return d(j); }, "SimplicialLDLT");
+    info_ = message_.empty() ? Eigen::Success : Eigen::NumericalIssue;
   }
   Eigen::ComputationInfo info() const override { return info_; }
   const std::string& message() const override { return message_; }
