@@ -67,6 +67,9 @@ void bind_option_structs(py::module_& m) {
       .rw("compute_residual", &SubspaceOptions::compute_residual, "Compute the KKT residual. Default True.")
       .rw("reduced_lift_tolerance", &SubspaceOptions::reduced_lift_tolerance,
           "Lift of H̄'s small eigen-directions for the fast path. Default 1e-8.")
+      .rw("prepare_constraint_path", &SubspaceOptions::prepare_constraint_path,
+          "Prepare set_constraints' fast path (O(p³)) at precompute; False: at the first set_constraints. "
+          "Default True.")
       .rw("check_dependent_cd", &SubspaceOptions::check_dependent_cd, "Report Status.DependentCD. Default True.")
       .repr()
       .keyword_init<SubspaceOptions>();

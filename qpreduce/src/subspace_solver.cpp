@@ -123,7 +123,7 @@ SubspaceSummary SubspaceSolver<Scalar>::precompute(const SparseMatrix<Scalar>& H
   Hr_ = Hr_d_.template cast<Scalar>();
   BtD_ = BtD_d_.template cast<Scalar>();
   compute_basis_norms();
-  prepare_fast_path(options.reduced_lift_tolerance);
+  prepare_fast_path(options);
   ready_ = true;
   return summary;
 }
@@ -162,7 +162,7 @@ void SubspaceSolver<Scalar>::restore(VariationalSubspace<Scalar> subspace, Matri
   k_ = k;
   has_basis_ = true;
   compute_basis_norms();
-  prepare_fast_path(options.reduced_lift_tolerance);
+  prepare_fast_path(options);
   ready_ = true;
 }
 
@@ -188,7 +188,7 @@ void SubspaceSolver<Scalar>::restore_without_basis(Index n, Index d, Vector<doub
   k_ = p - d;
   has_basis_ = false;
   basis_norms_ = std::move(basis_norms);
-  prepare_fast_path(options.reduced_lift_tolerance);
+  prepare_fast_path(options);
   ready_ = true;
 }
 
@@ -206,14 +206,22 @@ void SubspaceSolver<Scalar>::compute_basis_norms() {
 }
 
 template <typename Scalar>
-void SubspaceSolver<Scalar>::prepare_fast_path(double lift_tolerance) {
+void SubspaceSolver<Scalar>::prepare_fast_path(const SubspaceOptions& options) {
   static std::atomic<std::uint64_t> generations{0};
   generation_ = ++generations;
-  lift_tolerance_ = lift_tolerance;
+  lift_tolerance_ = options.reduced_lift_tolerance;
+  range_.reset();
+  P0_ = MatD();
+  lift_btd_ = MatD();
+  if (options.prepare_constraint_path) prepare_range_space();
+}
+
+template <typename Scalar>
+void SubspaceSolver<Scalar>::prepare_range_space() {
   // T₂, T₃ for the factored fast path, which only the double solver takes.
   constexpr bool factored_terms = std::is_same_v<Scalar, double>;
   auto range =
-      std::make_shared<detail::RangeSpace>(detail::prepare_range_space(Hr_d_, lift_tolerance, factored_terms));
+      std::make_shared<detail::RangeSpace>(detail::prepare_range_space(Hr_d_, lift_tolerance_, factored_terms));
   P0_ = range->Minv0 * BtD_d_;
   if constexpr (factored_terms) lift_btd_ = range->lift_cols.transpose() * BtD_d_;
   range_ = std::move(range);
@@ -306,6 +314,7 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints_in_design(const Matrix
 
 template <typename Scalar>
 ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const ConstraintOptions& options) {
+  if (!range_) prepare_range_space();
   ConstraintSummary summary;
   const Index m = Ar.rows(), p = Ar.cols();
   summary.m = m;

@@ -185,6 +185,53 @@ TEST_CASE("set_constraints fast path agrees with the null-space method", "[solve
   }
 }
 
+TEST_CASE("the fast path prepared at the first set_constraints answers as one prepared at precompute",
+          "[solver][fast]") {
+  const Index nx = 16, ny = 16, n = nx * ny;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
+  const std::vector<Index> rows = gen::random_subset(n, 24, 41);
+  const SparseMatrix<double> C = gen::selection(n, rows), D = gen::grid_trend_basis(nx, ny, 6);
+  SubspaceOptions deferred;
+  deferred.prepare_constraint_path = false;
+  SubspaceSolver<double> eager, lazy;
+  REQUIRE(eager.precompute(H, C, D).ok());
+  REQUIRE(lazy.precompute(H, C, D, deferred).ok());
+  const std::vector<Index> handles(rows.begin(), rows.begin() + 8);
+  const Vector<double> q = gen::gaussian_vector(n, 42), Y = gen::gaussian_vector(6, 43);
+  for (const bool soft : {false, true}) {
+    CAPTURE(soft);
+    ConstraintOptions o;
+    o.soft = soft;
+    const SparseMatrix<double> A = gen::selection(n, handles);
+    const Vector<double> b = gen::gaussian_vector(A.cols(), 44);
+    const ConstraintSummary se = eager.set_constraints(A, o), sl = lazy.set_constraints(A, o);
+    REQUIRE(se.status == Status::Success);
+    CHECK(sl.status == se.status);
+    CHECK(sl.fast_path == se.fast_path);
+    CHECK(sl.fast_path);
+    Vector<double> q_r(eager.p()), we(eager.p()), wl(lazy.p()), ye(eager.p()), yl(lazy.p());
+    eager.reduce_linear_term(q, q_r);
+    eager.solve(b, q_r, we);
+    lazy.solve(b, q_r, wl);
+    eager.solve_in_D(b, Y, ye);
+    lazy.solve_in_D(b, Y, yl);
+    CHECK(wl == we);  // the same arithmetic, only earlier or later
+    CHECK(yl == ye);
+  }
+  // A restore without the preparation prepares at its first set_constraints too.
+  SubspaceSolver<double> restored;
+  restored.restore(lazy.subspace(), lazy.reduced_hessian(), lazy.reduced_linear_map(), deferred);
+  const SparseMatrix<double> A = gen::selection(n, handles);
+  const Vector<double> b = gen::gaussian_vector(A.cols(), 44);
+  REQUIRE(restored.set_constraints(A).status == Status::Success);
+  REQUIRE(eager.set_constraints(A).status == Status::Success);
+  Vector<double> q_r(eager.p()), we(eager.p()), wr(restored.p());
+  eager.reduce_linear_term(q, q_r);
+  eager.solve(b, q_r, we);
+  restored.solve(b, q_r, wr);
+  CHECK((wr - we).norm() <= 1e-12 * we.norm());
+}
+
 TEST_CASE("factored fast path agrees with the explicit one", "[solver][fast][factored]") {
   // ridge 0: H̄ has a lifted direction (ν = 1, constants); ridge > 0: ν = 0.
   const double ridge = GENERATE(0.0, 1e-2);

@@ -103,6 +103,11 @@ struct SubspaceOptions {
   // rounding error grows with, while each lifted direction adds one row to the
   // per-demand Schur complement.
   double reduced_lift_tolerance = 1e-8;
+  // SubspaceSolver: prepare set_constraints' fast path (the eigen-
+  // decomposition of the scaled H_r, O(p³)) at precompute and restore. false
+  // leaves it to the first set_constraints, for a caller that only reads the
+  // reduced operators (the deformer, whose Phase 1 has its own fast path).
+  bool prepare_constraint_path = true;
   // Report Status::DependentCD when a combination of D's columns lies in
   // Span(C). Off for callers that use D as a plain right-hand side (the
   // full-space solve, where q ∈ Span(A) is legitimate).

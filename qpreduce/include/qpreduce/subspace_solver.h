@@ -115,8 +115,9 @@ class SubspaceSolver {
   // Restores a precomputed solver from its parts (e.g. read back from a cache
   // file): the subspace B = [N UD] (n×p), H_r = BᵀHB (p×p, symmetric) and
   // BᵀD (p×k), as `precompute` would have made them from the same options.
-  // Redoes only the p×p fast-path preparation (O(p³), no factorization)
-  // and the column norms ‖B_j‖ (O(n·p)).
+  // Redoes only the p×p fast-path preparation (O(p³), no factorization;
+  // SubspaceOptions::prepare_constraint_path) and the column norms ‖B_j‖
+  // (O(n·p)).
   // Throws std::invalid_argument on inconsistent sizes, NaN/Inf, or an
   // asymmetric H_r.
   void restore(VariationalSubspace<Scalar> subspace, Matrix<double> Hr, Matrix<double> BtD,
@@ -139,8 +140,10 @@ class SubspaceSolver {
   void release_basis();
 
   // The on-site step for a new constraint set A (n×m, sparse). m may be 0.
-  // Throws std::invalid_argument on a wrong row count, NaN, or when called
-  // before a successful precompute.
+  // With SubspaceOptions::prepare_constraint_path false, the first call
+  // after precompute or restore also prepares the fast path (O(p³) once).
+  // Throws std::invalid_argument on a wrong row
+  // count, NaN, or when called before a successful precompute.
   ConstraintSummary set_constraints(const SparseMatrix<Scalar>& A, const ConstraintOptions& options = {});
   // The same with A_r = AᵀB (m × p) formed by the caller — e.g. summed over
   // the processes that each hold rows of B (qpreduce::distributed), for a
@@ -203,8 +206,12 @@ class SubspaceSolver {
   void set_reduced(const char* what, Index p, Index k, Matrix<double> Hr, Matrix<double> BtD);
   // ‖B_j‖ from the held basis (precompute, restore).
   void compute_basis_norms();
-  // The fast path's p×p preparation and a new generation (precompute, restore).
-  void prepare_fast_path(double lift_tolerance);
+  // A new generation and lift tolerance (precompute, restore); the range
+  // space now or, with SubspaceOptions::prepare_constraint_path false, at
+  // the first set_constraints.
+  void prepare_fast_path(const SubspaceOptions& options);
+  // The fast path's p×p preparation (O(p³)): range_, P0_, lift_btd_.
+  void prepare_range_space();
   // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
   void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,

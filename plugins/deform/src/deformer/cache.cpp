@@ -389,8 +389,9 @@ void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh
   }
   model.patch_rows = patch_rows;
   try {
-    model.solver.restore_without_basis(model.nu, model.nx, norms.col(0), std::move(Hr), std::move(BtD),
-                                       options.subspace);
+    SubspaceOptions sub = options.subspace;
+    sub.prepare_constraint_path = false;  // as subspace_options (precompute.cpp)
+    model.solver.restore_without_basis(model.nu, model.nx, norms.col(0), std::move(Hr), std::move(BtD), sub);
   } catch (const std::invalid_argument& e) {
     throw IoError(path, 0, e.what());
   }

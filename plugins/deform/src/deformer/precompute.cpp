@@ -674,6 +674,9 @@ void choose_ordering_groups(const Model& model, SubspaceOptions* sub) {
 SubspaceOptions subspace_options(const Model& model, const DeformerOptions& options, const Groups& groups,
                                  double hu_nonzeros) {
   SubspaceOptions sub = options.subspace;
+  // The deformer never sets constraints on the SubspaceSolver (Phase 1 has
+  // its own fast path on H_zz): no p × p eigendecomposition for it.
+  sub.prepare_constraint_path = false;
   // Phase 1 holds the rotational coordinates fixed (y = S), so U·D need not
   // have full rank: rotations whose effect the linear proxies or patches
   // already pin (all of them, with a proxy at every vertex) are legitimate.
