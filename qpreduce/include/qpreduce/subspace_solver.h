@@ -142,8 +142,8 @@ class SubspaceSolver {
   // The on-site step for a new constraint set A (n×m, sparse). m may be 0.
   // With SubspaceOptions::prepare_constraint_path false, the first call
   // after precompute or restore also prepares the fast path (O(p³) once).
-  // Throws std::invalid_argument on a wrong row
-  // count, NaN, or when called before a successful precompute.
+  // Throws std::invalid_argument on a wrong row count, NaN, or when called
+  // before a successful precompute.
   ConstraintSummary set_constraints(const SparseMatrix<Scalar>& A, const ConstraintOptions& options = {});
   // The same with A_r = AᵀB (m × p) formed by the caller — e.g. summed over
   // the processes that each hold rows of B (qpreduce::distributed), for a
