@@ -60,6 +60,9 @@ void bind_deformer_options(py::module_& m) {
       .rw("global_rotation", &DeformerOptions::global_rotation, "Factor out a global rotation. Default True.")
       .rw("float_rounds", &DeformerOptions::float_rounds, "Phase 2 inputs from float products. Default True.")
       .rw("round_threads", &DeformerOptions::round_threads, "OpenMP threads of a frame's rounds. Default 1.")
+      .rw("prepare_onsite", &DeformerOptions::prepare_onsite,
+          "Prepare Phase 1's fast path at precompute (a d x d eigendecomposition), so that the first handle set "
+          "costs what later ones do; False: at the first set_handles that needs it. Default True.")
       .rw("subspace", &DeformerOptions::subspace, "SubspaceOptions of the engine.")
       .repr()
       .keyword_init<DeformerOptions>();

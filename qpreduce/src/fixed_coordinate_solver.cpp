@@ -1,6 +1,7 @@
 // Phase 1 of the alternation (alternating.h): z = M_b·b + M_Y·Y for one
-// constraint set, by the range-space fast path on H_zz (FactoredPhaseOne) or
-// the null-space method (ExplicitPhaseOne); phase_one.h has both forms.
+// constraint set, by the elimination of a selection (when A_z is one and it
+// costs less), the range-space fast path on H_zz (FactoredPhaseOne) or the
+// null-space method (ExplicitPhaseOne); phase_one.h has the forms.
 #include "qpreduce/alternating.h"
 
 #include "blas.h"
@@ -90,6 +91,41 @@ std::shared_ptr<const PhaseOneOperator> null_space_phase_one(const SubspaceSolve
   return std::make_shared<ExplicitPhaseOne>(std::move(ops.Mc), std::move(MY));
 }
 
+// The multipliers of an eliminated selection (hard): W = (A_zᵀ)⁺ keeps the
+// rows C and divides by a, so with X = [M_b, M_Y] split into its rows C
+// (X_C, m × (m + k); M_b's part is diag(1/a)) and F,
+//     Λ_b = −diag(1/a)·(H_CC·diag(1/a) + H_CF·M_b,F),
+//     Λ_y = diag(1/a)·(G_C − H_CC·M_Y,C − H_CF·M_Y,F),
+// O(m·f·(m + k) + m²·k) instead of the dense W·H_zz·X's m·d·(m + k).
+// Returns Λ_y (m × k) and sets *Lb.
+Matrix<double> selection_multipliers(const SubspaceSolver<double>& solver, const PhaseOneOperator& op,
+                                     const ScaledSelection& sel, Matrix<double>* Lb) {
+  const Index d = solver.d(), m = static_cast<Index>(sel.cols.size()), f = d - m;
+  const Matrix<double> MY = op.MY();
+  const Index k = MY.cols();
+  const auto H = solver.reduced_hessian().topLeftCorner(d, d);
+  const Matrix<double> G = phase_one_G(solver);
+  Matrix<double> Hcc(m, m), Hcf(m, f), Xf(f, m + k), MYc(m, k), out(m, m + k);
+  for (Index i = 0; i < m; ++i) {
+    const Index c = sel.cols[static_cast<size_t>(i)];
+    for (Index j = 0; j < m; ++j) Hcc(j, i) = H(sel.cols[static_cast<size_t>(j)], c);
+    MYc.row(i) = MY.row(c);
+    out.row(i).tail(k) = G.row(c);
+  }
+  for (Index a = 0; a < f; ++a) {
+    const Index r = sel.free[static_cast<size_t>(a)];
+    for (Index j = 0; j < m; ++j) Hcf(j, a) = H(sel.cols[static_cast<size_t>(j)], r);
+    Xf.row(a).head(m) = op.Mb().row(r);
+    Xf.row(a).tail(k) = MY.row(r);
+  }
+  out.leftCols(m) = -(Hcc * sel.inv_scale.asDiagonal());
+  blas_gemm(false, false, -1.0, Hcc, MYc, 1.0, out.rightCols(k));
+  blas_gemm(false, false, -1.0, Hcf, Xf, 1.0, out);
+  out = sel.inv_scale.asDiagonal() * out;
+  *Lb = out.leftCols(m);
+  return out.rightCols(k);
+}
+
 // The multipliers of Phase 1 as affine maps of (b, y) (alternating.h,
 // form_energy_terms), with z = M_b·b + M_Y·y:
 //   fast path (hard or soft)  λ = K·(R·y − [b; 0]) (phase_one.h):
@@ -120,6 +156,10 @@ PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const Phas
     const double two_delta = 2.0 * options.delta;
     e.Lb = two_delta * (Az * op.Mb() - Matrix<double>::Identity(m, m));
     e.AyLy.bottomRows(m) = two_delta * (Az * MY + Ay);
+    return e;
+  }
+  if (const ScaledSelection* sel = op.selection()) {
+    e.AyLy.bottomRows(m) = selection_multipliers(solver, op, *sel, &e.Lb);
     return e;
   }
   const Matrix<double> W = Eigen::CompleteOrthogonalDecomposition<Matrix<double>>(Az.transpose()).pseudoInverse();
@@ -179,7 +219,16 @@ ConstraintSummary FixedCoordinateSolver<Scalar>::set_reduced_constraints(const S
   if (options.threads > 0) blas.emplace(options.threads);
   ConstraintSummary summary;
   summary.m = Az.rows();
-  if (options.fast_path) {
+  if (options.fast_path && !options.soft) {
+    const bool prepared = prep_ && prep_->generation == solver.generation();
+    if (auto sel = detail::scaled_selection(Az);
+        sel && detail::elimination_pays(solver.d(), Az.rows(), Ay.cols(), prepared)) {
+      op_ = detail::eliminated_phase_one(solver.reduced_hessian().topLeftCorner(solver.d(), solver.d()),
+                                         prepared ? prep_->G : detail::phase_one_G(solver), Ay, std::move(*sel),
+                                         options, &summary);
+    }
+  }
+  if (!op_ && options.fast_path) {
     prepare_impl(solver);
     op_ = detail::fast_phase_one(prep_, Az, Ay, options, &summary);
   }

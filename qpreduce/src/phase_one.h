@@ -22,6 +22,8 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
+#include <vector>
 
 namespace qpreduce::detail {
 
@@ -36,6 +38,18 @@ struct FixedCoordinatePrep {
 };
 
 class FactoredPhaseOne;
+
+// A_z (m × d) as a scaled selection: row i has one nonzero, a_i, in column
+// cols[i], and no two rows share a column (so A_z has full row rank m).
+struct ScaledSelection {
+  std::vector<Index> cols;    // c_i (m)
+  Eigen::VectorXd inv_scale;  // 1/a_i (m)
+  std::vector<Index> free;    // the other d − m columns, ascending
+};
+
+// The selection A_z is, or nullopt (m = 0, a row without or with a second
+// nonzero, two rows in one column). O(m·d).
+std::optional<ScaledSelection> scaled_selection(const Matrix<double>& Az);
 
 // The terms of the reduced energy of one constraint set
 // (FixedCoordinateSolver::form_energy_terms): λ = Λ_b·b + Λ_y·y.
@@ -56,6 +70,8 @@ class PhaseOneOperator {
   virtual void apply(const double* b, const double* Y, double* z, double* scratch) const = 0;
   // The factored form, or null.
   virtual const FactoredPhaseOne* factored() const { return nullptr; }
+  // A_z's selection when the operator eliminated it, or null.
+  virtual const ScaledSelection* selection() const { return nullptr; }
   virtual Index scratch_size() const { return 0; }
 
  protected:
@@ -65,8 +81,10 @@ class PhaseOneOperator {
 
 class ExplicitPhaseOne final : public PhaseOneOperator {
  public:
-  ExplicitPhaseOne(Matrix<double> Mb, Matrix<double> MY) : PhaseOneOperator(std::move(Mb)), MY_(std::move(MY)) {}
+  ExplicitPhaseOne(Matrix<double> Mb, Matrix<double> MY, std::optional<ScaledSelection> selection = std::nullopt)
+      : PhaseOneOperator(std::move(Mb)), MY_(std::move(MY)), selection_(std::move(selection)) {}
   Matrix<double> MY() const override { return MY_; }
+  const ScaledSelection* selection() const override { return selection_ ? &*selection_ : nullptr; }
   const Matrix<double>& explicit_MY() const { return MY_; }
   void apply(const double* b, const double* Y, double* z, double* /*scratch*/) const override {
     gemv(Mb_, b, z, false);
@@ -75,6 +93,7 @@ class ExplicitPhaseOne final : public PhaseOneOperator {
 
  private:
   Matrix<double> MY_;  // d × k
+  std::optional<ScaledSelection> selection_;
 };
 
 class FactoredPhaseOne final : public PhaseOneOperator {
@@ -103,5 +122,26 @@ class FactoredPhaseOne final : public PhaseOneOperator {
   Matrix<double> R_;
   Matrix<double> K_;
 };
+
+// Phase 1 by elimination, for hard constraints whose A_z is the scaled
+// selection `sel`: with C = sel.cols and F = sel.free (f = d − m),
+//     z_C = diag(1/a)·(b − A_y·Y),   z_F = H_FF⁻¹·(G_F·Y − H_FC·z_C),
+// so M_b and M_Y are X = [X_C; X_F] with X_C = diag(1/a)·[I, −A_y] and
+// X_F = H_FF⁻¹·([0, G_F] − H_FC·X_C). O(f³/3 + f²·(m + k) + f·m·k).
+// Hzz: H_zz (d × d); G: NᵀD − H_zy (d × k); Ay: m × k. Null when H_FF is
+// not clearly positive definite (a Cholesky of the Jacobi-scaled H_FF whose
+// pivot ratio times options.rank_tolerance stays below 10⁻², the null-space
+// method's test): the minimiser is then not unique or near it, and the
+// null-space method decides. Sets *summary (Success, rank m, the
+// selection's condition max|a|/min|a|) when it returns an operator.
+std::shared_ptr<const PhaseOneOperator> eliminated_phase_one(const Matrix<double>& Hzz, const Matrix<double>& G,
+                                                             const Matrix<double>& Ay, ScaledSelection sel,
+                                                             const ConstraintOptions& options,
+                                                             ConstraintSummary* summary);
+
+// Whether the elimination costs fewer multiply-adds than the range-space
+// fast path for m hard rows on d linear and k rotational coordinates
+// (prepared: the fast path's per-solver part is already made).
+bool elimination_pays(Index d, Index m, Index k, bool prepared);
 
 }  // namespace qpreduce::detail

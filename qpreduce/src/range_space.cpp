@@ -53,7 +53,10 @@ RangeSpace prepare_range_space(const MatD& H, double lift_tolerance, bool factor
     }
   }
   const MatD DV = rs.scale.asDiagonal() * V;  // D_s·V
-  rs.Minv0 = DV * inv.asDiagonal() * DV.transpose();
+  // M0 = W·Wᵀ with W = D_s·V·Λ̃^(−1/2) (every entry of Λ̃⁻¹ is positive), through the BLAS.
+  const MatD W = DV * inv.cwiseSqrt().asDiagonal();
+  rs.Minv0.resize(p, p);
+  blas_gemm(false, true, 1.0, W, W, 0.0, rs.Minv0);
   rs.Minv0 = 0.5 * (rs.Minv0 + rs.Minv0.transpose()).eval();
   const Index nu = static_cast<Index>(lifted.size());
   rs.lift_cols.resize(p, nu);

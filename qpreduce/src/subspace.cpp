@@ -8,6 +8,7 @@
 #include "qpreduce/support.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/SparseCholesky>
 #include <fmt/format.h>
 
 #include <omp.h>
@@ -74,7 +75,9 @@ constexpr Index kResidualColumns = 32;
 void blocked_pass(const SpD& H, const SpD& C, const SpD& D, const MatD& N, const MatD& UD, double* residual,
                   MatD* gram) {
   const Index d = N.cols(), k = UD.cols(), p = d + k;
-  const Eigen::LDLT<MatD> CtC(MatD(C.transpose() * C));
+  // CᵀC is as sparse as C's column overlaps (diagonal for a selection): a
+  // sparse factor, not a dense d × d one.
+  const Eigen::SimplicialLDLT<SpD> CtC(SpD(C.transpose() * C));
   const Index nb_d = (d + kResidualColumns - 1) / kResidualColumns;
   const Index nb_k = (k + kResidualColumns - 1) / kResidualColumns;
   if (gram) gram->setZero(p, p);

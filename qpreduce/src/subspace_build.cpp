@@ -92,6 +92,7 @@ class SubspaceBuild {
   bool certify_psd(const std::vector<Index>& aug, const MatD& S, double hrho_bound);
   void null_space_and_ud(const MatD& S);
   bool check_ud_rank(const MatD& DtUD);
+  void snap_selected_rows();
 
   const Timer total;
   SpD H_store, C_store, D_store;
@@ -153,7 +154,19 @@ bool SubspaceBuild<Scalar>::psd_by_factorization() {
 // Rank of C, independent of H: CᵀC must be SPD.
 template <typename Scalar>
 bool SubspaceBuild<Scalar>::check_rank_of_C() {
-  const auto eig = detail::symmetric_eigenvalues(MatD(C.transpose() * C));
+  // (CᵀC is diagonal when no two columns share a row, a selection for one:
+  // its eigenvalues are then its diagonal, without a dense d × d solver.)
+  const SpD CtC = C.transpose() * C;
+  bool diagonal = true;
+  for (Index j = 0; j < CtC.outerSize() && diagonal; ++j)
+    for (SpD::InnerIterator it(CtC, j); it; ++it) diagonal = diagonal && (it.row() == j || it.value() == 0.0);
+  Eigen::VectorXd eig;
+  if (diagonal) {
+    eig = CtC.diagonal();
+    std::sort(eig.data(), eig.data() + eig.size());
+  } else {
+    eig = detail::symmetric_eigenvalues(MatD(CtC));
+  }
   const Index rank = detail::numerical_rank(eig, options.rank_tolerance);
   if (rank < d) {
     return fail(Status::RankDeficientC,
@@ -196,6 +209,7 @@ SubspaceSummary SubspaceBuild<Scalar>::run(SubspaceExtras* extras) {
     return summary;
   }
   if (!(use_kkt ? kkt_route() : augmented_route(aug))) return summary;
+  snap_selected_rows();
 
   // U·D must have full column rank: (UD)ᵀH(UD) = Dᵀ·UD is SPD iff no
   // combination of D's columns lies in Span(C).
@@ -319,7 +333,12 @@ bool SubspaceBuild<Scalar>::certify_psd(const std::vector<Index>& aug, const Mat
 // In place, by row blocks: N = G·S⁻¹, then UD = F − G·S⁻¹·CᵀF = F − N·CᵀF.
 template <typename Scalar>
 void SubspaceBuild<Scalar>::null_space_and_ud(const MatD& S) {
-  MatD Sinv = Eigen::LLT<MatD>(S).solve(MatD::Identity(d, d));
+  // S⁻¹ = L⁻ᵀ·L⁻¹ from S = L·Lᵀ, the two d³ steps through the BLAS.
+  const Eigen::LLT<MatD> llt(S);
+  MatD Linv = MatD::Identity(d, d);
+  blas_lower_solve(llt.matrixLLT(), Linv);
+  MatD Sinv(d, d);
+  blas_gemm(true, false, 1.0, Linv, Linv, 0.0, Sinv);
   Sinv = 0.5 * (Sinv + Sinv.transpose()).eval();
   const MatD CtF = k > 0 ? MatD(C.transpose() * Uw) : MatD(d, 0);  // d × k
   const Index blocks = (n + kRowBlock - 1) / kRowBlock;
@@ -374,6 +393,24 @@ bool SubspaceBuild<Scalar>::kkt_route() {
   Uw = rhs.topRightCorner(n, k);
   summary.s_condition = 0.0;
   return true;
+}
+
+// A column j of C with one nonzero c_j, in row r, states N(r, :)·c_j = e_jᵀ
+// and UD(r, :) = 0 (CᵀN = I, CᵀUD = 0): those rows are set to exactly that,
+// where the solves left them at round-off from it. A proxy that is one
+// unknown (a vertex coordinate) is then met to the bit by any Y, and
+// constraints on such unknowns are exact selections of z (phase_one.h).
+template <typename Scalar>
+void SubspaceBuild<Scalar>::snap_selected_rows() {
+  for (Index j = 0; j < d; ++j) {
+    if (C.col(j).nonZeros() != 1) continue;
+    const SpD::InnerIterator it(C, j);
+    if (it.value() == 0.0) continue;
+    const Index r = it.row();
+    Nw.row(r).setZero();
+    Nw(r, j) = 1.0 / it.value();
+    if (k > 0) Uw.row(r).setZero();
+  }
 }
 
 template <typename Scalar>

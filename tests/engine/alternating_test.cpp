@@ -671,6 +671,26 @@ void set_up_rounds(const SphereModel& s, FixedCoordinateSolver<double>* phase1, 
   fused->set_proximal_block_size(UnitBlocks::kBlock);
   fused->set(*phase1, s.Gz, s.Gy);
 }
+
+// Five plain and five accelerated rounds of `a` (on Phase 1 `pa`) and of
+// `r` (on `pr`) from s.start(): the same iterates, and the same energy.
+void check_rounds_agree(const SphereModel& s, FusedAlternation<double>& a, const FixedCoordinateSolver<double>& pa,
+                        FusedAlternation<double>& r, const FixedCoordinateSolver<double>& pr, const Vector<double>& b) {
+  UnitBlocks proj;
+  AlternatingOptions plain, accelerated;
+  plain.iterations = 5;
+  accelerated.iterations = 5;
+  accelerated.anderson_window = 3;
+  for (const AlternatingOptions& opts : {plain, accelerated}) {
+    Vector<double> z1(s.d), z2(s.d), y1 = s.start(), y2 = y1;
+    const AlternatingSummary r1 = a.run(pa, proj, b, opts, z1, y1);
+    const AlternatingSummary r2 = r.run(pr, proj, b, opts, z2, y2);
+    CHECK((y1 - y2).norm() <= 1e-8 * std::max(1.0, y2.norm()));
+    CHECK((z1 - z2).norm() <= 1e-8 * std::max(1.0, z2.norm()));
+    if (opts.anderson_window > 0) CHECK(r1.energy == Approx(r2.energy).epsilon(1e-8));
+  }
+}
+
 }  // namespace
 
 TEST_CASE("constraints on y: the rounds descend on E(y) and stop at its stationary points", "[alternating][constrained_y]") {
@@ -826,23 +846,58 @@ TEST_CASE("constraints on y: the fast path's multipliers and curvature test give
     f_factored.set(fast, s.Gz, Gy, 1, FusedForm::Factored);
     CHECK((f_factored.proximal_weights().maxCoeff() > 0.0) == (w_ref.maxCoeff() > 0.0));
 
-    UnitBlocks proj;
-    AlternatingOptions plain, accelerated;
-    plain.iterations = 5;
-    accelerated.iterations = 5;
-    accelerated.anderson_window = 3;
-    for (const AlternatingOptions& opts : {plain, accelerated}) {
-      Vector<double> z1(s.d), z2(s.d), y1 = s.start(), y2 = y1;
-      const AlternatingSummary r1 = f_fast.run(fast, proj, b, opts, z1, y1);
-      const AlternatingSummary r2 = f_ref.run(ref, proj, b, opts, z2, y2);
-      CHECK((y1 - y2).norm() <= 1e-8 * std::max(1.0, y2.norm()));
-      CHECK((z1 - z2).norm() <= 1e-8 * std::max(1.0, z2.norm()));
-      if (opts.anderson_window > 0) CHECK(r1.energy == Approx(r2.energy).epsilon(1e-8));
-    }
+    check_rounds_agree(s, f_fast, fast, f_ref, ref, b);
   }
   CAPTURE(stiff, free);
   CHECK(stiff > 0);
   CHECK(free > 0);
+}
+
+TEST_CASE("Phase 1 eliminates a selection of z, with the null-space method's operators, multipliers and rounds",
+          "[alternating][elimination]") {
+  // Rows of A_z that each pick one linear coordinate (a handle on a proxy
+  // itself) are met by eliminating those coordinates when that costs less
+  // than the range-space path (6 or 8 of 9 here; 2 of 9 keep the fast path).
+  // Operators, multipliers (with A_y ≠ 0) and rounds must be the null-space
+  // method's; the selected coordinates come out exact.
+  SphereModel s;
+  const Index m = GENERATE(2, 6, 8);
+  CAPTURE(m);
+  const std::vector<Index> cols = gen::random_subset(s.d, m, 80 + static_cast<std::uint64_t>(m));
+  Matrix<double> Az = Matrix<double>::Zero(m, s.d);
+  for (Index i = 0; i < m; ++i) Az(i, cols[static_cast<size_t>(i)]) = (i % 2 ? -1.0 : 1.0) * (0.5 + 0.25 * i);
+  const Matrix<double> Ay = gen::gaussian_matrix(m, s.k, 90);
+  ConstraintOptions o;
+  FixedCoordinateSolver<double> el, ref;
+  el.prepare(s.solver);  // as the deformer does at precompute: the fast path's part is then free
+  const ConstraintSummary es = el.set_reduced_constraints(s.solver, Az, Ay, o);
+  o.fast_path = false;
+  const ConstraintSummary rs = ref.set_reduced_constraints(s.solver, Az, Ay, o);
+  INFO(es.message << " | " << rs.message);
+  REQUIRE(es.status == Status::Success);
+  REQUIRE(rs.status == Status::Success);
+  CHECK(es.rank == m);
+  const bool eliminated = es.message.find("eliminated") != std::string::npos;
+  CHECK(eliminated == (m > 2));
+  CHECK(es.fast_path == !eliminated);
+  CHECK(rel_diff(el.Mb(), ref.Mb()) <= 1e-10);
+  CHECK(rel_diff(el.MY(), ref.MY()) <= 1e-10);
+  // z = M_b·b + M_Y·y meets A_z·z = b − A_y·y.
+  const Vector<double> b = gen::gaussian_vector(m, 91), y = gen::gaussian_vector(s.k, 92);
+  Vector<double> z(s.d);
+  el.solve(b, y, z);
+  CHECK((Az * z + Ay * y - b).norm() <= 1e-12 * (1.0 + b.norm()));
+
+  el.form_energy_terms(s.solver);
+  ref.form_energy_terms(s.solver);
+  FusedAlternation<double> f_el, f_ref;
+  f_el.set_proximal_block_size(UnitBlocks::kBlock);
+  f_ref.set_proximal_block_size(UnitBlocks::kBlock);
+  f_el.set(el, s.Gz, s.Gy);
+  f_ref.set(ref, s.Gz, s.Gy);
+  REQUIRE(f_el.constrained_y());
+  CHECK((f_el.proximal_weights() - f_ref.proximal_weights()).norm() <= 1e-8 * (1.0 + f_ref.proximal_weights().norm()));
+  check_rounds_agree(s, f_el, el, f_ref, ref, b);
 }
 
 TEST_CASE("constraints on y: misuse is refused with the words", "[alternating][constrained_y][errors]") {

@@ -52,6 +52,37 @@ TEST_CASE("subspace satisfies Eq. 4 column by column", "[subspace]") {
   CHECK(((I - proj) * (p.H * s.UD - Matrix<double>(p.D))).norm() < 1e-9);
 }
 
+TEST_CASE("a column of C that picks one unknown makes its rows of N and UD exact", "[subspace][selection]") {
+  // CᵀN = I and CᵀUD = 0 state, for a column with one nonzero c in row r,
+  // N(r, :) = e_jᵀ/c and UD(r, :) = 0: exact to the bit on every backend,
+  // beside a column that is not a selection (and shares some of their rows).
+  const Index nx = 12, ny = 10, n = nx * ny;
+  const SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
+  const std::vector<Index> rows = gen::random_subset(n, 6, 21);
+  SparseMatrix<double> C(n, 7);
+  std::vector<Eigen::Triplet<double>> t;
+  for (Index j = 0; j < 6; ++j) t.emplace_back(rows[static_cast<size_t>(j)], j, j == 2 ? -3.0 : 1.0);
+  for (Index i = 0; i < n; i += 3) t.emplace_back(i, 6, 1.0 + 0.01 * static_cast<double>(i));
+  C.setFromTriplets(t.begin(), t.end());
+  const SparseMatrix<double> D = gen::gaussian_sparse(n, 3, 22);
+  for (Backend backend : {Backend::Cholmod, Backend::SimplicialLDLT, Backend::SparseLU}) {
+    CAPTURE(to_string(backend));
+    SubspaceOptions opts;
+    opts.backend = backend;
+    VariationalSubspace<double> s;
+    REQUIRE(build_subspace(H, C, D, opts, &s).ok());
+    for (Index j = 0; j < 6; ++j) {
+      const Index r = rows[static_cast<size_t>(j)];
+      CAPTURE(j, r);
+      Vector<double> expected = Vector<double>::Zero(7);
+      expected(j) = 1.0 / (j == 2 ? -3.0 : 1.0);
+      CHECK((s.N.row(r).transpose() - expected).cwiseAbs().maxCoeff() == 0.0);
+      CHECK(s.UD.row(r).cwiseAbs().maxCoeff() == 0.0);
+    }
+    CHECK((Matrix<double>(C.transpose() * s.N) - Matrix<double>::Identity(7, 7)).norm() < 1e-10);
+  }
+}
+
 TEST_CASE("full-space solve matches a dense KKT solve, also with q in Span(A)", "[full]") {
   const Index n = 60;
   const SparseMatrix<double> H = gen::random_psd(n, 3, 11);

@@ -125,7 +125,11 @@ PrecomputeSummary ArapSolver::precompute(const Vertices& V, const ElementsRef& F
   // Every held vertex its own linear proxy, then samples around them (as
   // many as the options ask, within what the mesh has).
   st->model.linear = exact_handle_proxies(st->model, st->handles, options.deformer.linear_proxies);
-  PrecomputeSummary summary = st->deformer.precompute(st->model, options.deformer);
+  // Its one handle set, on linear proxies that are vertices, is eliminated
+  // (docs/engine.md): Phase 1's fast path would be prepared for nothing.
+  DeformerOptions deformer_options = options.deformer;
+  deformer_options.prepare_onsite = false;
+  PrecomputeSummary summary = st->deformer.precompute(st->model, deformer_options);
   if (!summary.ok()) return summary;
   st->deformer.set_rounds(options.max_rounds, options.tolerance);
   st->handle_summary = st->deformer.set_handles(st->handles);

@@ -46,7 +46,8 @@ RefineSummary arap(const Vertices& V, const ElementsRef& F, const std::vector<In
 struct ArapSolverOptions {
   // The reduced deformer. linear_proxies counts the samples added beyond the
   // vertices of b (farthest from them); rotational_proxies, energy, … as in
-  // Deformer::precompute.
+  // Deformer::precompute (prepare_onsite is not read: its one handle set
+  // needs no preparation).
   DeformerOptions deformer;
   // Rounds of each solve: until the relative fixed-point residual is at most
   // `tolerance`, for at most `max_rounds` (Deformer::set_rounds).

@@ -129,6 +129,13 @@ struct DeformerOptions {
   // too short for a barrier to pay on most models (docs/deform.md,
   // "Defaults"). The reconstruction always uses all threads.
   int round_threads = 1;
+  // Prepare Phase 1's per-solver part at precompute (H_zz's lifted inverse
+  // and responses: a d × d eigendecomposition, d = 3 × linear proxies + 12 ×
+  // patches), so that the first handle set costs what the later ones do.
+  // false: at the first set_handles that needs it; sets whose every row holds
+  // a linear proxy that is one vertex never do (Phase 1 eliminates them).
+  // ArapSolver sets false: its one handle set is of that kind.
+  bool prepare_onsite = true;
   SubspaceOptions subspace;
 
   bool is_valid(std::string* why) const;
