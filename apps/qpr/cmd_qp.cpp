@@ -145,8 +145,9 @@ std::vector<DemandFiles> read_manifest(const fs::path& file) {
   json doc;
   try {
     doc = json::parse(text);
-  } catch (const json::parse_error& e) {
-    // e.what() names the line and column.
+  } catch (const json::exception& e) {
+    // e.what() names the line and column (parse_error) or the number too
+    // large for a double (out_of_range 406).
     throw std::invalid_argument(fmt::format("{}: {}", file.string(), e.what()));
   }
   const fs::path base = file.parent_path();

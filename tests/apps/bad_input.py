@@ -279,6 +279,8 @@ case("scenes", "duplicate key", ["deform", "--scene", "{W}/s.json"], RUN, ["s.js
      {"s.json": '{"mesh": "tube.off", "mesh": "other.off"}'})
 case("scenes", "unknown key", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "unknown key 'meshes'"],
      {"s.json": '{"mesh": "tube.off", "meshes": 1}'})
+case("scenes", "a number too large for a double", ["deform", "--scene", "{W}/s.json"], RUN,
+     ["s.json", "out of range", "number overflow"], {"s.json": scene(', "energy": {"alpha": 1e400}')})
 case("scenes", "vertex out of range", ["deform", "--scene", "{W}/s.json"], RUN, ["s.json", "out of range"],
      {"s.json": scene(', "handles": [{"vertices": [9999], "targets": [[[0, 0, 0]]]}]')})
 case("scenes", "missing mesh file", ["deform", "--scene", "{W}/s.json"], RUN, ["none.off"],
@@ -465,6 +467,8 @@ case("matrix", "manifest: missing b", qp(demands="{W}/m.json"), RUN, ["m.json", 
      {"m.json": '{"demands": [{"name": "d", "A": "dem/A_d0.mtx"}]}'})
 case("matrix", "manifest: syntax error", qp(demands="{W}/m.json"), RUN, ["m.json", "parse error"],
      {"m.json": '{"demands": [}'})
+case("matrix", "manifest: a number too large for a double", qp(demands="{W}/m.json"), RUN,
+     ["m.json", "number overflow"], {"m.json": '{"demands": [], "x": 1e400}'})
 INCONSISTENT = {"dem/A_d0.mtx": "%%MatrixMarket matrix coordinate real general\n4 2 2\n2 1 1\n2 2 1\n",
                 "dem/b_d0.mtx": "%%MatrixMarket matrix array real general\n2 1\n1\n2\n"}
 case("matrix", "inconsistent demand is a warning on stderr (was only in the JSON)", qp(), 0,

@@ -99,6 +99,7 @@ TEST_CASE("JSON scene errors name the scene and the JSON pointer", "[io][scene][
   };
   fails_with(R"({"mesh": "octa.off",)", "scene.json: JSON syntax error");
   fails_with(R"([1, 2])", "scene.json: the scene must be a JSON object");
+  fails_with(R"({"mesh": "octa.off", "energy": {"alpha": 1e400}})", "scene.json: JSON value out of range");
   fails_with(R"({"handels": []})", "scene.json: unknown key 'handels'");
   fails_with(R"({"energy": {}})", "scene.json: /: missing key 'mesh'");
   fails_with(R"({"mesh": "nowhere.off"})", "nowhere.off: cannot open file");

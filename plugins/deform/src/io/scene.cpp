@@ -58,6 +58,9 @@ class SceneParser {
       root = json::parse(text);
     } catch (const json::parse_error& e) {
       detail::fail(path_, 0, fmt::format("JSON syntax error: {}", e.what()));
+    } catch (const json::exception& e) {
+      // out_of_range 406: a number too large for a double (1e400).
+      detail::fail(path_, 0, fmt::format("JSON value out of range: {}", e.what()));
     }
     if (!root.is_object()) fail("", "the scene must be a JSON object");
     check_keys(root, "", {"description", "mesh", "energy", "solver", "proxies", "patches", "handles"});
