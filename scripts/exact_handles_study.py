@@ -5,13 +5,14 @@ display-rate frames (8 rounds each) with 100 exact handle vertices on the
 shared Bumpy Plane.
 
     build/bin/qpreduce-python scripts/exact_handles_study.py [--counts 10 30 100 300] [--data ../shared/data]
-        [--parts sweep break-even frames]
+        [--parts sweep break-even frames] [--sweep-mesh SEGMENTS RINGS]
 
 Prints a Markdown table per part; medians over --repeats runs of each solve.
 """
 
 import argparse
 import os
+import resource
 import statistics
 import time
 
@@ -37,13 +38,18 @@ def timed(f, repeats):
     return result, statistics.median(times)
 
 
-def sweep(counts, repeats):
-    V, F = deform.shapes.capped_cylinder(1.0, 6.0, 30, 60)
+def peak_rss_mb():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux: KiB
+
+
+def sweep(counts, repeats, segments=30, rings=60):
+    V, F = deform.shapes.capped_cylinder(1.0, 6.0, segments, rings)
     d = np.linalg.norm(np.ptp(V, axis=0))
     rng = np.random.default_rng(19)
-    print(f"capped cylinder, n = {len(V)}; b random vertices, targets a bend")
-    print("| handle vertices | p | precompute s | basis MB (float) | solve ms (median) | rounds | handle error / diag |")
-    print("|---|---|---|---|---|---|---|")
+    print(f"capped cylinder ({segments} segments, {rings} rings), n = {len(V)}; b random vertices, targets a bend")
+    print("| handle vertices | p | precompute s | peak RSS MB (process so far) | basis MB (float) | solve ms (median) "
+          "| rounds | handle error / diag |")
+    print("|---|---|---|---|---|---|---|---|")
     for h in counts:
         b = rng.choice(len(V), size=h, replace=False)
         bc = bent(V, b)
@@ -54,8 +60,8 @@ def sweep(counts, repeats):
         bc2 = bc + 0.01 * d
         U, ms = timed(lambda: solver.solve(bc2), repeats)
         p = solver.precompute_summary.reduced_size
-        print(f"| {h} | {p} | {pre:.2f} | {3 * len(V) * p * 4 / 1e6:.0f} | {1e3 * ms:.2f} | "
-              f"{solver.last_solve.rounds} | {np.abs(U[b] - bc2).max() / d:.0e} |")
+        print(f"| {h} | {p} | {pre:.2f} | {peak_rss_mb():.0f} | {3 * len(V) * p * 4 / 1e6:.0f} | {1e3 * ms:.2f} | "
+              f"{solver.last_solve.rounds} | {np.abs(U[b] - bc2).max() / d:.0e} |", flush=True)
 
 
 def break_even(data, repeats):
@@ -118,11 +124,13 @@ def main():
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--parts", nargs="*", default=["sweep", "break-even", "frames"],
                         choices=["sweep", "break-even", "frames"], help="which tables (default: all three)")
+    parser.add_argument("--sweep-mesh", type=int, nargs=2, default=[30, 60], metavar=("SEGMENTS", "RINGS"),
+                        help="the sweep's capped cylinder (default 30 60: 1,802 vertices)")
     parser.add_argument("--data", default=os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
         os.path.abspath(__file__)))), "shared", "data"))
     args = parser.parse_args()
     if "sweep" in args.parts:
-        sweep(args.counts, args.repeats)
+        sweep(args.counts, args.repeats, *args.sweep_mesh)
     if not os.path.isdir(args.data):
         print(f"\n{args.data} not found: the break-even and frames parts need the shared data")
         return

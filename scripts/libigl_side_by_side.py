@@ -1,10 +1,11 @@
 """One edit, the way a libigl user writes it, against qpreduce's one-call
-solve (docs/performance.md, "Coming from libigl: the same edit timed"):
+solve (docs/performance.md, "Coming from libigl or CGAL: the same edit timed"):
 every fixed and handle vertex of a shared Botsch–Sorkine scenario held at
 its target, classic (spokes-and-rims) ARAP.
 
     build/bin/qpreduce-python scripts/libigl_side_by_side.py [--model bumpy_plane] [--data ../shared/data]
-        [--harness /tmp/libigl_arap] [--max-rounds 20000] [--repeats 3] [--work /tmp/qpreduce-libigl]
+        [--harness /tmp/libigl_arap] [--cgal-harness /tmp/cgal_arap] [--max-rounds 20000] [--repeats 3]
+        [--work /tmp/qpreduce-libigl]
 
 Writes b.txt, bc.txt and the tightly converged shape (deform.arap to a
 distance tolerance of 1e-9, ref.off) into --work; times deform.arap at its
@@ -12,7 +13,10 @@ defaults and reports its RMS distance from that shape (/ diagonal). With
 --harness (bench/external/libigl_arap.cpp, built against a libigl checkout
 outside this project's dependencies), runs libigl's arap_precomputation and
 arap_solve from the rest pose until they are within 1 % and 0.1 % of the
-same shape (or --max-rounds), in the same run. The classic ARAP energy
+same shape (or --max-rounds), in the same run; with --cgal-harness
+(bench/external/cgal_arap.cpp, built against Debian's libcgal-dev, also
+outside the dependencies) the same for CGAL's Surface_mesh_deformation
+(spokes and rims, one deform(1, 0) call a round). The classic ARAP energy
 (arap_energy, Eq. 6) of each shape, and of CGAL's reference shape in
 ../shared/data/references when there is one, says which is nearer a minimum.
 """
@@ -40,6 +44,7 @@ def main():
     ap.add_argument("--model", default="bumpy_plane")
     ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
     ap.add_argument("--harness", default=None, help="the built bench/external/libigl_arap.cpp")
+    ap.add_argument("--cgal-harness", default=None, help="the built bench/external/cgal_arap.cpp")
     ap.add_argument("--max-rounds", type=int, default=20000, help="libigl's rounds at most")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--work", default="/tmp/qpreduce-libigl")
@@ -79,16 +84,19 @@ def main():
              f"{statistics.median(times):.3f}", rms(U), deform.arap_energy(model, U)),
             ("qpreduce `deform.arap`, distance tolerance 1e-9", tight_summary.rounds, f"{tight_s:.3f}", 0.0,
              deform.arap_energy(model, R))]
-    if args.harness:
-        last = os.path.join(args.work, "libigl.off")
-        out = subprocess.run([args.harness, mesh, os.path.join(args.work, "b.txt"), os.path.join(args.work, "bc.txt"),
+    harnesses = [("libigl", "libigl `arap_precomputation` + `arap_solve`", args.harness),
+                 ("cgal", "CGAL `Surface_mesh_deformation` (`preprocess` + `deform`)", args.cgal_harness)]
+    for key, what, harness in harnesses:
+        if not harness:
+            continue
+        last = os.path.join(args.work, key + ".off")
+        out = subprocess.run([harness, mesh, os.path.join(args.work, "b.txt"), os.path.join(args.work, "bc.txt"),
                               ref, "--max-rounds", str(args.max_rounds), "--out", last],
                              capture_output=True, text=True, check=True).stdout
-        print("\nlibigl (bench/external/libigl_arap.cpp):\n" + out)
+        print(f"\n{key} (bench/external/{key}_arap.cpp):\n" + out)
         L, _ = deform.read_mesh(last)
         rounds = [line for line in out.splitlines() if line.startswith(("0.1 %", "not within"))][-1]
-        rows.append((f"libigl `arap_precomputation` + `arap_solve`: {rounds}", "", "", rms(L),
-                     deform.arap_energy(model, L)))
+        rows.append((f"{what}: {rounds}", "", "", rms(L), deform.arap_energy(model, L)))
     cgal = os.path.join(args.data, "references", f"cgal_sr_{args.model}_it5000.off")
     if not os.path.exists(cgal):
         cgal = cgal.replace("it5000", "it10000")

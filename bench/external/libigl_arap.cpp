@@ -1,7 +1,7 @@
 // libigl's arap_precomputation + arap_solve on one edit, timed: the rounds
 // and the wall time until the pose is within 1 % and 0.1 % of the bounding-box
 // diagonal (RMS over the vertices) of a reference shape. For the side-by-side
-// of docs/performance.md ("Coming from libigl: the same edit timed"); libigl is
+// of docs/performance.md ("Coming from libigl or CGAL: the same edit timed"); libigl is
 // not a dependency of qpreduce, so this file is not part of the build. With a
 // libigl checkout's include/ folder (header-only use) and Debian's Eigen:
 //
