@@ -161,6 +161,19 @@ double probe_error(const SparseFactorization& factor, const SpD& K) {
   return std::isfinite(err) ? err : INFINITY;
 }
 
+void snap_selected_rows(const SpD& C, Index row_begin, MatD& N, MatD& UD) {
+  const Index rows = N.rows();
+  for (Index j = 0; j < C.cols(); ++j) {
+    if (C.col(j).nonZeros() != 1) continue;
+    const SpD::InnerIterator it(C, j);
+    const Index r = it.row() - row_begin;
+    if (it.value() == 0.0 || r < 0 || r >= rows) continue;
+    N.row(r).setZero();
+    N(r, j) = 1.0 / it.value();
+    if (UD.cols() > 0) UD.row(r).setZero();
+  }
+}
+
 double gershgorin_bound(const SpD& A) {
   double top = 0.0;
   for (Index j = 0; j < A.outerSize(); ++j) {

@@ -92,7 +92,6 @@ class SubspaceBuild {
   bool certify_psd(const std::vector<Index>& aug, const MatD& S, double hrho_bound);
   void null_space_and_ud(const MatD& S);
   bool check_ud_rank(const MatD& DtUD);
-  void snap_selected_rows();
 
   const Timer total;
   SpD H_store, C_store, D_store;
@@ -209,7 +208,7 @@ SubspaceSummary SubspaceBuild<Scalar>::run(SubspaceExtras* extras) {
     return summary;
   }
   if (!(use_kkt ? kkt_route() : augmented_route(aug))) return summary;
-  snap_selected_rows();
+  snap_selected_rows(C, 0, Nw, Uw);
 
   // U·D must have full column rank: (UD)ᵀH(UD) = Dᵀ·UD is SPD iff no
   // combination of D's columns lies in Span(C).
@@ -393,24 +392,6 @@ bool SubspaceBuild<Scalar>::kkt_route() {
   Uw = rhs.topRightCorner(n, k);
   summary.s_condition = 0.0;
   return true;
-}
-
-// A column j of C with one nonzero c_j, in row r, states N(r, :)·c_j = e_jᵀ
-// and UD(r, :) = 0 (CᵀN = I, CᵀUD = 0): those rows are set to exactly that,
-// where the solves left them at round-off from it. A proxy that is one
-// unknown (a vertex coordinate) is then met to the bit by any Y, and
-// constraints on such unknowns are exact selections of z (phase_one.h).
-template <typename Scalar>
-void SubspaceBuild<Scalar>::snap_selected_rows() {
-  for (Index j = 0; j < d; ++j) {
-    if (C.col(j).nonZeros() != 1) continue;
-    const SpD::InnerIterator it(C, j);
-    if (it.value() == 0.0) continue;
-    const Index r = it.row();
-    Nw.row(r).setZero();
-    Nw(r, j) = 1.0 / it.value();
-    if (k > 0) Uw.row(r).setZero();
-  }
 }
 
 template <typename Scalar>

@@ -64,6 +64,16 @@ Matrix<double> dense_written(const SparseMatrix<double>& S);
 // finite): whether the factorization of K can be trusted.
 double probe_error(const SparseFactorization& factor, const SparseMatrix<double>& K);
 
+// Rows of B = [N UD] that C fixes: a column j of C with one nonzero c, in
+// row r, states N(r, :) = e_jᵀ/c and UD(r, :) = 0 (CᵀN = I, CᵀUD = 0);
+// those rows are written exactly, where the solves left them at round-off.
+// A proxy that is one unknown (a vertex coordinate) is then met to the bit
+// by any Y, and constraints on such unknowns are exact selections of z
+// (phase_one.h). N (rows × d) and UD (rows × k) hold rows
+// [row_begin, row_begin + rows) of the whole basis (all n rows, or one MPI
+// rank's); UD may have no columns.
+void snap_selected_rows(const SparseMatrix<double>& C, Index row_begin, Matrix<double>& N, Matrix<double>& UD);
+
 // Gershgorin bound on λ_max of a symmetric sparse matrix: max column sum of |a_ij|.
 double gershgorin_bound(const SparseMatrix<double>& A);
 

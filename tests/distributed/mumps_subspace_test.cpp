@@ -7,6 +7,7 @@
 #include "relative_difference.h"
 #include "qpreduce/distributed/mumps_subspace.h"
 #include "qpreduce/problems/families.h"
+#include "qpreduce/problems/generators.h"
 #include "qpreduce/subspace_solver.h"
 
 #include <mpi.h>
@@ -126,6 +127,41 @@ TEST_CASE("MUMPS subspace with the factor out of core matches the single-process
   CHECK(std::filesystem::is_empty(dir));  // no factor files left behind
   MPI_Barrier(MPI_COMM_WORLD);
   if (rank == 0) std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("MUMPS: a column of C that picks one unknown makes its rows of N and UD exact", "[distributed]") {
+  // As in the single-process build (engine subspace test): N(r, :) = e_jᵀ/c
+  // and UD(r, :) = 0 to the bit in the rows each rank owns, on both routes,
+  // beside a column of C that is not a selection.
+  namespace gen = qpreduce::generators;
+  const Index nx = 12, ny = 10, n = nx * ny;
+  const SpD H = gen::grid_laplacian_2d(nx, ny);
+  const std::vector<Index> picked = gen::random_subset(n, 6, 21);
+  SpD C(n, 7);
+  std::vector<Eigen::Triplet<double>> t;
+  for (Index j = 0; j < 6; ++j) t.emplace_back(picked[static_cast<size_t>(j)], j, j == 2 ? -3.0 : 1.0);
+  for (Index i = 0; i < n; i += 3) t.emplace_back(i, 6, 1.0 + 0.01 * static_cast<double>(i));
+  C.setFromTriplets(t.begin(), t.end());
+  const SpD D = gen::gaussian_sparse(n, 3, 22);
+  for (Backend backend : {Backend::Auto, Backend::SparseLU}) {
+    CAPTURE(to_string(backend));
+    SubspaceOptions options;
+    options.backend = backend;
+    DistributedSubspace out;
+    const auto summary = build_subspace_mumps(MPI_COMM_WORLD, owned_rows_of(H), C, D, options, {}, &out);
+    REQUIRE(summary.ok());
+    CHECK(summary.kkt_route == (backend == Backend::SparseLU));
+    for (Index j = 0; j < 6; ++j) {
+      const Index r = picked[static_cast<size_t>(j)] - out.rows.begin;
+      if (r < 0 || r >= out.rows.size()) continue;  // another rank's row
+      CAPTURE(j, r);
+      Vector<double> expected = Vector<double>::Zero(7);
+      expected(j) = 1.0 / (j == 2 ? -3.0 : 1.0);
+      CHECK((out.N_rows.row(r).transpose() - expected).cwiseAbs().maxCoeff() == 0.0);
+      CHECK(out.UD_rows.row(r).cwiseAbs().maxCoeff() == 0.0);
+    }
+    check_against_single_process(H, C, D, options);
+  }
 }
 
 TEST_CASE("MUMPS subspace on the KKT route matches SparseLU", "[distributed]") {

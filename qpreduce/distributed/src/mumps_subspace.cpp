@@ -6,7 +6,7 @@
 
 #include "dense.h"
 #include "mumps_solver.h"
-#include "subspace_internal.h"  // kRowBlock
+#include "subspace_internal.h"  // kRowBlock, snap_selected_rows
 
 #include "qpreduce/support.h"
 
@@ -513,6 +513,9 @@ DistributedSummary MumpsBuild::run() {
                        (options.backend == Backend::Auto && fill > options.max_augmentation_fill * H_nnz);
   summary.kkt_route = use_kkt;
   if (!(use_kkt ? kkt_route() : augmented_route(aug))) return summary;
+  // The rows C fixes exactly, as the single-process build writes them (this
+  // rank's rows of N and UD).
+  qpreduce::detail::snap_selected_rows(C, rows.begin, G, F);
 
   MatD DtUD = k > 0 ? MatD(D_rows.transpose() * F) : MatD(0, 0);
   allreduce_sum(comm, DtUD);
