@@ -277,6 +277,43 @@ TEST_CASE("units: a scene scaled by 10^k, k in -30…30, deforms to the same pos
   }
 }
 
+TEST_CASE("units: coordinates far beyond 1e30 are the same problem (targets judged in the rest pose's frame)",
+          "[deformer][units]") {
+  // kMaxCoordinate bounds what can be normalised (1e100), and targets are
+  // judged by their reach in the rest pose's frame (kMaxReach diagonals), so
+  // a scene whose coordinates pass 1e30 (which was refused) deforms as at
+  // unit size; a target beyond kMaxReach diagonals is refused at any scale.
+  const Scene base_scene = make_scene(false, true);
+  const Result base = run(base_scene, false);
+  REQUIRE(base.pose.rows() == base_scene.model.V.rows());
+  for (const double s : {1e31, 1e60, 1e90}) {
+    Similarity g;
+    g.s = s;
+    const Scene scaled = transformed(base_scene, g);
+    REQUIRE(scaled.model.V.cwiseAbs().maxCoeff() > 1e30);
+    const Result o = run(scaled, false);
+    INFO("scale " << s << ": " << o.precompute << " | " << o.constraints << " | " << o.frame);
+    CHECK(o.precompute == base.precompute);
+    CHECK(o.constraints == base.constraints);
+    REQUIRE(o.pose.rows() == base.pose.rows());
+    CHECK(distance_back(base.pose, o.pose, g) <= kReducedTolerance);
+    // The same far target, relative to the mesh, is refused at either scale.
+    for (const double scale : {1.0, s}) {
+      Similarity h;
+      h.s = scale;
+      Scene far = transformed(base_scene, h);
+      Deformer deformer;
+      REQUIRE(deformer.precompute(far.model, options()).ok());
+      REQUIRE(deformer.set_handles(far.handles).ok());
+      HandleTargets t = far.frames.back();
+      t.points(0, 0) = 1e31 * scale;  // about 10^31 diagonals away
+      Vertices out;
+      CHECK_THROWS_WITH(deformer.frame(t, &out), Catch::Contains("a point handle's target reaches") &&
+                                                     Catch::Contains("beyond 1e+30 diagonals"));
+    }
+  }
+}
+
 TEST_CASE("units: a rigidly moved scene deforms to the same pose moved", "[deformer][units]") {
   std::mt19937 rng(11);
   std::normal_distribution<double> normal;

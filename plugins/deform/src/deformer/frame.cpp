@@ -3,7 +3,7 @@
 // and Phase 2 warm-started from the last frame, and the reconstruction
 // V′ = r₀·(P·[N UD]·[X; S_local]); reset_pose and the round threads.
 #include "qpreduce/deform/deformer/deformer.h"
-#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxCoordinate
+#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxReach
 
 #include "state.h"
 
@@ -26,31 +26,22 @@ using detail_deformer::OnSite;
 using detail_deformer::Pose;
 using detail_deformer::Workspace;
 
-// Sizes and finiteness of the targets, and magnitudes that cannot overflow
-// in the energy (kMaxCoordinate, the rule and the words of qpr's scenario
-// check); a Rigid patch's transform must be a rotation. Throws
-// std::invalid_argument.
+// Sizes and finiteness of the targets, and how far they reach from the rest
+// pose in its frame (reach_in_frame; beyond kMaxReach diagonals they would
+// overflow in the energy: the rule and the words of qpr's scenario check);
+// a Rigid patch's transform must be a rotation. Throws std::invalid_argument.
 void check_targets(const Model& model, const Handles& handles, const HandleTargets& targets) {
   check_size("Deformer::frame: target points", static_cast<Index>(handles.points.size()), targets.points.rows());
   check_size("Deformer::frame: patch transforms", static_cast<Index>(handles.patches.size()),
              static_cast<Index>(targets.patch_transforms.size()));
-  const auto refuse_reach = [](const std::string& what, double reach) {
-    if (!(reach <= kMaxCoordinate)) {
-      throw std::invalid_argument(fmt::format(
-          "Deformer::frame: {} reaches {:g}: handle targets beyond {:g} overflow in the energy (check the "
-          "transform or target)",
-          what, reach, kMaxCoordinate));
-    }
-  };
-  if (targets.points.size() > 0) {
-    check_finite("Deformer::frame: target points", targets.points);
-    refuse_reach("a point handle's target", targets.points.cwiseAbs().maxCoeff());
-  }
+  if (targets.points.size() > 0) check_finite("Deformer::frame: target points", targets.points);
+  for (const auto& T : targets.patch_transforms) check_finite("Deformer::frame: patch transform", T);
+  std::string where;
+  const double reach = reach_in_frame(targets, model.frame, handles, &where);
+  if (!(reach <= kMaxReach)) throw std::invalid_argument("Deformer::frame: " + reach_message(where, reach));
   for (size_t i = 0; i < targets.patch_transforms.size(); ++i) {
     const auto& T = targets.patch_transforms[i];
-    check_finite("Deformer::frame: patch transform", T);
     const Index p = handles.patches[i];
-    refuse_reach(fmt::format("an entry of patch {}'s transform", p), T.cwiseAbs().maxCoeff());
     if (model.patch_types[p] == PatchType::Rigid) {
       const Eigen::Matrix3d A = T.leftCols<3>();
       const double off = (A.transpose() * A - Eigen::Matrix3d::Identity()).norm();

@@ -2,13 +2,17 @@
 
 #include "handle_checks.h"
 
+#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxReach
+
 #include <qpreduce/support.h>
 
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <string>
 
 namespace qpreduce::deform {
 
@@ -48,6 +52,38 @@ HandleTargets normalised(const HandleTargets& targets, const Normalization& fram
     T.col(3) = (T.leftCols<3>() * frame.centre + T.col(3) - frame.centre) / frame.scale;
   }
   return out;
+}
+
+double reach_in_frame(const HandleTargets& targets, const Normalization& frame, const Handles& handles,
+                      std::string* where) {
+  double reach = 0.0;
+  const auto take = [&](double r, const auto& name) {
+    if (!(r <= reach)) {  // NaN or inf wins too
+      reach = std::isnan(r) ? std::numeric_limits<double>::infinity() : r;
+      if (where) *where = name();
+    }
+  };
+  for (Index i = 0; i < targets.points.rows(); ++i) {
+    const double r = ((targets.points.row(i).transpose() - frame.centre) / frame.scale).cwiseAbs().maxCoeff();
+    take(r, [] { return std::string("a point handle's target"); });
+  }
+  for (size_t k = 0; k < targets.patch_transforms.size(); ++k) {
+    const Eigen::Matrix<double, 3, 4>& T = targets.patch_transforms[k];
+    const Eigen::Vector3d t = (T.leftCols<3>() * frame.centre + T.col(3) - frame.centre) / frame.scale;
+    const double r = std::max(T.leftCols<3>().cwiseAbs().maxCoeff(), t.cwiseAbs().maxCoeff());
+    take(r, [&] {
+      return k < handles.patches.size() ? fmt::format("patch {}'s transform", handles.patches[k])
+                                        : std::string("a patch transform");
+    });
+  }
+  return reach;
+}
+
+std::string reach_message(const std::string& where, double reach) {
+  return fmt::format(
+      "{} reaches {:.3g} bounding-box diagonals from the rest pose's centre: handle targets beyond {:g} diagonals "
+      "overflow in the energy (check the transform or target)",
+      where, reach, kMaxReach);
 }
 
 double handle_residual(const DeformableMesh& m, const Handles& handles, const HandleTargets& targets,

@@ -160,31 +160,6 @@ void check_conflicting_pins(const Scenario& sc, const std::string& source) {
 
 }  // namespace
 
-namespace {
-
-// The largest |coordinate| of handle targets in frame f, and where.
-std::pair<double, std::string> frame_reach(const Scenario& sc, size_t f) {
-  const HandleTargets& t = sc.frames[f];
-  double reach = t.points.size() > 0 ? t.points.cwiseAbs().maxCoeff() : 0.0;
-  std::string where = "a point handle's target";
-  for (size_t k = 0; k < t.patch_transforms.size() && k < sc.handles.patches.size(); ++k) {
-    const Eigen::Matrix<double, 3, 4>& T = t.patch_transforms[k];
-    for (size_t v = 0; v < sc.model.patch_of_vertex.size(); ++v) {
-      if (sc.model.patch_of_vertex[v] != sc.handles.patches[k]) continue;
-      const double r = (T.leftCols<3>() * sc.model.V.row(static_cast<Index>(v)).transpose() + T.col(3))
-                           .cwiseAbs()
-                           .maxCoeff();
-      if (!(r <= reach)) {
-        reach = r;
-        where = fmt::format("vertex {} moved by patch {}'s transform", v, sc.handles.patches[k]);
-      }
-    }
-  }
-  return {reach, where};
-}
-
-}  // namespace
-
 void check_handle_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                           Index frame, const std::string& source) {
   const Vertices& V = model.V;
@@ -241,12 +216,13 @@ void check_scenario(const Scenario& sc, const std::string& source) {
       throw std::invalid_argument(fmt::format("{}: vertex {} at ({:g}, {:g}, {:g}): coordinates beyond {:g} overflow "
                                               "in the energy",
                                               source, v, V(v, 0), V(v, 1), V(v, 2), kMaxCoordinate));
+  // Targets as Deformer::frame judges them: in the rest pose's frame.
+  const Normalization frame = normalization_of(V);
   for (size_t f = 0; f < sc.frames.size(); ++f) {
-    const auto [reach, where] = frame_reach(sc, f);
-    if (!(reach <= kMaxCoordinate))
-      throw std::invalid_argument(fmt::format("{}: frame {}: {} reaches {:g}: handle targets beyond {:g} overflow in "
-                                              "the energy (check the transform or target)",
-                                              source, f, where, reach, kMaxCoordinate));
+    std::string where;
+    const double reach = reach_in_frame(sc.frames[f], frame, sc.handles, &where);
+    if (!(reach <= kMaxReach))
+      throw std::invalid_argument(fmt::format("{}: frame {}: {}", source, f, reach_message(where, reach)));
   }
   const MeshComponents components = sc.model.is_tet() ? connected_components(V.rows(), sc.model.T)
                                                        : connected_components(V.rows(), sc.model.F);

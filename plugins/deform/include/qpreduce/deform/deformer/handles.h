@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 
+#include <string>
 #include <vector>
 
 namespace qpreduce::deform {
@@ -85,6 +86,17 @@ RotationElements in_given_units(RotationElements elements, const Normalization& 
 // `targets` in the frame: points x̂ = (x − centre)/scale, patch transforms
 // x ↦ A·x + t as x̂ ↦ A·x̂ + (A·centre + t − centre)/scale.
 HandleTargets normalised(const HandleTargets& targets, const Normalization& frame);
+// How far `targets` reach in that frame: the largest magnitude among the
+// entries of x̂ over the points and of A and (A·centre + t − centre)/scale
+// over the patch transforms (+inf when one overflows). Targets that reach
+// beyond kMaxReach (mesh_check.h) are refused by Deformer::frame and qpr's
+// scenario check; `where` (when not null) names the target that reaches
+// farthest ("a point handle's target", "patch 3's transform").
+double reach_in_frame(const HandleTargets& targets, const Normalization& frame, const Handles& handles,
+                      std::string* where = nullptr);
+// The refusal's words for targets that reach `reach` (beyond kMaxReach), the
+// farthest named by `where`.
+std::string reach_message(const std::string& where, double reach);
 
 // Largest distance between where the handles are in `deformed` (n × 3) and
 // where `targets` put them: point handles by their weighted point, patch

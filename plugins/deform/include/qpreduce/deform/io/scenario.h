@@ -7,7 +7,7 @@
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/io/handles_io.h"
 #include "qpreduce/deform/io/scene.h"
-#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxCoordinate
+#include "qpreduce/deform/mesh/mesh_check.h"  // kMaxCoordinate, kMaxReach
 
 #include <optional>
 #include <string>
@@ -29,13 +29,14 @@ struct Scenario {
 };
 
 // Checks what would otherwise surface deep in the solve as "contains NaN" or
-// "not strictly convex … condition inf": every mesh coordinate and every
-// handle target (points, and patches moved by their transforms) within
-// kMaxCoordinate in magnitude, and every connected component of the elements
-// anchored by a point handle, a fixed patch or a prescribed patch. Throws
-// std::invalid_argument "<source>: …" naming the vertex, frame or component.
-// (kMaxCoordinate is in mesh_check.h, whose diagnose_mesh checks all of the
-// mesh's side of this and more.)
+// "not strictly convex … condition inf": every mesh coordinate within
+// kMaxCoordinate in magnitude, every frame's handle targets within kMaxReach
+// bounding-box diagonals of the rest pose's centre (reach_in_frame, as
+// Deformer::frame judges them), and every connected component of the
+// elements anchored by a point handle, a fixed patch or a prescribed patch.
+// Throws std::invalid_argument "<source>: …" naming the vertex, frame or
+// component. (kMaxCoordinate and kMaxReach are in mesh_check.h, whose
+// diagnose_mesh checks all of the mesh's side of this and more.)
 void check_scenario(const Scenario& scenario, const std::string& source);
 
 // Handles that cannot hold in one frame: a vertex pinned by two single-vertex

@@ -57,11 +57,19 @@
 
 namespace qpreduce::deform {
 
-// Coordinates beyond this overflow in the precompute, which forms products of
-// up to about the eighth power of the coordinates' scale (measured with a
-// far-away vertex and with a .def translation: 1e35 runs, 1e40 ends in NaN;
-// 1e308 is the largest double). Real meshes are many orders smaller.
-inline constexpr double kMaxCoordinate = 1e30;
+// Coordinates up to this magnitude can be normalised and reported (the
+// deformer and the refine compute on the rest pose centred and divided by
+// its bounding-box diagonal σ, Normalization in deformer/handles.h, and give
+// energies in the mesh's units, σ² or σ³ times the frame's): both stay
+// finite (1e308 is the largest double). A limit of representation, not of
+// units.
+inline constexpr double kMaxCoordinate = 1e100;
+// Handle targets at most this many bounding-box diagonals from the rest
+// pose's centre (reach_in_frame, deformer/handles.h): the energy, which forms
+// products of up to about the eighth power of the targets' distance, stays
+// finite, with a margin (docs/robustness.md). Relative to the mesh, so that
+// a scene gets the same verdict in any units.
+inline constexpr double kMaxReach = 1e30;
 
 enum class CheckSeverity { Warning, Error };
 const char* to_string(CheckSeverity severity);  // "warning", "error"
