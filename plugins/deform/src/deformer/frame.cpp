@@ -36,9 +36,12 @@ void check_targets(const Model& model, const Handles& handles, const HandleTarge
              static_cast<Index>(targets.patch_transforms.size()));
   if (targets.points.size() > 0) check_finite("Deformer::frame: target points", targets.points);
   for (const auto& T : targets.patch_transforms) check_finite("Deformer::frame: patch transform", T);
-  std::string where;
-  const double reach = reach_in_frame(targets, model.frame, handles, &where);
-  if (!(reach <= kMaxReach)) throw std::invalid_argument("Deformer::frame: " + reach_message(where, reach));
+  const double reach = reach_in_frame(targets, model.frame, handles);  // no allocation on a frame's path
+  if (!(reach <= kMaxReach)) {
+    std::string where;
+    reach_in_frame(targets, model.frame, handles, &where);
+    throw std::invalid_argument("Deformer::frame: " + reach_message(where, reach));
+  }
   for (size_t i = 0; i < targets.patch_transforms.size(); ++i) {
     const auto& T = targets.patch_transforms[i];
     const Index p = handles.patches[i];

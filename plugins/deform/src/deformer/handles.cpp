@@ -57,24 +57,26 @@ HandleTargets normalised(const HandleTargets& targets, const Normalization& fram
 double reach_in_frame(const HandleTargets& targets, const Normalization& frame, const Handles& handles,
                       std::string* where) {
   double reach = 0.0;
-  const auto take = [&](double r, const auto& name) {
+  Index farthest = -1;  // a point handle (< 0: none), or points.rows() + the transform's index
+  const auto take = [&](double r, Index which) {
     if (!(r <= reach)) {  // NaN or inf wins too
       reach = std::isnan(r) ? std::numeric_limits<double>::infinity() : r;
-      if (where) *where = name();
+      farthest = which;
     }
   };
-  for (Index i = 0; i < targets.points.rows(); ++i) {
-    const double r = ((targets.points.row(i).transpose() - frame.centre) / frame.scale).cwiseAbs().maxCoeff();
-    take(r, [] { return std::string("a point handle's target"); });
-  }
+  const Index points = targets.points.rows();
+  for (Index i = 0; i < points; ++i)
+    take(((targets.points.row(i).transpose() - frame.centre) / frame.scale).cwiseAbs().maxCoeff(), i);
   for (size_t k = 0; k < targets.patch_transforms.size(); ++k) {
     const Eigen::Matrix<double, 3, 4>& T = targets.patch_transforms[k];
     const Eigen::Vector3d t = (T.leftCols<3>() * frame.centre + T.col(3) - frame.centre) / frame.scale;
-    const double r = std::max(T.leftCols<3>().cwiseAbs().maxCoeff(), t.cwiseAbs().maxCoeff());
-    take(r, [&] {
-      return k < handles.patches.size() ? fmt::format("patch {}'s transform", handles.patches[k])
-                                        : std::string("a patch transform");
-    });
+    take(std::max(T.leftCols<3>().cwiseAbs().maxCoeff(), t.cwiseAbs().maxCoeff()), points + static_cast<Index>(k));
+  }
+  if (where && farthest >= 0) {
+    const size_t k = static_cast<size_t>(farthest - points);
+    *where = farthest < points              ? std::string("a point handle's target")
+             : k < handles.patches.size() ? fmt::format("patch {}'s transform", handles.patches[k])
+                                            : std::string("a patch transform");
   }
   return reach;
 }
