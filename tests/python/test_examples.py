@@ -48,3 +48,15 @@ def test_deform_cactus_writes_frames_and_a_figure(tmp_path):
     assert deform.arap_energy(model, R) < deform.arap_energy(model, V)
     assert residual < 1e-5  # the handle patch follows its path (float reconstruction)
     assert (tmp_path / "cylinder.png").stat().st_size > 10_000
+
+
+def test_arap_one_call_meets_the_handles_and_its_refine_reaches_the_one_call_shape(tmp_path):
+    result = load("arap_one_call").main(["--builtin", "--around", "16", "--rings", "24", "--solves", "2",
+                                         "--out", str(tmp_path)])
+    assert result["converged"]
+    assert result["one_call_handle_error"] <= 1e-8 and result["handle_error"] <= 1e-8
+    # The reduced shape is the E′ model's (a few % of the diagonal away); the
+    # refine and the one call stop within 1e-4 of the converged shape each.
+    assert result["reduced_rms"] > result["refined_rms"]
+    assert result["refined_rms"] <= 1e-3
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one_call.off", "reduced.off", "refined.off"]
