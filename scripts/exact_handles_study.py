@@ -5,7 +5,7 @@ display-rate frames (8 rounds each) with 100 exact handle vertices on the
 shared Bumpy Plane.
 
     build/bin/qpreduce-python scripts/exact_handles_study.py [--counts 10 30 100 300] [--data ../shared/data]
-        [--parts sweep break-even frames] [--sweep-mesh SEGMENTS RINGS]
+        [--parts sweep break-even frames shared-sel] [--sweep-mesh SEGMENTS RINGS] [--models cylinder cactus bar]
 
 Prints a Markdown table per part; medians over --repeats runs of each solve.
 """
@@ -92,6 +92,31 @@ def break_even(data, repeats):
           f"in place of one-call solves")
 
 
+def shared_sel(data, models, repeats):
+    """Every fixed and handle vertex of each shared .sel held vertex by vertex (libigl's habit)."""
+    bs = os.path.join(data, "meshes", "botsch-sorkine")
+    print("\nshared Botsch–Sorkine models, every fixed and handle vertex of the .sel held, targets from the .def")
+    print("| model | n | held | p | precompute s | peak RSS MB (process so far) | solve ms (median) "
+          "| reconstruction's handle error / diag | returned handle error / diag |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in models:
+        V, F = deform.read_mesh(os.path.join(bs, name + ".off"))
+        sel = deform.read_sel(os.path.join(bs, name + ".sel"))
+        M = deform.read_def(os.path.join(bs, name + ".def"))
+        b = np.flatnonzero(sel != 1)
+        bc = V[b].copy()
+        handle = sel[b] == 2
+        bc[handle] = V[b][handle] @ M[:3, :3].T + M[:3, 3]
+        d = np.linalg.norm(np.ptp(V, axis=0))
+        t = time.perf_counter()
+        solver = deform.ArapSolver(V, F, b)
+        pre = time.perf_counter() - t
+        U, ms = timed(lambda: solver.solve(bc), repeats)
+        p = solver.precompute_summary.reduced_size
+        print(f"| {name} | {len(V)} | {len(b)} | {p} | {pre:.2f} | {peak_rss_mb():.0f} | {1e3 * ms:.2f} | "
+              f"{solver.reconstruction_handle_error / d:.1e} | {np.abs(U[b] - bc).max() / d:.1e} |", flush=True)
+
+
 def frames_on_bumpy_plane(data, handles, repeats):
     V, F = deform.read_mesh(os.path.join(data, "meshes", "botsch-sorkine", "bumpy_plane.off"))
     d = np.linalg.norm(np.ptp(V, axis=0))
@@ -123,7 +148,10 @@ def main():
     parser.add_argument("--counts", type=int, nargs="*", default=[10, 30, 100, 300])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--parts", nargs="*", default=["sweep", "break-even", "frames"],
-                        choices=["sweep", "break-even", "frames"], help="which tables (default: all three)")
+                        choices=["sweep", "break-even", "frames", "shared-sel"],
+                        help="which tables (default: the first three)")
+    parser.add_argument("--models", nargs="*", default=["cylinder", "cactus", "bar"],
+                        help="shared-sel's Botsch–Sorkine models")
     parser.add_argument("--sweep-mesh", type=int, nargs=2, default=[30, 60], metavar=("SEGMENTS", "RINGS"),
                         help="the sweep's capped cylinder (default 30 60: 1,802 vertices)")
     parser.add_argument("--data", default=os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(
@@ -138,6 +166,8 @@ def main():
         break_even(args.data, args.repeats)
     if "frames" in args.parts:
         frames_on_bumpy_plane(args.data, 100, args.repeats)
+    if "shared-sel" in args.parts:
+        shared_sel(args.data, args.models, args.repeats)
 
 
 if __name__ == "__main__":
