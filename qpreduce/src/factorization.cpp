@@ -135,7 +135,11 @@ class CholmodFactorization final : public SparseFactorization {
     const Index minor = static_cast<Index>(factor_->minor);
     if (common_.status == CHOLMOD_OK && minor >= A.rows()) {
       set_info(Eigen::Success, "");
-      if (!factor_->is_ll) check_ldlt_pivots();
+      if (factor_->is_ll) {
+        check_ll_pivots();
+      } else {
+        check_ldlt_pivots();
+      }
     } else if (common_.status == CHOLMOD_NOT_POSDEF || minor < A.rows()) {
       set_info(Eigen::NumericalIssue,
                fmt::format("CHOLMOD: matrix is not positive definite (factorization stopped at column {} of {})",
@@ -228,6 +232,18 @@ class CholmodFactorization final : public SparseFactorization {
     v.xtype = CHOLMOD_REAL;
     v.dtype = CHOLMOD_DOUBLE;
     return v;
+  }
+  // An LLᵀ stops at a pivot ≤ 0, but a singular positive semidefinite matrix
+  // can end with a pivot of round-off size on either side of 0 (which side
+  // depends on the BLAS kernels' rounding): the same relative test as the
+  // LDLᵀ's, on d_j = L_jj² (cholmod_rcond is min d_j / max d_j).
+  void check_ll_pivots() {
+    if (factor_->n == 0) return;
+    const double rcond = cholmod_rcond(factor_, &common_);
+    if (!(rcond > 1e3 * Eigen::NumTraits<double>::epsilon())) {
+      set_info(Eigen::NumericalIssue,
+               fmt::format("CHOLMOD LLᵀ: matrix is numerically singular (pivot ratio {:.2e}, below 1e3·ε)", rcond));
+    }
   }
   // A simplicial LDLᵀ succeeds on indefinite matrices: the inertia of D
   // (the first entry of each column of the factor) says whether A was

@@ -305,6 +305,28 @@ TEST_CASE("CHOLMOD's in-place blocked solves match a dense solve", "[factorizati
   CHECK((solved_on(*factor, B, threads, block) - expected).norm() <= 1e-12 * expected.norm());
 }
 
+TEST_CASE("CHOLMOD's supernodal LLT refuses a singular positive semidefinite matrix, whichever side of 0 its last "
+          "pivot lands", "[factorization]") {
+  // A grid Laplacian without its ridge (constants in the kernel) factors to a
+  // last pivot of round-off size, negative for some sizes (CHOLMOD stops:
+  // not positive definite) and positive for others (the pivot-ratio test).
+  // Both are refused, and a ridge of 10⁻⁶ is accepted.
+  int by_ratio = 0, by_sign = 0;
+  for (Index nx = 3; nx <= 40; ++nx) {
+    CAPTURE(nx);
+    auto factor = make_factorization(Backend::Cholmod);
+    factor->compute(gen::grid_laplacian_2d(nx, nx + 3, 0.0));
+    CHECK(factor->info() == Eigen::NumericalIssue);
+    by_ratio += factor->message().find("numerically singular") != std::string::npos;
+    by_sign += factor->message().find("not positive definite") != std::string::npos;
+    auto ridged = make_factorization(Backend::Cholmod);
+    ridged->compute(gen::grid_laplacian_2d(nx, nx + 3, 1e-6));
+    CHECK(ridged->info() == Eigen::Success);
+  }
+  INFO(by_ratio << " refused by the pivot ratio, " << by_sign << " by a pivot ≤ 0");
+  CHECK(by_ratio + by_sign == 38);  // which test refuses which size is the BLAS's rounding
+}
+
 TEST_CASE("CHOLMOD's simplicial LDLT solves match a dense solve and refuse a matrix that is not positive definite",
           "[factorization][blocks]") {
   const SparseMatrix<double> A = gen::grid_laplacian_2d(17, 13, 0.3);
