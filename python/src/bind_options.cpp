@@ -3,7 +3,7 @@
 #include "bindings.h"
 #include "fields.h"
 
-#include <qpreduce/alternating.h>
+#include <qpreduce/alternation.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/quotient.h>
 #include <qpreduce/subspace_solver.h>
@@ -27,7 +27,7 @@ void bind_enums(py::module_& m) {
       .value("SingularKKT", Status::SingularKKT, "The KKT matrix is singular: H is not PD on ker(Cᵀ).")
       .value("Unbounded", Status::Unbounded, "The (reduced) problem has no unique minimiser.")
       .value("NumericalFailure", Status::NumericalFailure, "Anything else a factorization reported.");
-  py::enum_<RoundStop>(m, "RoundStop", "What ended a frame's rounds (alternating.h).")
+  py::enum_<RoundStop>(m, "RoundStop", "What ended a frame's rounds (alternation.h).")
       .value("RoundLimit", RoundStop::RoundLimit, "The cap (iterations) was reached.")
       .value("Tolerance", RoundStop::Tolerance, "The fixed-point residual met the tolerance.")
       .value("TimeBudget", RoundStop::TimeBudget, "The time budget was spent first.");

@@ -158,4 +158,28 @@ void AndersonAcceleration::step(const Eigen::Ref<const Eigen::VectorXd>& x, cons
   }
 }
 
+void SafeguardedAnderson::reset(Index n, const AndersonOptions& options) {
+  anderson_.reset(n, options);
+  window_ = options.window;
+  rejected_ = 0;
+}
+
+void SafeguardedAnderson::restart() {
+  anderson_.restart();
+  rejected_ = 0;
+}
+
+bool SafeguardedAnderson::propose(const Eigen::Ref<const Eigen::VectorXd>& x,
+                                  const Eigen::Ref<const Eigen::VectorXd>& gx, Eigen::Ref<Eigen::VectorXd> out) {
+  anderson_.step(x, gx, out);
+  return anderson_.history() > 0;
+}
+
+bool SafeguardedAnderson::accept(double energy, double accepted, double slack) {
+  if (energy <= accepted + slack) return true;  // false for NaN too
+  anderson_.restart();
+  ++rejected_;
+  return false;
+}
+
 }  // namespace qpreduce

@@ -1,8 +1,8 @@
-// Phase 1 of the alternation (alternating.h): z = M_b·b + M_Y·Y for one
+// Phase 1 of the alternation (alternation.h): z = M_b·b + M_Y·Y for one
 // constraint set, by the elimination of a selection (when A_z is one and it
 // costs less), the range-space fast path on H_zz (FactoredPhaseOne) or the
 // null-space method (ExplicitPhaseOne); phase_one.h has the forms.
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 
 #include "blas.h"
 #include "phase_one.h"
@@ -126,7 +126,7 @@ Matrix<double> selection_multipliers(const SubspaceSolver<double>& solver, const
   return out.rightCols(k);
 }
 
-// The multipliers of Phase 1 as affine maps of (b, y) (alternating.h,
+// The multipliers of Phase 1 as affine maps of (b, y) (alternation_parts.h,
 // form_energy_terms), with z = M_b·b + M_Y·y:
 //   fast path (hard or soft)  λ = K·(R·y − [b; 0]) (phase_one.h):
 //         Λ_b = −K's first m columns, Λ_y = K·R; O(m·μ·k);

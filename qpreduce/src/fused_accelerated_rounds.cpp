@@ -49,11 +49,11 @@ void constraint_term(const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vec
   }
 }
 
-AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+AlternationResults run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                    const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                   const AlternatingOptions& options, const detail::StopTest& stop,
+                                   const AlternationSettings& options, const detail::StopTest& stop,
                                    Eigen::Ref<Vector<double>> y) {
-  AlternatingSummary summary;
+  AlternationResults summary;
   const bool use_float = options.float_products;
   const bool corrected = M.energy != nullptr;
   auto product = [&](const Vector<double>& at) {
@@ -69,30 +69,28 @@ AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, Input
     product(W.y_try);
     const Vector<double>* D = corrected ? &M.proximal_entries : nullptr;
     double energy = reduced_energy(E, W, projection, b, W.y_try, use_float, D, &slack);
-    if (extrapolated && !(energy <= accepted + slack)) {  // the safeguard: back to the plain step
+    if (extrapolated && !W.anderson.accept(energy, accepted, slack)) {  // the safeguard: back to the plain step
       W.y_try = W.y_plain;
       product(W.y_try);
       energy = reduced_energy(E, W, projection, b, W.y_try, use_float, D, &slack);
-      W.anderson.restart();
-      ++summary.rejected;
     }
     accepted = energy;
     W.y_plain = W.y_try;
     summary.last_change = projection.project(W.g, W.y_plain);
     summary.iterations = it + 1;
     if (stop.done(summary.last_change, [&] { return W.y_try.norm(); }, &summary)) break;
-    W.anderson.step(W.y_try, W.y_plain, W.y_next);
-    extrapolated = W.anderson.history() > 0;
+    extrapolated = W.anderson.propose(W.y_try, W.y_plain, W.y_next);
     if (extrapolated) projection.retract(W.y_next);
     W.y_try.swap(W.y_next);
   }
   y = W.y_plain;
   summary.energy = accepted;
+  summary.rejected = W.anderson.rejected();
   return summary;
 }
 
 void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const InputProjection<double>& projection,
-                          const AlternatingOptions& options, const Eigen::Ref<const Vector<double>>& y,
+                          const AlternationSettings& options, const Eigen::Ref<const Vector<double>>& y,
                           FusedWorkspace& W) {
   if (!phase1.has_energy_terms()) {
     throw std::invalid_argument(
@@ -104,9 +102,8 @@ void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const Inp
         "FusedAlternation::run: this projection cannot be accelerated (its quadratic_term is not given)");
   }
   const Index k = y.size(), m = phase1.m();
-  if (W.anderson.size() != k || W.anderson_window != options.anderson_window) {
+  if (W.anderson.size() != k || W.anderson.window() != options.anderson_window) {
     W.anderson.reset(k, AndersonOptions{options.anderson_window});
-    W.anderson_window = options.anderson_window;
   }
   W.y_plain.resize(k);
   size_energy_workspace(k, m, W);

@@ -1,8 +1,8 @@
-// FusedAlternation (alternating.h): Phase 1 folded into Phase 2's input,
+// FusedAlternation (alternation.h): Phase 1 folded into Phase 2's input,
 // g = F_b·b + F_y·y, in the explicit or the factored form (fused_rounds.h).
 // `set` forms the operators (fused_form.cpp); `run` picks one of the loops
 // (fused_steps.h: plain, accelerated, second-order).
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 
 #include "blas.h"
 #include "fused_form.h"
@@ -23,46 +23,6 @@
 #include <optional>
 
 namespace qpreduce {
-
-bool AlternatingOptions::is_valid(std::string* why) const {
-  if (iterations < 1) {
-    if (why) *why = fmt::format("iterations must be at least 1, got {}", iterations);
-    return false;
-  }
-  if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
-    if (why) *why = fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance);
-    return false;
-  }
-  if (!(time_budget >= 0.0) || !std::isfinite(time_budget)) {
-    if (why) *why = fmt::format("time_budget must be finite and ≥ 0 seconds (0: none), got {}", time_budget);
-    return false;
-  }
-  if (threads < 0) {
-    if (why) *why = fmt::format("threads must be ≥ 0 (0: all), got {}", threads);
-    return false;
-  }
-  if (parallel_min_entries < 0) {
-    if (why) *why = fmt::format("parallel_min_entries must be ≥ 0, got {}", parallel_min_entries);
-    return false;
-  }
-  if (anderson_window < 0 || anderson_window > AndersonAcceleration::kMaxWindow) {
-    if (why) {
-      *why = fmt::format("anderson_window must be in [0, {}] (0: plain rounds), got {}",
-                         AndersonAcceleration::kMaxWindow, anderson_window);
-    }
-    return false;
-  }
-  return true;
-}
-
-const char* to_string(RoundStop stop) {
-  switch (stop) {
-    case RoundStop::RoundLimit: return "round limit";
-    case RoundStop::Tolerance: return "tolerance";
-    case RoundStop::TimeBudget: return "time budget";
-  }
-  return "unknown";
-}
 
 namespace {
 
@@ -126,7 +86,7 @@ bool FusedAlternation<Scalar>::constrained_y() const {
 
 template <typename Scalar>
 bool FusedAlternation<Scalar>::second_order(const InputProjection<Scalar>& projection,
-                                            const AlternatingOptions& options) const {
+                                            const AlternationSettings& options) const {
   return model_->second_order && options.second_order && projection.rotation_blocks();
 }
 
@@ -145,6 +105,16 @@ void FusedAlternation<Scalar>::set_proximal_block_size(Index block) {
 template <typename Scalar>
 bool FusedAlternation<Scalar>::float_set() const {
   return model_->float_set;
+}
+
+template <typename Scalar>
+const Matrix<Scalar>& FusedAlternation<Scalar>::Gz() const {
+  return model_->Gz;
+}
+
+template <typename Scalar>
+const Matrix<Scalar>& FusedAlternation<Scalar>::Gy() const {
+  return model_->Gy;
 }
 
 template <typename Scalar>
@@ -225,10 +195,10 @@ void FusedAlternation<Scalar>::prepare(const FixedCoordinateSolver<Scalar>& phas
 }
 
 template <typename Scalar>
-AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Scalar>& phase1,
+AlternationResults FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Scalar>& phase1,
                                                  InputProjection<Scalar>& projection,
                                                  const Eigen::Ref<const Vector<Scalar>>& b,
-                                                 const AlternatingOptions& options, Eigen::Ref<Vector<Scalar>> z,
+                                                 const AlternationSettings& options, Eigen::Ref<Vector<Scalar>> z,
                                                  Eigen::Ref<Vector<Scalar>> y) {
   const FusedModel& M = *model_;
   FusedWorkspace& W = *workspace_;
@@ -240,7 +210,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   if (M.float_set && !options.float_products) {
     throw std::invalid_argument(
         "FusedAlternation::run: set with FusedPrecision::Float needs float rounds "
-        "(AlternatingOptions::float_products)");
+        "(AlternationSettings::float_products)");
   }
   if (M.energy_seen != phase1.shared_energy_terms()) {
     throw std::invalid_argument(
@@ -262,7 +232,7 @@ AlternatingSummary FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   const int threads = options.threads > 0 ? options.threads : omp_get_max_threads();
   const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
                         q * k >= options.parallel_min_entries && q / block >= 2;
-  AlternatingSummary summary;
+  AlternationResults summary;
   if (second_order(projection, options)) {
     prepare_second_order(phase1, k, W);
     summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, stop, y);

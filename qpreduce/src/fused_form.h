@@ -11,7 +11,7 @@
 #include "fused_rounds.h"
 #include "phase_one.h"
 
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 
 #include <memory>
 
@@ -43,7 +43,7 @@ void set_explicit_plain(FusedModel& M, const FixedCoordinateSolver<double>& phas
 // the stiff sets that second-order steps are for (once the weights are formed).
 bool stiff_rotation_set(const FusedModel& M);
 
-// Constraints on y (alternating.h): the energy terms the rounds correct
+// Constraints on y (alternation.h): the energy terms the rounds correct
 // for — Phase 1 has them, A_y ≠ 0 and q = k — or null. Resets what the last
 // set's correction left.
 const PhaseOneEnergy* start_correction(FusedModel& M, const FixedCoordinateSolver<double>& phase1);

@@ -9,8 +9,8 @@
 
 namespace qpreduce::detail {
 
-AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                                const AlternatingOptions& options, const detail::StopTest& stop, Index threads,
+AlternationResults run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                                const AlternationSettings& options, const detail::StopTest& stop, Index threads,
                                 Index block, Eigen::Ref<Vector<double>> y) {
   const Index q = M.q(), blocks = q / block, mu = M.rounds().scratch_size();
   const bool use_float = options.float_products;
@@ -33,7 +33,7 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
   bool spent[2] = {false, false};
   W.scratch_threads.resize(mu, threads);  // these allocate on the first call only
   W.scratch_f_threads.resize(mu, threads);
-  AlternatingSummary summary;
+  AlternationResults summary;
 #pragma omp parallel num_threads(static_cast<int>(threads))
   {
     const Index t = omp_get_thread_num(), nt = omp_get_num_threads();
@@ -89,10 +89,10 @@ AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputPro
   return summary;
 }
 
-AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                              const AlternatingOptions& options, const detail::StopTest& stop,
+AlternationResults run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                              const AlternationSettings& options, const detail::StopTest& stop,
                               Eigen::Ref<Vector<double>> y) {
-  AlternatingSummary summary;
+  AlternationResults summary;
   for (int it = 0; it < options.iterations; ++it) {
     round_product(M, W, y.data(), options.float_products, it == 0 ? kNoChange : summary.last_change);
     summary.last_change = projection.project(W.g, y);

@@ -1,4 +1,4 @@
-// Private to the engine: FusedAlternation's model and workspace (alternating.h;
+// Private to the engine: FusedAlternation's model and workspace (alternation_parts.h;
 // derivation in docs/engine.md, "The alternation").
 //
 // A round forms g = g_b + F_y·y (q entries, g_b = F_b·b once per run) and
@@ -83,7 +83,7 @@ class FactoredRounds final : public RoundOperator {
   }
 };
 
-// Whether the corrected rounds need proximal weights at all (alternating.h,
+// Whether the corrected rounds need proximal weights at all (alternation_parts.h,
 // "Constraints on y"): D = 0 exactly when Q ⪯ 0. On the fast path
 // Q = −F₀ + U·R with F₀ = C0 + G_y the same for every constraint set and
 // U·R = Q + F₀ symmetric, of rank ≤ μ (U = G_z·T + A_yᵀ·K, q × μ; R μ × k).
@@ -141,7 +141,7 @@ struct FusedModel {
   bool factored = false;   // the rounds use factored_rounds
   bool float_set = false;  // factored_rounds.U_f and Fb were formed in float
   bool ready = false;
-  // Constraints on y (alternating.h, "Constraints on y"): the energy terms
+  // Constraints on y (docs/engine.md, "Constraints on y"): the energy terms
   // the rounds were corrected with (null: not corrected), and the proximal
   // weights D (one per block of `block` entries; empty when not corrected).
   // In the explicit form D sits on F_y's diagonal; in the factored form G_z·T
@@ -181,8 +181,7 @@ struct FusedWorkspace {
   // Accelerated rounds: the iterate tried, the plain step from the last
   // accepted one, the extrapolation (k each); [A_y·y; Λ_y·y] (2m), Λ_b·b (m);
   // the energy's constraint term when affine in y, c₀ + cᵀy (c = Λ_yᵀb, k).
-  AndersonAcceleration anderson;
-  int anderson_window = 0;
+  SafeguardedAnderson anderson;
   Vector<double> y_try, y_plain, y_next, ay_ly, lambda_b, lyb;
   double blb = 0.0;
   bool constraint_affine = false;

@@ -14,9 +14,9 @@ namespace qpreduce::detail {
 
 using MatD = Matrix<double>;
 
-AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+AlternationResults run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                     const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                    const AlternatingOptions& options, const detail::StopTest& stop,
+                                    const AlternationSettings& options, const detail::StopTest& stop,
                                     Eigen::Ref<Vector<double>> y) {
   const Index k = M.k(), d = k / 9;
   const MatD& F = M.explicit_rounds.F;  // F_y − A_yᵀΛ_y + D
@@ -27,7 +27,7 @@ AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
     double_product(M, W, at.data(), 0, k, W.scratch.data());
     return reduced_energy(E, W, projection, b, at, false, &D, &slack);
   };
-  AlternatingSummary summary;
+  AlternationResults summary;
   summary.second_order = true;
   W.y_try = y;
   double energy = evaluate(W.y_try);

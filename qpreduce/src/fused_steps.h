@@ -10,21 +10,21 @@
 #include "phase_one.h"
 #include "round_stop.h"
 
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 
 namespace qpreduce::detail {
 
-// The rounds on `threads` threads over block ranges (AlternatingOptions::
+// The rounds on `threads` threads over block ranges (AlternationSettings::
 // threads); y is updated in place, z is left to the caller.
-AlternatingSummary run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                                const AlternatingOptions& options, const StopTest& stop, Index threads, Index block,
+AlternationResults run_parallel(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                                const AlternationSettings& options, const StopTest& stop, Index threads, Index block,
                                 Eigen::Ref<Vector<double>> y);
 
 // The serial rounds.
-AlternatingSummary run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
-                              const AlternatingOptions& options, const StopTest& stop, Eigen::Ref<Vector<double>> y);
+AlternationResults run_serial(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+                              const AlternationSettings& options, const StopTest& stop, Eigen::Ref<Vector<double>> y);
 
-// The energy (*) of alternating.h at y, with g = g(y) in W.g:
+// The energy (*) of alternation_parts.h at y, with g = g(y) in W.g:
 // ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀ(λ_b + Λ_y·y), and a bound on its round-off
 // (`slack`, relative to the terms' sizes: 1e-9 with float rounds, whose
 // products are relative to a double reference, 1e-11 in double).
@@ -42,18 +42,18 @@ double reduced_energy(const PhaseOneEnergy& E, FusedWorkspace& W, const InputPro
 void constraint_term(const PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b, bool corrected,
                      FusedWorkspace& W);
 
-// Accelerated rounds (AlternatingOptions::anderson_window): Anderson on the
+// Accelerated rounds (AlternationSettings::anderson_window): Anderson on the
 // fixed-point map y ← Π(g(y)) with the retraction and the energy safeguard;
 // y ends as the plain step from the last accepted iterate.
-AlternatingSummary run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+AlternationResults run_accelerated(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                    const PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                   const AlternatingOptions& options, const StopTest& stop,
+                                   const AlternationSettings& options, const StopTest& stop,
                                    Eigen::Ref<Vector<double>> y);
 
 // Checks what accelerated rounds need and sizes their vectors (allocates
 // only when the sizes or the window change). Throws std::invalid_argument.
 void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const InputProjection<double>& projection,
-                          const AlternatingOptions& options, const Eigen::Ref<const Vector<double>>& y,
+                          const AlternationSettings& options, const Eigen::Ref<const Vector<double>>& y,
                           FusedWorkspace& W);
 
 // Sizes the vectors that the accelerated rounds and the second-order steps
@@ -62,7 +62,7 @@ void prepare_acceleration(const FixedCoordinateSolver<double>& phase1, const Inp
 void size_energy_workspace(Index k, Index m, FusedWorkspace& W);
 
 // Second-order steps for stiff constraints on rotation blocks
-// (AlternatingOptions::second_order; alternating.h, "Constraints on y"): a
+// (AlternationSettings::second_order; docs/engine.md, "Constraints on y"): a
 // Riemannian Newton step with Levenberg–Marquardt damping on E(y) over
 // SO(3)^d, y_a ← y_a·exp([ω_a]×). E is quadratic in y with Hessian N_S + Q
 // (Q = −(F_y′ − D), explicit), N_S is constant on rotations, so along
@@ -73,9 +73,9 @@ void size_energy_workspace(Index k, Index m, FusedWorkspace& W);
 // vec(S_a·[e_i]×). A step is kept only when (*) does not rise; a rejected one
 // raises the damping μ. O(k²·d + d³) per step (a dozen rounds' work); it
 // reaches in a few steps what damped rounds need thousands of rounds for.
-AlternatingSummary run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
+AlternationResults run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                     const PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
-                                    const AlternatingOptions& options, const StopTest& stop,
+                                    const AlternationSettings& options, const StopTest& stop,
                                     Eigen::Ref<Vector<double>> y);
 
 // Sizes the second-order steps' workspace (allocates only when k changes).

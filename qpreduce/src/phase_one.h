@@ -1,4 +1,4 @@
-// Private to the engine: Phase 1 of the alternation (alternating.h) for one
+// Private to the engine: Phase 1 of the alternation (alternation.h) for one
 // constraint set, z = M_b·b + M_Y·Y (b: m, Y: k, z: d), in one of two forms
 // behind one small interface (the derivation: docs/engine.md, "The
 // alternation"):

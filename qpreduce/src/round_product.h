@@ -2,7 +2,7 @@
 // in double or as float rounds relative to a double reference, for every
 // loop of fused_steps.h.
 //
-// Float rounds (AlternatingOptions::float_products) form
+// Float rounds (AlternationSettings::float_products) form
 //     g = g_b + F_y·y_r + F_y·(y − y_r)
 // with F_y·y_r in double at a reference y_r and only the difference's
 // product in float. The reference moves to y (one double product) when

@@ -1,9 +1,9 @@
-// The one stop test of the alternation's rounds (AlternatingOptions:
+// The one stop test of the alternation's rounds (AlternationSettings:
 // iterations, tolerance, time_budget), shared by the plain, parallel,
 // accelerated and second-order loops of fused_steps.h.
 #pragma once
 
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 
 #include <algorithm>
 #include <chrono>
@@ -13,7 +13,7 @@ namespace qpreduce::detail {
 class StopTest {
  public:
   // Starts the budget's clock (when there is a budget).
-  explicit StopTest(const AlternatingOptions& options)
+  explicit StopTest(const AlternationSettings& options)
       : tolerance_(options.tolerance), budget_(options.time_budget), clock_(options.clock) {
     if (budget_ > 0.0) start_ = now();
   }
@@ -28,7 +28,7 @@ class StopTest {
   // ynorm() gives ‖y‖; it is called only when there is a tolerance (O(k)
   // a round that rounds without one need not pay).
   template <typename YNorm>
-  bool done(double change, const YNorm& ynorm, AlternatingSummary* summary) const {
+  bool done(double change, const YNorm& ynorm, AlternationResults* summary) const {
     if (tolerance_ > 0.0 && converged(change, ynorm())) {
       summary->stop = RoundStop::Tolerance;
       return true;
@@ -36,7 +36,7 @@ class StopTest {
     return spent(summary);
   }
   // After a step that cannot meet the tolerance (a rejected one): the budget only.
-  bool spent(AlternatingSummary* summary) const {
+  bool spent(AlternationResults* summary) const {
     if (!over_budget()) return false;
     summary->stop = RoundStop::TimeBudget;
     return true;

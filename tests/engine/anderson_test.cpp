@@ -6,6 +6,8 @@
 
 #include <Eigen/Dense>
 
+#include <cmath>
+#include <limits>
 #include <random>
 #include <stdexcept>
 #include <string>
@@ -168,4 +170,52 @@ TEST_CASE("Anderson: bad options and sizes throw with the words") {
   CHECK_THROWS_WITH(aa.step(v4, v5, out5), Catch::Contains("expected 5, got 4"));
   CHECK_THROWS_WITH(aa.step(v5, v4, out5), Catch::Contains("gx"));
   CHECK_THROWS_WITH(aa.step(v5, v5, out4), Catch::Contains("out"));
+}
+
+TEST_CASE("SafeguardedAnderson: a quadratic's energy judges the steps; refusals restart the history and are counted") {
+  // x ← Mx + c is the gradient step of E(x) = ½xᵀ(I − M)x − cᵀx (I − M ≻ 0),
+  // so the safeguarded loop never raises E and reaches x* as the plain one.
+  using qpreduce::SafeguardedAnderson;
+  const Contraction k = make_contraction(40, 0.98, 11);
+  const Eigen::Index n = k.c.size();
+  const Eigen::MatrixXd K = Eigen::MatrixXd::Identity(n, n) - k.M;
+  const auto energy = [&](const Eigen::VectorXd& x) { return 0.5 * x.dot(K * x) - k.c.dot(x); };
+  SafeguardedAnderson aa;
+  aa.reset(n, AndersonOptions{5});
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(n), gx(n), trial(n);
+  double accepted = energy(x);
+  int steps = 0;
+  for (; steps < 2000 && (x - k.fixed_point).norm() > 1e-10 * k.fixed_point.norm(); ++steps) {
+    gx = k.M * x + k.c;
+    if (aa.propose(x, gx, trial)) {
+      const double e = energy(trial);
+      if (aa.accept(e, accepted)) {
+        CHECK(e <= accepted);
+        x = trial;
+        accepted = e;
+        continue;
+      }
+    }
+    x = gx;  // the plain step: never raises E
+    const double e = energy(x);
+    CHECK(e <= accepted + 1e-12 * std::abs(accepted));
+    accepted = e;
+  }
+  CHECK(steps < 400);  // plain: about log(1e-10)/log(0.98) ≈ 1,100
+
+  // The judgement itself: higher or non-finite energies are refused, each
+  // refusal counted and the history dropped (the next proposal is G(x)).
+  const int before = aa.rejected();
+  CHECK(aa.accept(1.0, 1.0));
+  CHECK(aa.accept(1.0 + 1e-13, 1.0, 1e-12));  // within the slack
+  CHECK_FALSE(aa.accept(2.0, 1.0));
+  CHECK(aa.history() == 0);
+  CHECK_FALSE(aa.accept(std::numeric_limits<double>::quiet_NaN(), 1.0));
+  CHECK(aa.rejected() == before + 2);
+  gx = k.M * x + k.c;
+  CHECK_FALSE(aa.propose(x, gx, trial));
+  CHECK(trial == gx);
+  aa.restart();
+  CHECK(aa.rejected() == 0);
+  CHECK_THROWS_AS(aa.reset(n, AndersonOptions{0}), std::invalid_argument);
 }

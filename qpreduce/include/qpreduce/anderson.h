@@ -16,9 +16,11 @@
 // nearly dependent differences from blowing θ up (it changes θ by a relative
 // ~1e-12 when ΔF is well conditioned).
 //
-// The class does not know the energy: the caller keeps the safeguard of Peng
-// et al. (evaluate the energy at x_{k+1}; if it is not lower than at x_k,
-// take the plain step G(x_k) instead and call restart()).
+// AndersonAcceleration does not know the energy; SafeguardedAnderson adds
+// the safeguard of Peng et al. (an extrapolated x_{k+1} whose energy is
+// above the last accepted one is refused: the caller takes the plain step
+// G(x_k) and the history restarts), which the reduced rounds
+// (Alternation) and the full-space refine both use.
 //
 // Affine constraints are preserved: x_{k+1} is an affine combination (the
 // weights sum to one) of G's outputs, so if every G(x) satisfies Ax = b so
@@ -81,6 +83,39 @@ class AndersonAcceleration {
   Small gram_;                     // ΔFᵀΔF, history × history in the top-left corner
   SmallVector rhs_;                // ΔFᵀf_k (window; the first history_ entries)
   SmallVector theta_, column_;
+};
+
+// Anderson steps judged by an energy the caller evaluates (Peng et al. 2018,
+// Algorithm 1's safeguard). A loop reads
+//     trial = propose(x, G(x))  →  energy E(trial)  →  accept(E, E_accepted)
+// and on a refusal goes back to the plain step G(x).
+class SafeguardedAnderson {
+ public:
+  // Sizes the history for iterates of n entries, clears it and the count
+  // of refusals. Throws std::invalid_argument as AndersonAcceleration::reset.
+  void reset(Index n, const AndersonOptions& options);
+  // Drops the history and the count (a new run from a new start).
+  void restart();
+  // One type-II step from the accepted x with gx = G(x) (n each) into out
+  // (may alias gx, not x). Returns true when out is an extrapolation, to be
+  // judged by accept; false when it is gx itself (no history yet). No heap
+  // allocation after reset.
+  bool propose(const Eigen::Ref<const Eigen::VectorXd>& x, const Eigen::Ref<const Eigen::VectorXd>& gx,
+               Eigen::Ref<Eigen::VectorXd> out);
+  // An extrapolation's energy against the last accepted energy: true keeps
+  // it (energy ≤ accepted + slack); false (higher, or not finite) counts a
+  // refusal and restarts the history: the caller takes the plain step.
+  bool accept(double energy, double accepted, double slack = 0.0);
+
+  int rejected() const { return rejected_; }  // refusals since reset or restart
+  int history() const { return anderson_.history(); }
+  Index size() const { return anderson_.size(); }
+  int window() const { return window_; }
+
+ private:
+  AndersonAcceleration anderson_;
+  int window_ = 0;
+  int rejected_ = 0;
 };
 
 }  // namespace qpreduce

@@ -56,7 +56,7 @@ struct ConstraintOptions {
   // (docs/engine.md, "Round-off in A_r = AᵀB"). 0 keeps every entry. In [0, 1).
   double drop_tolerance = 1e-10;
   // Use the precomputed range-space fast path when it applies (docs/engine.md;
-  // likewise FixedCoordinateSolver and FusedAlternation, alternating.h);
+  // likewise Alternation, alternation.h);
   // false forces the O(p³) null-space method (for comparison and tests).
   bool fast_path = true;
   // OpenMP/BLAS threads for the dense algebra of this step (0 means

@@ -222,7 +222,7 @@ TEST_CASE("deformer: tet meshes deform and keep handles", "[deformer]") {
 
 TEST_CASE("deformer: rounds on two threads give the serial frames", "[deformer]") {
   // 30 clusters: 9d = 270, so F_y is large enough for the factored form and
-  // the parallel rounds (alternating.h).
+  // the parallel rounds (alternation.h).
   const TriangleMesh m = shapes::capped_cylinder(1.0, 3.0, 12, 10);
   DeformableMesh model;
   model.V = m.V;

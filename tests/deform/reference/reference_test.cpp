@@ -475,7 +475,7 @@ TEST_CASE("point handles off the proxies: E' never rises, and rounds and Newton 
           "[reference][anderson][point_handles]") {
   // Point handles at vertices that are not linear proxies: their rows
   // involve the cluster rotations (A_y ≠ 0). The rounds must step on E′ with
-  // z following Phase 1 (alternating.h, "Constraints on y"); before that
+  // z following Phase 1 (docs/engine.md, "Constraints on y"); before that
   // fix they converged elsewhere and could blow up (docs/robustness.md,
   // "Soak"). Stiff sets take Newton steps (DeformerOptions::second_order).
   for (const ModelKind kind : {ModelKind::Arap, ModelKind::Conformal}) {
@@ -615,7 +615,7 @@ TEST_CASE("bad acceleration settings give clear errors", "[reference][anderson]"
   options = DeformerOptions{};
   options.cold_start_tolerance = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH(deformer.precompute(c.model, options), Catch::Contains("cold_start_tolerance must be finite"));
-  AlternatingOptions ao;
+  AlternationSettings ao;
   ao.anderson_window = 0;
   CHECK(ao.is_valid(nullptr));
   ao.anderson_window = 17;

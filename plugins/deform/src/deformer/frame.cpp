@@ -101,7 +101,7 @@ void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& f
 // The first frame after set_handles runs to DeformerOptions::
 // cold_start_tolerance, within cold_start_rounds rounds (second-order steps
 // count kRoundsPerSecondOrderStep each), without a time budget.
-void cold_start(const detail_deformer::Settings& settings, bool second_order, AlternatingOptions* opts) {
+void cold_start(const detail_deformer::Settings& settings, bool second_order, AlternationSettings* opts) {
   const int cap = second_order ? std::max(1, settings.cold_start_rounds / DeformerOptions::kRoundsPerSecondOrderStep)
                                : settings.cold_start_rounds;
   opts->iterations = std::max(opts->iterations, cap);
@@ -118,7 +118,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   const OnSite& onsite = st.onsite;
   Pose& pose = st.pose;
   Workspace& work = st.work;
-  if (!st.ready || !onsite.phase1.ready()) {
+  if (!st.ready || !onsite.alternation.ready()) {
     throw std::invalid_argument("Deformer::frame: call precompute and set_handles first");
   }
   check_targets(model, onsite.handles, targets);
@@ -138,16 +138,14 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   }
   rotate_clusters(model.d, r0t, pose.S, &work.s_local);
   Timer t;
-  AlternatingOptions opts = st.settings.alternating;
+  AlternationSettings opts = st.settings.alternating;
   if (!onsite.warm && st.settings.cold_start_rounds > 0) {
-    cold_start(st.settings, onsite.fused.second_order(*model.projection, opts), &opts);
+    cold_start(st.settings, onsite.alternation.second_order(*model.projection, opts), &opts);
     summary.cold_start = true;
   }
   st.onsite.warm = true;
-  const bool tied = !onsite.tied_patches.empty();
   if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
-  const AlternatingSummary as = st.onsite.fused.run(onsite.phase1, *model.projection, work.b, opts, pose.x, work.s_local);
-  if (tied) pose.x.noalias() += onsite.tie_map * work.s_local;  // the ties' right-hand sides
+  const AlternationResults as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
   summary.iterations = as.iterations;
   summary.stop = as.stop;
   summary.last_change = as.last_change;
@@ -217,7 +215,7 @@ void Deformer::set_round_threads(int threads) {
 }
 
 void Deformer::set_rounds(int iterations, double tolerance, double time_budget) {
-  AlternatingOptions rounds = state_->settings.alternating;
+  AlternationSettings rounds = state_->settings.alternating;
   rounds.iterations = iterations;
   rounds.tolerance = tolerance;
   rounds.time_budget = time_budget;

@@ -1,7 +1,7 @@
 // Deformer::set_handles, the on-site step (paper Section 3.2, "OP"): the
 // constraint rows of a handle set in the subspace, A_r = AᵀB, handed to the
-// engine's Phase 1 (FixedCoordinateSolver) and fused rounds; free Rigid
-// patches are tied to their cluster's rotation.
+// engine's Alternation (Phase 1 and the fused rounds); free Rigid patches are
+// tied to their cluster's rotation.
 #include "qpreduce/deform/deformer/deformer.h"
 
 #include "handle_checks.h"
@@ -86,37 +86,21 @@ RowMatrixD reduced_constraints(const Model& model, const ConstraintLayout& layou
   return Ar;
 }
 
-// tie_map = M_b[:, ties]·E (nx × 9d; only formed when there are ties, and
-// frame() reads it only then).
-void make_tie_map(const Model& model, const ConstraintLayout& layout, OnSite* onsite) {
-  if (layout.tied.empty()) {
-    onsite->tie_map.resize(0, 0);
-  } else {
-    onsite->tie_map.setZero(model.nx, 9 * model.d);
-  }
+// T (cols × 9d) of AlternationSetup::follow_y: row 3a + c of tie i follows
+// s_c(a, c) of its patch's cluster k, entry 9k + 3c + a of y (empty without ties).
+SparseMatrix<double> tie_rows(const Model& model, const ConstraintLayout& layout) {
+  SparseMatrix<double> T;
+  if (layout.tied.empty()) return T;
+  Triplets t;
   for (size_t i = 0; i < layout.tied.size(); ++i) {
     const Index k = model.rigid_cluster_of_patch[layout.tied[i]];
     for (int a = 0; a < 3; ++a)
       for (int c = 0; c < 3; ++c)
-        onsite->tie_map.col(9 * k + 3 * c + a) +=
-            onsite->phase1.Mb().col(layout.tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c);
+        t.emplace_back(layout.tie_row0 + 9 * static_cast<Index>(i) + 3 * a + c, 9 * k + 3 * c + a, 1.0);
   }
-}
-
-// The fused rounds for this handle set: Phase 2 sees G_z = M_N and
-// G_y = M_U, or M_U + M_N·tie_map with ties.
-void set_fused(const Model& model, bool tied, int threads, FusedPrecision precision, OnSite* onsite) {
-  if (!tied && onsite->fused_inputs_plain) {
-    // G_z = M_N, G_y = M_U as last time: not compared again
-    onsite->fused.set(onsite->phase1, threads, FusedForm::Automatic, precision);
-  } else if (!tied) {
-    onsite->fused.set(onsite->phase1, model.MN, model.MU, threads, FusedForm::Automatic, precision);
-    onsite->fused_inputs_plain = true;
-  } else {
-    onsite->MU_tied = model.MU + model.MN * onsite->tie_map;
-    onsite->fused.set(onsite->phase1, model.MN, onsite->MU_tied, threads, FusedForm::Automatic, precision);
-    onsite->fused_inputs_plain = false;
-  }
+  T.resize(layout.cols, 9 * model.d);
+  T.setFromTriplets(t.begin(), t.end());
+  return T;
 }
 
 // The handle set's rows in the full space, A (control rows × cols), and
@@ -204,26 +188,15 @@ std::string unreachable_reason(const FullSpaceRows& full, const ConstraintSummar
 
 namespace detail_deformer {
 
-void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* onsite) {
+std::string plain_reason(const Model& model, bool exact_rotation_fit, bool tied) {
   // The energy terms assume no ties and the exact Phase 2 input; a custom
   // projection may not define its energy on Phase 2 outputs (quadratic_term
   // NaN: InputProjection).
-  if (!exact_rotation_fit) {
-    onsite->plain_reason = "the model uses the paper's Eq. 19 rotation step";
-  } else if (!onsite->tied_patches.empty()) {
-    onsite->plain_reason = "this handle set ties a free Rigid patch to its cluster";
-  } else if (!onsite->constraints_ok || !onsite->phase1.ready()) {
-    onsite->plain_reason = "this handle set's constraints were not solved exactly";
-  } else if (!std::isfinite(model.projection->quadratic_term(Vector<double>::Zero(9 * model.d)))) {
-    onsite->plain_reason = "the model's projection defines no quadratic_term";
-  } else {
-    onsite->plain_reason.clear();
-  }
-  // Formed for plain rounds too: with point handles the handle rows involve
-  // the rotations (A_y ≠ 0), and the fused rounds need them to step on E′.
-  if (onsite->plain_reason.empty() && !onsite->phase1.has_energy_terms()) {
-    onsite->phase1.form_energy_terms(model.solver);
-  }
+  if (!exact_rotation_fit) return "the model uses the paper's Eq. 19 rotation step";
+  if (tied) return "this handle set ties a free Rigid patch to its cluster";
+  if (!std::isfinite(model.projection->quadratic_term(Vector<double>::Zero(9 * model.d))))
+    return "the model's projection defines no quadratic_term";
+  return {};
 }
 
 }  // namespace detail_deformer
@@ -235,17 +208,18 @@ void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* o
 // exact set, where the least-squares form runs uncorrected rounds that need
 // not converge. Returns false (and changes nothing) when it does not apply.
 bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, const FullSpaceRows& full,
-                           const RowMatrixD& Ar, const ConstraintOptions& options, OnSite* onsite,
+                           const RowMatrixD& Ar, const AlternationSetup& setup, OnSite* onsite,
                            ConstraintSummary* cs) {
-  if (cs->status != Status::ConstraintsLeastSquares || options.soft || !layout.tied.empty()) return false;
+  if (cs->status != Status::ConstraintsLeastSquares || setup.constraints.soft || !layout.tied.empty()) return false;
   const std::vector<Index>& independent = full.independent;
   if (full.rank == 0 || full.rank >= layout.cols || cs->rank < full.rank) return false;
   RowMatrixD ArI(full.rank, Ar.cols());
   for (Index i = 0; i < full.rank; ++i) ArI.row(i) = Ar.row(independent[static_cast<size_t>(i)]);
-  const ConstraintSummary reduced = onsite->phase1.set_reduced_constraints(
-      model.solver, ArI.leftCols(model.nx), ArI.rightCols(9 * model.d), options);
+  const ConstraintSummary reduced = onsite->alternation.setup(model.solver, ArI.leftCols(model.nx),
+                                                               ArI.rightCols(9 * model.d), *model.projection, setup);
   if (reduced.status != Status::Success) {  // back to the least-squares form
-    onsite->phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+    onsite->alternation.setup(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), *model.projection,
+                              setup);
     return false;
   }
   onsite->target_projection = target_projection(full.A, independent);
@@ -277,8 +251,21 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   add_point_rows(model, handles, &layout);
   add_patch_rows(model, handles, &layout);
   const RowMatrixD Ar = reduced_constraints(model, layout);
-  ConstraintSummary cs =
-      onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), options);
+  // Phase 1, its energy terms (unless the rounds must run plain), the
+  // proximal weights and the fused rounds, for G_z = M_N, G_y = M_U; a tie's
+  // rows follow its cluster's rotation.
+  AlternationSetup setup;
+  setup.constraints = options;
+  setup.follow_y = tie_rows(model, layout);
+  onsite.plain_reason = detail_deformer::plain_reason(
+      model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, !layout.tied.empty());
+  setup.energy_terms = onsite.plain_reason.empty();
+  setup.precision = st.fused_precision();
+  const auto solve_rows = [&](const RowMatrixD& rows, const AlternationSetup& with) {
+    return onsite.alternation.setup(model.solver, rows.leftCols(model.nx), rows.rightCols(9 * model.d),
+                                    *model.projection, with);
+  };
+  ConstraintSummary cs = solve_rows(Ar, setup);
   onsite.target_projection.resize(0, 0);
   const FullSpaceRows full =
       cs.status == Status::ConstraintsLeastSquares ? full_space_rows(layout) : FullSpaceRows{};
@@ -288,8 +275,8 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
     const std::string why = unreachable_reason(full, cs);
     if (!why.empty()) {
       // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
-      ConstraintOptions soft = options;
-      soft.soft = true;
+      AlternationSetup soft = setup;
+      soft.constraints.soft = true;
       // More rows than the subspace has coordinates: the soft term
       // δ‖A_r·x − b‖² is δ‖R·x − Qᵀb‖² plus a constant (A_r = Q·R, thin),
       // so the set is solved on the p rows of R with the targets projected by
@@ -303,8 +290,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
         onsite.target_projection = (qr.householderQ() * Matrix<double>::Identity(Ar.rows(), p)).transpose();
       }
       const RowMatrixD& As = Rsoft.size() > 0 ? Rsoft : Ar;
-      ConstraintSummary ss =
-          onsite.phase1.set_reduced_constraints(model.solver, As.leftCols(model.nx), As.rightCols(9 * model.d), soft);
+      ConstraintSummary ss = solve_rows(As, soft);
       if (ss.ok()) {
         ss.status = Status::ConstraintsLeastSquares;
         ss.beyond_subspace = true;
@@ -316,25 +302,22 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
         softened = true;
       } else {  // keep the exact form, as before
         onsite.target_projection.resize(0, 0);
-        cs = onsite.phase1.set_reduced_constraints(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d),
-                                                   options);
+        cs = solve_rows(Ar, setup);
       }
     }
   }
-  const bool reduced = !softened && reduce_dependent_rows(model, layout, full, Ar, options, &onsite, &cs);
+  const bool reduced = !softened && reduce_dependent_rows(model, layout, full, Ar, setup, &onsite, &cs);
   // A least-squares set neither softened nor reduced to its independent rows:
   // is it the subspace's doing (a lower rank than in the full space)?
   if (cs.status == Status::ConstraintsLeastSquares && !softened && !reduced)
     cs.beyond_subspace = cs.rank < full.rank;
-  make_tie_map(model, layout, &onsite);
   onsite.tied_patches = std::move(layout.tied);
-  // A softened set has at most as many rows as the subspace has coordinates
-  // (compressed above): it gets Phase 1's energy terms too.
-  onsite.constraints_ok = cs.ok() || reduced || softened;
-  // The energy terms first: the fused rounds read them for point handles,
-  // whose rows involve the cluster rotations (alternating.h, "Constraints on y").
-  detail_deformer::prepare_energy_terms(model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, &onsite);
-  set_fused(model, !onsite.tied_patches.empty(), options.threads, st.fused_precision(), &onsite);
+  // A set solved exactly (a softened one too: it has at most as many rows
+  // as the subspace has coordinates, compressed above) got Phase 1's energy
+  // terms, which the rounds need to step on E′ with point handles, whose
+  // rows involve the cluster rotations (docs/engine.md, "Constraints on y").
+  if (onsite.plain_reason.empty() && !onsite.alternation.energy_terms())
+    onsite.plain_reason = "this handle set's constraints were not solved exactly";
   onsite.tie_row0 = layout.tie_row0;
   onsite.handles = handles;
   onsite.rows = layout.cols;

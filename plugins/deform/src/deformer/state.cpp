@@ -305,10 +305,8 @@ void Deformer::State::finish(const DeformerOptions& options) {
   // Phase 1's and the fused rounds' per-solver parts (H_zz's lifted inverse,
   // its responses P0, C0 = M_N·P0) belong to the precompute: the first handle
   // set then costs what the later ones do (unless prepare_onsite is false).
-  if (options.prepare_onsite) onsite.phase1.prepare(model.solver);
-  onsite.fused.set_proximal_block_size(model.projection->proximal_block_size());
-  onsite.fused.prepare(onsite.phase1, model.MN, model.MU, fused_precision());
-  onsite.fused_inputs_plain = true;
+  onsite.alternation.prepare(model.solver, model.MN, model.MU, *model.projection, fused_precision(),
+                             options.prepare_onsite);
   ready = true;
 }
 

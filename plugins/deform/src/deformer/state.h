@@ -20,7 +20,7 @@
 #include "qpreduce/deform/deformer/deformer.h"
 #include "qpreduce/deform/mesh/geometry.h"
 
-#include <qpreduce/alternating.h>
+#include <qpreduce/alternation.h>
 #include <qpreduce/subspace_solver.h>
 
 #include <string>
@@ -80,7 +80,7 @@ struct Model {
   Eigen::VectorXd cluster_measure;  // Σ a_k per cluster (global rotation weights)
   // Rigid patches (Eq. 47 with t_s ∈ SO(3)): each has its own rotational
   // cluster, the rotation of its elements; when a handle does not prescribe
-  // the patch, Phase 1 ties t_s = s_c (OnSite::tie_map), so the patch moves
+  // the patch, Phase 1 ties t_s = s_c (OnSite::tied_patches), so the patch moves
   // rigidly with the rotation Phase 2 fits.
   std::vector<Index> rigid_cluster_of_patch;  // s entries, −1 if not Rigid
 
@@ -155,24 +155,21 @@ struct Model {
 
 // What set_handles builds for one handle set.
 struct OnSite {
-  FixedCoordinateSolver<double> phase1;
-  FusedAlternation<double> fused;
-  bool fused_inputs_plain = false;  // fused was last set with G_z = MN, G_y = MU (MN, MU never change after precompute)
+  // Phase 1 and the fused rounds for this handle set (the engine's
+  // Alternation: G_z = M_N, G_y = M_U from precompute).
+  Alternation<double> alternation;
   bool warm = false;                // a frame ran since set_handles (DeformerOptions::cold_start_rounds)
   Handles handles;
   Index rows = 0;  // constraint rows
   // Ties of the current handle set: free Rigid patches, their rows start at
-  // tie_row0 of b. With E (9·ties × 9d) selecting s_c(a, c) for row 3a + c of
-  // tie i, X = M_b·b + M_Y·S + tie_map·S, tie_map = M_b[:, ties]·E (nx × 9d),
-  // and Phase 2 sees G = M_N·X + (M_U + M_N·tie_map)·S.
+  // tie_row0 of b. Row 3a + c of tie i follows s_c(a, c) of its cluster
+  // (AlternationSetup::follow_y), so the patch moves with the cluster.
   std::vector<Index> tied_patches;
   Index tie_row0 = 0;
-  Matrix<double> tie_map, MU_tied;
   // Why this handle set's rounds run plain whatever anderson_window says
   // (empty: they may be accelerated): a tied free Rigid patch, constraints
   // not solved exactly, or a projection without quadratic_term.
   std::string plain_reason;
-  bool constraints_ok = false;  // Success, or softened (DeformerOptions::soften_unreachable_handles)
   // A dependent set solved on its independent rows (onsite.cpp,
   // reduce_dependent_rows), or a softened set with more rows than the
   // subspace has coordinates, on the rows of its R factor: b = P·(the set's
@@ -180,12 +177,11 @@ struct OnSite {
   Matrix<double> target_projection;
 };
 
-// Sets onsite->plain_reason for the current handle set (why its rounds
-// cannot be accelerated nor corrected for point handles) and otherwise forms
-// Phase 1's energy terms once (O(m·d·k)), which accelerated rounds and the
-// fused rounds' correction for constraints on the rotations read. Called by
-// set_handles before the fused rounds are set.
-void prepare_energy_terms(const Model& model, bool exact_rotation_fit, OnSite* onsite);
+// Why a handle set's rounds cannot be accelerated nor corrected for point
+// handles before its constraints are solved (the paper's Eq. 19 step, a tie
+// to a free Rigid patch, a projection without quadratic_term), or "": then
+// set_handles asks the alternation for Phase 1's energy terms.
+std::string plain_reason(const Model& model, bool exact_rotation_fit, bool tied);
 
 // The results of the last frame (warm start of the next one).
 struct Pose {
@@ -209,7 +205,7 @@ struct Workspace {
 // The runtime options (DeformerOptions: iterations, float_rounds,
 // round_threads, global_rotation).
 struct Settings {
-  AlternatingOptions alternating;
+  AlternationSettings alternating;
   bool global_rotation = true;
   int cold_start_rounds = 500;        // DeformerOptions::cold_start_rounds
   double cold_start_tolerance = 1e-6;  // DeformerOptions::cold_start_tolerance

@@ -916,7 +916,7 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
   bool newton_ready = false;
   double previous_newton_step = std::numeric_limits<double>::infinity();  // RMS of the last full Newton step
   double trust_radius = std::numeric_limits<double>::infinity();          // of the Newton steps, in the K-norm
-  AndersonAcceleration anderson;
+  SafeguardedAnderson anderson;
   if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
   // Records a round's (or Newton step's) energy and time; returns the
   // reference test (step and energy change) and the refine test (energy
@@ -1007,20 +1007,21 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
       next = rounds.local_step();
       z.swap(gz);
     } else if (accelerate && anderson.history() > 0) {
-      anderson.step(z, gz, za);
+      anderson.propose(z, gz, za);
       unpack(za);
       next = rounds.local_step();
-      if (std::isfinite(next) && next <= energy && rounds.X.allFinite()) {
+      if (anderson.accept(std::isfinite(next) && rounds.X.allFinite() ? next : std::numeric_limits<double>::quiet_NaN(),
+                         energy)) {
         z.swap(za);
       } else {  // the safeguard: the plain round, which never raises the energy
-        ++summary.rejected_steps;
-        anderson.restart();
         unpack(gz);
         next = rounds.local_step();
         z.swap(gz);
       }
     } else {
-      if (accelerate) anderson.step(z, gz, za);  // the first step: G(z); starts the history
+      // The first steps after a start or a refusal are G(z): they fill the
+      // history (the extrapolation of the step that makes it 1 is not tried).
+      if (accelerate) anderson.propose(z, gz, za);
       next = rounds.local_step();
       z.swap(gz);
     }
@@ -1042,6 +1043,7 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
     }
   }
   summary.iterations = it;
+  summary.rejected_steps = anderson.rejected();
   summary.solve_seconds = timer.seconds();
   // Back to the world frame.
   out->V = rounds.X * Ft;  // rows: (F x)ᵀ = xᵀFᵀ

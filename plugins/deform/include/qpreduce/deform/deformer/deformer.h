@@ -17,7 +17,7 @@
 #include "qpreduce/deform/proxies/proxies.h"
 #include "qpreduce/deform/deformer/handles.h"
 
-#include <qpreduce/alternating.h>
+#include <qpreduce/alternation.h>
 #include <qpreduce/subspace_solver.h>
 
 #include <functional>
@@ -70,19 +70,19 @@ struct DeformerOptions {
   int iterations = 1000;
   double tolerance = 1e-6;
   double time_budget = 0.004;
-  // Anderson acceleration of the rounds (AlternatingOptions::anderson_window,
+  // Anderson acceleration of the rounds (AlternationSettings::anderson_window,
   // Peng et al. 2018) with the energy safeguard: 0 off, else the window
   // (1–16). Needs rotation_fit Exact (the safeguard's energy is E′ at the
   // exact Phase 2 input). With rotation_fit Exact set_handles forms Phase 1's
   // energy terms whatever the window (O(m·d·k) per handle set): point
   // handles at vertices move with the cluster rotations, and the rounds then
-  // step on E′ itself (qpreduce/alternating.h, "Constraints on y"). Handle sets that tie a free Rigid patch to its
+  // step on E′ itself (docs/engine.md, "Constraints on y"). Handle sets that tie a free Rigid patch to its
   // cluster run plain rounds (FrameSummary::message says so). The default 5
   // (docs/quality.md, "Accelerated rounds"): with the exact step, plain rounds
   // converge more slowly than the paper's, and 8 accelerated rounds reach a
   // lower E′ than 8 plain rounds of either. Set 0 with PaperPhase2.
   int anderson_window = 5;
-  // Stiff point-handle sets (qpreduce/alternating.h, "Constraints on y"):
+  // Stiff point-handle sets (docs/engine.md, "Constraints on y"):
   // Riemannian Newton steps on E′ over the cluster rotations instead of
   // rounds, `iterations` of them per frame (ARAP without γ; each costs about
   // a dozen rounds). false: rounds always (they then crawl on such sets:
@@ -119,11 +119,11 @@ struct DeformerOptions {
   // Factor out a global rotation each frame (appendix "Global rotation adaptation").
   bool global_rotation = true;
   // Phase 2 inputs from a float product relative to a double reference in
-  // each round (AlternatingOptions::float_products): the fixed points of
+  // each round (AlternationSettings::float_products): the fixed points of
   // double rounds at about a float round's cost; the handles hold to double
   // precision. false: every round in double.
   bool float_rounds = true;
-  // OpenMP threads for a frame's rounds (AlternatingOptions::threads): they
+  // OpenMP threads for a frame's rounds (AlternationSettings::threads): they
   // split the clusters when the model's Phase 2 is cluster-separable (γ = 0)
   // and 9d ≥ 256; 0: omp_get_max_threads(). Serial by default: a round is
   // too short for a barrier to pay on most models (docs/deform.md,

@@ -30,7 +30,7 @@
 
 #include "qpreduce/deform/energy/arap_energy.h"
 
-#include <qpreduce/alternating.h>
+#include <qpreduce/alternation.h>
 
 #include <memory>
 #include <string>

@@ -1,8 +1,10 @@
 // Phase 1 with fixed coordinates (Eq. 16–17) and the alternating scheme.
 #include <catch2/catch.hpp>
 
-#include "qpreduce/alternating.h"
+#include "alternation_parts.h"
 #include "qpreduce/problems/generators.h"
+
+#include "alternation_fixtures.h"
 
 #include <Eigen/Dense>
 
@@ -10,6 +12,7 @@
 #include <limits>
 
 using namespace qpreduce;
+using namespace qpreduce::testing_alternation;
 namespace gen = qpreduce::generators;
 
 namespace {
@@ -52,10 +55,10 @@ struct Phase2Projection {
 
 // Runs Phase 1 then Phase 2, `options.iterations` times from the given y,
 // and ends with a Phase 1, so z is optimal for the returned y.
-AlternatingSummary reference_alternate(const FixedCoordinateSolver<double>& phase1, Phase2Projection& phase2,
-                                       const Eigen::Ref<const Vector<double>>& b, const AlternatingOptions& options,
+AlternationResults reference_alternate(const FixedCoordinateSolver<double>& phase1, Phase2Projection& phase2,
+                                       const Eigen::Ref<const Vector<double>>& b, const AlternationSettings& options,
                                        Eigen::Ref<Vector<double>> z, Eigen::Ref<Vector<double>> y) {
-  AlternatingSummary summary;
+  AlternationResults summary;
   double change = 0.0;
   for (int it = 0; it < options.iterations; ++it) {
     phase1.solve(b, y, z);
@@ -110,9 +113,9 @@ TEST_CASE("alternate runs the requested rounds and ends with Phase 1", "[alterna
   NormalizeProjection proj;
   const Vector<double> b = gen::gaussian_vector(f.m, 24);
   Vector<double> z(f.d), y = gen::gaussian_vector(f.k, 25);
-  AlternatingOptions opts;
+  AlternationSettings opts;
   opts.iterations = 5;
-  const AlternatingSummary s = reference_alternate(phase1, proj, b, opts, z, y);
+  const AlternationResults s = reference_alternate(phase1, proj, b, opts, z, y);
   CHECK(s.iterations == 5);
   CHECK(proj.calls == 5);
   CHECK(y.norm() == Approx(1.0));
@@ -125,7 +128,7 @@ TEST_CASE("alternate runs the requested rounds and ends with Phase 1", "[alterna
   opts.iterations = 200;
   opts.tolerance = 1e-12;
   proj.calls = 0;
-  const AlternatingSummary s2 = reference_alternate(phase1, proj, b, opts, z, y);
+  const AlternationResults s2 = reference_alternate(phase1, proj, b, opts, z, y);
   CHECK(s2.iterations < 200);
   CHECK(s2.last_change <= 1e-12 * std::max(1.0, y.norm()));
 }
@@ -165,10 +168,10 @@ TEST_CASE("fused alternation gives the iterates of the plain one", "[alternating
   fused.set(phase1, in.Gz, in.Gy);
   const Vector<double> b = gen::gaussian_vector(f.m, 34);
   Vector<double> z1(f.d), z2(f.d), y1 = gen::gaussian_vector(f.k, 35), y2 = y1;
-  AlternatingOptions opts;
+  AlternationSettings opts;
   opts.iterations = 6;
   reference_alternate(phase1, plain, b, opts, z1, y1);
-  const AlternatingSummary s = fused.run(phase1, fused_proj, b, opts, z2, y2);
+  const AlternationResults s = fused.run(phase1, fused_proj, b, opts, z2, y2);
   CHECK(s.iterations == 6);
   CHECK((y1 - y2).norm() <= 1e-12 * (1 + y1.norm()));
   CHECK((z1 - z2).norm() <= 1e-12 * (1 + z1.norm()));
@@ -226,7 +229,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
 
   struct Run {
     Vector<double> z, y;
-    AlternatingSummary s;
+    AlternationResults s;
   };
   // scale < 1 makes the rounds a contraction (g is dominated by F_b·b).
   auto run = [&](FusedForm form, bool float_products, int threads, double tolerance, int iterations = 6,
@@ -235,7 +238,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     fused.set(phase1, scale * Gz, scale * Gy, 1, form, precision);
     CHECK(fused.factored() == (form == FusedForm::Factored));
     CHECK(fused.float_set() == (form == FusedForm::Factored && precision == FusedPrecision::Float));
-    AlternatingOptions o;
+    AlternationSettings o;
     o.iterations = iterations;
     o.float_products = float_products;
     o.threads = threads;
@@ -291,7 +294,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
   {
     FusedAlternation<double> fused;
     fused.set(phase1, Gz, Gy, 1, FusedForm::Factored, FusedPrecision::Float);
-    AlternatingOptions o;
+    AlternationSettings o;
     Vector<double> z(d), y = y0;
     CHECK_THROWS_WITH(fused.run(phase1, proj, b, o, z, y), Catch::Contains("float_products"));
     CHECK(y == y0);
@@ -309,7 +312,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     REQUIRE(other.set_constraints(solver, gen::selection(n, gen::random_subset(n, m, 76))).fast_path);
     reuse.set(other, 1, FusedForm::Factored);
     fresh.set(other, Gz, Gy, 1, FusedForm::Explicit);
-    AlternatingOptions o;
+    AlternationSettings o;
     Vector<double> z1(d), z2(d), y1 = y0, y2 = y0;
     reuse.run(other, proj, b, o, z1, y1);
     fresh.run(other, proj, b, o, z2, y2);
@@ -331,7 +334,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
     CHECK((early.MY() - phase1.MY()).norm() == 0.0);
     fused.set(early, 1, FusedForm::Factored, FusedPrecision::Float);  // the prepared G_z, G_y
     plain.set(phase1, Gz, Gy, 1, FusedForm::Factored, FusedPrecision::Float);
-    AlternatingOptions o;
+    AlternationSettings o;
     o.float_products = true;
     Vector<double> z1(d), z2(d), y1 = y0, y2 = y0;
     fused.run(early, proj, b, o, z1, y1);
@@ -368,7 +371,7 @@ TEST_CASE("fused alternation: the factored form and parallel rounds give the exp
   Matrix<double> bad = Az;
   bad(0, 0) = std::numeric_limits<double>::quiet_NaN();
   CHECK_THROWS_WITH(reduced.set_reduced_constraints(solver, bad, Ay), Catch::Contains("A_z"));
-  AlternatingOptions o;
+  AlternationSettings o;
   o.threads = -1;
   std::string why;
   CHECK_FALSE(o.is_valid(&why));
@@ -383,7 +386,7 @@ TEST_CASE("alternating scheme rejects bad input", "[alternating][errors]") {
                     Catch::Contains("not ready"));
   CHECK_THROWS_WITH(phase1.set_constraints(f.solver, SparseMatrix<double>(3, 1)),
                     Catch::Contains("expected " + std::to_string(f.n) + ", got 3"));
-  AlternatingOptions o;
+  AlternationSettings o;
   o.iterations = 0;
   std::string why;
   CHECK_FALSE(o.is_valid(&why));
@@ -439,7 +442,7 @@ void check_fused_agree(FusedAlternation<double>& fused, const FixedCoordinateSol
   fref.set(ref, Gz, Gy);
   NormalizeG proj;
   const Vector<double> b = gen::gaussian_vector(phase1.m(), 64);
-  AlternatingOptions opts;
+  AlternationSettings opts;
   opts.iterations = 4;
   Vector<double> z1(phase1.d()), z2(phase1.d()), y1 = gen::gaussian_vector(phase1.k(), 65), y2 = y1;
   fused.run(phase1, proj, b, opts, z1, y1);
@@ -597,72 +600,6 @@ TEST_CASE("Phase 1 fast path follows its solver through restore, and C0 its G_z"
 }
 
 namespace {
-// Constraints on y: a model with the deformer's structure, E(z, y) =
-// ½XᵀHX − XᵀD·y + ½‖y‖², X = N z + UD·y, whose Phase 2 input is the exact
-// y-coefficient g = DᵀX (G_z = DᵀN, G_y = DᵀUD), with y on a product of
-// unit spheres (blocks of 3: ‖y‖ is constant there, so Π(g) normalises
-// each block of g). Point constraints AᵀX = b at vertices that are not
-// proxies involve y (A_y = AᵀUD ≠ 0).
-struct UnitBlocks : InputProjection<double> {
-  static constexpr Index kBlock = 3;
-  double project(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y) override {
-    const Vector<double> old = y;
-    for (Index j = 0; j < g.size() / kBlock; ++j) y.segment(kBlock * j, kBlock) = g.segment(kBlock * j, kBlock).normalized();
-    return (y - old).norm();
-  }
-  double quadratic_term(const Eigen::Ref<const Vector<double>>& y) const override { return 0.5 * y.squaredNorm(); }
-  void retract(Eigen::Ref<Vector<double>> y) const override {
-    for (Index j = 0; j < y.size() / kBlock; ++j) y.segment(kBlock * j, kBlock).normalize();
-  }
-  Index proximal_block_size() const override { return kBlock; }
-};
-
-struct SphereModel {
-  Index nx = 14, ny = 11, n = nx * ny, d = 9, k = 12, m = 6;
-  SparseMatrix<double> H = gen::grid_laplacian_2d(nx, ny);
-  std::vector<Index> proxies = gen::random_subset(n, d, 5);
-  SparseMatrix<double> C = gen::selection(n, proxies);
-  SparseMatrix<double> D = gen::gaussian_sparse(n, k, 6);
-  SubspaceSolver<double> solver;
-  SparseMatrix<double> A;
-  Vector<double> b;
-  Matrix<double> Gz, Gy;
-  SphereModel() {
-    REQUIRE(solver.precompute(H, C, D).ok());
-    std::vector<Index> rows;  // constrained vertices away from the proxies
-    for (Index v : gen::random_subset(n, 3 * m, 41))
-      if (std::find(proxies.begin(), proxies.end(), v) == proxies.end() && static_cast<Index>(rows.size()) < m)
-        rows.push_back(v);
-    REQUIRE(static_cast<Index>(rows.size()) == m);
-    A = gen::selection(n, rows);
-    b = 3.0 * gen::gaussian_vector(m, 42);
-    const Matrix<double> Dd(D);
-    Gz = Dd.transpose() * solver.subspace().N;
-    Gy = Dd.transpose() * solver.subspace().UD;
-  }
-  // E(y) with z the Phase 1 minimiser, by a dense KKT solve (independent of
-  // the engine's energy terms).
-  double energy(const Vector<double>& y) const {
-    const Matrix<double>& N = solver.subspace().N;
-    const Matrix<double>& U = solver.subspace().UD;
-    const Matrix<double> Hd(H), Ad(A), Dd(D);
-    Matrix<double> K = Matrix<double>::Zero(d + m, d + m);
-    K.topLeftCorner(d, d) = N.transpose() * Hd * N;
-    K.topRightCorner(d, m) = N.transpose() * Ad;
-    K.bottomLeftCorner(m, d) = Ad.transpose() * N;
-    Vector<double> rhs(d + m);
-    rhs.head(d) = N.transpose() * (Dd * y) - N.transpose() * Hd * U * y;
-    rhs.tail(m) = b - Ad.transpose() * U * y;
-    const Vector<double> z = K.fullPivLu().solve(rhs).head(d);
-    const Vector<double> X = N * z + U * y;
-    return 0.5 * X.dot(Hd * X) - X.dot(Dd * y) + 0.5 * y.squaredNorm();
-  }
-  Vector<double> start() const {
-    Vector<double> y = gen::gaussian_vector(k, 43);
-    UnitBlocks().retract(y);
-    return y;
-  }
-};
 
 // Phase 1 for s.A with its energy terms, and the fused rounds on it.
 void set_up_rounds(const SphereModel& s, FixedCoordinateSolver<double>* phase1, FusedAlternation<double>* fused) {
@@ -677,14 +614,14 @@ void set_up_rounds(const SphereModel& s, FixedCoordinateSolver<double>* phase1, 
 void check_rounds_agree(const SphereModel& s, FusedAlternation<double>& a, const FixedCoordinateSolver<double>& pa,
                         FusedAlternation<double>& r, const FixedCoordinateSolver<double>& pr, const Vector<double>& b) {
   UnitBlocks proj;
-  AlternatingOptions plain, accelerated;
+  AlternationSettings plain, accelerated;
   plain.iterations = 5;
   accelerated.iterations = 5;
   accelerated.anderson_window = 3;
-  for (const AlternatingOptions& opts : {plain, accelerated}) {
+  for (const AlternationSettings& opts : {plain, accelerated}) {
     Vector<double> z1(s.d), z2(s.d), y1 = s.start(), y2 = y1;
-    const AlternatingSummary r1 = a.run(pa, proj, b, opts, z1, y1);
-    const AlternatingSummary r2 = r.run(pr, proj, b, opts, z2, y2);
+    const AlternationResults r1 = a.run(pa, proj, b, opts, z1, y1);
+    const AlternationResults r2 = r.run(pr, proj, b, opts, z2, y2);
     CHECK((y1 - y2).norm() <= 1e-8 * std::max(1.0, y2.norm()));
     CHECK((z1 - z2).norm() <= 1e-8 * std::max(1.0, z2.norm()));
     if (opts.anderson_window > 0) CHECK(r1.energy == Approx(r2.energy).epsilon(1e-8));
@@ -704,7 +641,7 @@ TEST_CASE("constraints on y: the rounds descend on E(y) and stop at its stationa
   Vector<double> z(s.d);
 
   // Plain rounds, one at a time: E(y) never rises (majorise–minimise).
-  AlternatingOptions one;
+  AlternationSettings one;
   one.iterations = 1;
   Vector<double> y = s.start();
   double previous = s.energy(y);
@@ -719,12 +656,12 @@ TEST_CASE("constraints on y: the rounds descend on E(y) and stop at its stationa
   // Accelerated to convergence: the reported energy is E(y), and y is a
   // stationary point of E on the spheres (central differences along each
   // block's tangent directions).
-  AlternatingOptions aa;
+  AlternationSettings aa;
   aa.iterations = 2000;
   aa.tolerance = 1e-13;
   aa.anderson_window = 5;
   y = s.start();
-  const AlternatingSummary sum = fused.run(phase1, proj, s.b, aa, z, y);
+  const AlternationResults sum = fused.run(phase1, proj, s.b, aa, z, y);
   CAPTURE(sum.iterations, sum.rejected, sum.last_change);
   REQUIRE(sum.last_change <= 1e-12);
   const double e_star = s.energy(y);
@@ -751,7 +688,7 @@ TEST_CASE("constraints on y: the rounds descend on E(y) and stop at its stationa
   FusedAlternation<double> old;
   old.set(uncorrected, s.Gz, s.Gy);
   CHECK_FALSE(old.constrained_y());
-  AlternatingOptions plain;
+  AlternationSettings plain;
   plain.iterations = 2000;
   Vector<double> y_old = s.start();
   old.run(uncorrected, proj, s.b, plain, z, y_old);
@@ -773,12 +710,12 @@ TEST_CASE("accelerated rounds report E(y) whichever form its constraint term tak
   set_up_rounds(s, &phase1, &fused);
   UnitBlocks proj;
   Vector<double> z(s.d);
-  AlternatingOptions aa;
+  AlternationSettings aa;
   aa.anderson_window = 5;
   for (const int rounds : {1, 3, 40}) {
     aa.iterations = rounds;
     Vector<double> y = s.start();
-    const AlternatingSummary sum = fused.run(phase1, proj, s.b, aa, z, y);
+    const AlternationResults sum = fused.run(phase1, proj, s.b, aa, z, y);
     CAPTURE(rounds, sum.iterations, sum.rejected);
     // The energy of the last accepted iterate, whose plain step y is: no
     // higher than E at y itself (the plain step is majorise–minimise).
@@ -788,7 +725,7 @@ TEST_CASE("accelerated rounds report E(y) whichever form its constraint term tak
   aa.iterations = 3000;
   aa.tolerance = 1e-13;
   Vector<double> y = s.start();
-  const AlternatingSummary sum = fused.run(phase1, proj, s.b, aa, z, y);
+  const AlternationResults sum = fused.run(phase1, proj, s.b, aa, z, y);
   CAPTURE(sum.iterations, sum.rejected, sum.last_change);
   REQUIRE(sum.last_change <= 1e-12);
   CHECK(sum.energy == Approx(s.energy(y)).epsilon(1e-8));
@@ -909,14 +846,14 @@ TEST_CASE("constraints on y: misuse is refused with the words", "[alternating][c
   phase1.form_energy_terms(s.solver);  // after set: the rounds did not see them
   UnitBlocks proj;
   Vector<double> z(s.d), y = s.start();
-  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternatingOptions{}, z, y), Catch::Contains("energy terms changed"));
+  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternationSettings{}, z, y), Catch::Contains("energy terms changed"));
   fused.set(phase1, s.Gz, s.Gy);  // blocks of 0 (one weight) for a projection with blocks of 3
-  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternatingOptions{}, z, y), Catch::Contains("proximal blocks"));
+  CHECK_THROWS_WITH(fused.run(phase1, proj, s.b, AlternationSettings{}, z, y), Catch::Contains("proximal blocks"));
   CHECK_THROWS_WITH(fused.set_proximal_block_size(-1), Catch::Contains("block size"));
 }
 
 namespace {
-// A clock that advances one second at each reading (AlternatingOptions::clock).
+// A clock that advances one second at each reading (AlternationSettings::clock).
 double fake_seconds = 0.0;
 double fake_clock() { return fake_seconds += 1.0; }
 }  // namespace
@@ -938,17 +875,17 @@ TEST_CASE("the time budget ends the rounds of every loop after the round that sp
   BallBlocks proj;
   for (int threads : {1, 2}) {
     INFO("threads " << threads);
-    AlternatingOptions o;
+    AlternationSettings o;
     o.threads = threads;
     o.parallel_min_entries = 0;
     o.iterations = 4;
     Vector<double> z(d), y4 = y0, y = y0;
-    const AlternatingSummary four = fused.run(phase1, proj, b, o, z, y4);
+    const AlternationResults four = fused.run(phase1, proj, b, o, z, y4);
     CHECK(four.stop == RoundStop::RoundLimit);
     o.iterations = 1000;
     o.time_budget = 3.5;
     o.clock = fake_clock;
-    const AlternatingSummary s = fused.run(phase1, proj, b, o, z, y);
+    const AlternationResults s = fused.run(phase1, proj, b, o, z, y);
     CHECK(s.iterations == 4);
     CHECK(s.stop == RoundStop::TimeBudget);
     CHECK(std::string(to_string(s.stop)) == "time budget");
@@ -960,9 +897,9 @@ TEST_CASE("the time budget ends the rounds of every loop after the round that sp
     o.time_budget = 1e9;
     o.tolerance = 1e-9;
     Vector<double> yt = y0, yn = y0;
-    const AlternatingSummary t = contracting.run(phase1, proj, b, o, z, yt);
+    const AlternationResults t = contracting.run(phase1, proj, b, o, z, yt);
     o.time_budget = 0.0;
-    const AlternatingSummary u = contracting.run(phase1, proj, b, o, z, yn);
+    const AlternationResults u = contracting.run(phase1, proj, b, o, z, yn);
     CHECK(t.iterations < 1000);
     CHECK(t.stop == RoundStop::Tolerance);
     CHECK(t.iterations == u.iterations);
@@ -975,7 +912,7 @@ TEST_CASE("the time budget ends the rounds of every loop after the round that sp
   FusedAlternation<double> rounds;
   set_up_rounds(s, &p1, &rounds);
   UnitBlocks unit;
-  AlternatingOptions aa;
+  AlternationSettings aa;
   aa.anderson_window = 5;
   aa.iterations = 4;
   Vector<double> z(s.d), y4 = s.start(), y = s.start();
@@ -983,7 +920,7 @@ TEST_CASE("the time budget ends the rounds of every loop after the round that sp
   aa.iterations = 1000;
   aa.time_budget = 3.5;
   aa.clock = fake_clock;
-  const AlternatingSummary a = rounds.run(p1, unit, s.b, aa, z, y);
+  const AlternationResults a = rounds.run(p1, unit, s.b, aa, z, y);
   CHECK(a.iterations == 4);
   CHECK(a.stop == RoundStop::TimeBudget);
   CHECK((y - y4).norm() <= 1e-12);

@@ -1,31 +1,21 @@
-// qpreduce — the alternating scheme of Section 3.1: Phase 1, a reduced QP in
-// the linear coordinates z with the other coordinates y held fixed (Eq. 16–
-// 17), and Phase 2, a plugin's projection of y onto its manifold, warm-started.
-//
-// With X = N·z + UD·y (Eq. 5) and the linear term q = D·y of the deformation
-// model, Phase 1 is
-//
-//     min_z ½zᵀH_zz z + zᵀH_zy y − (NᵀD·y)ᵀz   s.t.  A_z z = b − A_y y,
-//
-// H_r = BᵀHB = [[H_zz, H_zy], [H_yz, H_yy]] (B = [N UD]), A_r = AᵀB = [A_z A_y]
-// (m × d, m × k), and its answer is linear: z = M_b·b + M_Y·y (M_b d × m,
-// M_Y d × k). FixedCoordinateSolver forms M_b, M_Y once per constraint set;
-// FusedAlternation folds Phase 1 into Phase 2's input so that a round is one
-// q × k product and the projection. The fast path, the factored forms and the
-// derivations are in docs/engine.md ("The alternation").
+// Private to the engine: the two parts of Alternation (alternation.h).
+// FixedCoordinateSolver is Phase 1 for one constraint set, z = M_b·b + M_Y·y
+// (Eq. 16–17 with y fixed); FusedAlternation folds it into Phase 2's input,
+// g = F_b·b + F_y·y, and runs the rounds. Alternation::setup calls them in
+// the order they need (set_reduced_constraints, form_energy_terms,
+// set_proximal_block_size, set); the white-box tests drive them directly.
 #pragma once
 
+#include "qpreduce/alternation.h"
 #include "qpreduce/common.h"
 #include "qpreduce/subspace_solver.h"
 
-#include <limits>
 #include <memory>
 #include <type_traits>
 
 namespace qpreduce {
 
 namespace detail {
-// Private to the engine (src/phase_one.h, src/fused_rounds.h).
 struct FixedCoordinatePrep;
 class PhaseOneOperator;
 struct PhaseOneEnergy;
@@ -81,7 +71,7 @@ class FixedCoordinateSolver {
   Index m() const { return Mb().cols(); }
 
   // The terms of the reduced energy for this constraint set, which
-  // accelerated rounds (AlternatingOptions::anderson_window) need: A_y and
+  // accelerated rounds (AlternationSettings::anderson_window) need: A_y and
   // the multipliers of Phase 1's constraints, λ = Λ_b·b + Λ_y·y, so that
   //     E(y) = ½yᵀN_S y − ½gᵀy − ½(b − A_y·y)ᵀλ                (*)
   // is E′ at the Phase 1 minimiser for this y (docs/engine.md, "The energy
@@ -117,147 +107,6 @@ class FixedCoordinateSolver {
   Index k_ = 0;
   mutable Vector<double> scratch_;  // μ: R·y in the factored solve
 };
-
-// Why a run's rounds ended (AlternatingSummary::stop).
-enum class RoundStop {
-  RoundLimit,  // AlternatingOptions::iterations rounds ran
-  Tolerance,   // the last round's ‖Δy‖ met AlternatingOptions::tolerance
-  TimeBudget,  // AlternatingOptions::time_budget was spent first
-};
-const char* to_string(RoundStop stop);  // "round limit", "tolerance", "time budget"
-
-struct AlternatingOptions {
-  // Phase 1/Phase 2 rounds per call (the paper uses a fixed 8 per frame, so a
-  // frame's cost does not depend on the pose); the cap with `tolerance` or
-  // `time_budget`. ≥ 1.
-  int iterations = 8;
-  // Stop early when ‖Δy‖ ≤ tolerance·max(1, ‖y‖). 0: always run `iterations`.
-  double tolerance = 0.0;
-  // Stop once the rounds have run this many seconds (checked after each
-  // round, or second-order step, so the first always runs and the last may
-  // end past the budget by one round); 0: no budget. Finite and ≥ 0.
-  double time_budget = 0.0;
-  // The clock the budget reads, in seconds from any origin; nullptr:
-  // std::chrono::steady_clock. For tests and simulations.
-  double (*clock)() = nullptr;
-  // Form the round's product in float relative to a double reference y_r:
-  // g = F_b·b + F_y·y_r + F_y·(y − y_r), F_y·y_r in double (formed again,
-  // one double product, when ‖y − y_r‖ exceeds 10 % of ‖y‖ or 10⁵ times the
-  // last round's step) and only the last product in float, at about twice
-  // the SIMD width. The float round-off in g stays under 1e-8·‖F_y‖‖y‖ and
-  // shrinks with the steps, so the rounds reach the fixed points of double
-  // rounds and the accelerated rounds' energy safeguard holds to 1e-9.
-  // Phase 1's final z = M_b·b + M_Y·y stays in double, so hard constraints
-  // hold to double precision either way.
-  bool float_products = false;
-  // OpenMP threads for the rounds when the projection is block-separable
-  // (InputProjection::block_size() > 0) and F_y has at least
-  // parallel_min_entries entries (0 means omp_get_max_threads()). Each thread
-  // owns a contiguous range of blocks: its rows of F_y·y, then Phase 2 on its
-  // blocks, one barrier per round; its rows of F_y stay in its core's cache.
-  // The rounds are those of the serial ones up to the last bits of an entry
-  // of g (the row split moves entries between the SIMD body and its tail).
-  int threads = 1;
-  Index parallel_min_entries = 256 * 256;
-  // Anderson acceleration of the rounds (anderson.h; Peng et al. 2018): the
-  // rounds are the fixed-point map y ← Π(g_b + F_y·y), extrapolated from the
-  // last `anderson_window` rounds (1–16) and retracted onto the projection's
-  // manifold, with the energy safeguard: an extrapolated y whose energy (*)
-  // (FixedCoordinateSolver::form_energy_terms) is above the last accepted
-  // one is replaced by the plain step from that one, and the history
-  // restarts. 0: plain rounds. Accelerated rounds run serially and need
-  // form_energy_terms and a projection with quadratic_term; the answer is
-  // always a plain step from an accepted iterate.
-  int anderson_window = 0;
-  // Stiff constraints on rotation blocks (FusedAlternation, "Constraints on
-  // y": a set whose rounds need proximal weights, explicit double form,
-  // InputProjection::rotation_blocks): Riemannian Newton steps with
-  // Levenberg–Marquardt damping on E(y) instead of rounds, `iterations` of
-  // them (each costs about a dozen rounds; it reaches in a few steps what the
-  // damped rounds need thousands for). false: rounds always.
-  bool second_order = true;
-
-  bool is_valid(std::string* why) const;
-};
-
-struct AlternatingSummary : Outcome {  // Success after a run
-  int iterations = 0;
-  RoundStop stop = RoundStop::RoundLimit;
-  double last_change = 0.0;  // ‖Δy‖ of the last Phase 2
-  // Accelerated rounds only: the energy (*) of the last accepted y (up to
-  // the float rounds' round-off), and how many extrapolations the safeguard
-  // rejected.
-  double energy = std::numeric_limits<double>::quiet_NaN();
-  int rejected = 0;
-  bool second_order = false;  // second-order steps ran (AlternatingOptions::second_order); energy is E(y)
-};
-
-// A Phase 2 projection whose input is linear in (z, y): g = G_z·z + G_y·y
-// (q entries), then y ← Π(g) (Section 3.1, Phase 2).
-template <typename Scalar>
-class InputProjection {
- public:
-  virtual ~InputProjection() = default;
-  // y ← Π(g); returns ‖y_new − y_old‖. Should not allocate.
-  virtual double project(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y) = 0;
-
-  // Optional block structure, for parallel rounds (AlternatingOptions::
-  // threads). block_size() = s > 0 promises that Π acts block by block on
-  // g and y of equal length (q = k): block j of y (entries [s·j, s·(j + 1)))
-  // depends only on block j of g and of the old y. project_blocks then
-  // updates blocks [first, last) of y only, reads no other entry of y, and
-  // returns Σ‖Δy_j‖² over them; it is called concurrently on disjoint ranges.
-  // Override both or neither; 0 (the default) keeps the rounds serial.
-  virtual Index block_size() const { return 0; }
-
-  // For accelerated rounds (AlternatingOptions::anderson_window):
-  // ½yᵀN_S y, the quadratic term in y of the energy whose Phase 2 this is
-  // (for y on the manifold), and the retraction y ← the nearest point of the
-  // manifold. NaN (the default): the projection cannot be accelerated.
-  virtual double quadratic_term(const Eigen::Ref<const Vector<Scalar>>& y) const {
-    (void)y;
-    return std::numeric_limits<double>::quiet_NaN();
-  }
-  virtual void retract(Eigen::Ref<Vector<Scalar>> y) const { (void)y; }
-
-  // Proximal Phase 2, for constraints that involve y (FusedAlternation,
-  // "Constraints on y"): from now on `project` must (at least) decrease its
-  // Phase 2 energy plus ½·Σ_j w_j‖y_j‖², y_j the blocks of
-  // proximal_block_size() entries (one block, the whole y, when that is 0),
-  // for the input it is given, which the engine forms as g + w∘y_old.
-  // Projections onto a set on which each block's norm is constant
-  // (rotations, unit blocks) need do nothing, which is the default; one
-  // whose output's norm varies (scaled rotations) must add w_j to block j's
-  // curvature. Weights ≥ 0; all 0 (or empty) restores the plain Phase 2.
-  virtual Index proximal_block_size() const { return 0; }
-  // Whether y is d blocks of 3 × 3 matrices (column-major, 9 entries each) on
-  // SO(3) on which quadratic_term is constant, so that stiff constraints on
-  // y may take second-order steps (AlternatingOptions::second_order).
-  virtual bool rotation_blocks() const { return false; }
-  virtual void set_proximal_weights(const Eigen::Ref<const Vector<Scalar>>& weights) { (void)weights; }
-  virtual double project_blocks(const Eigen::Ref<const Vector<Scalar>>& g, Eigen::Ref<Vector<Scalar>> y,
-                                Index first, Index last) {
-    (void)g, (void)y, (void)first, (void)last;
-    return std::numeric_limits<double>::quiet_NaN();  // never called when block_size() == 0
-  }
-};
-
-// How FusedAlternation keeps F_y = G_z·M_Y + G_y when Phase 1 came from its
-// fast path: Explicit forms the q × k matrix per constraint set; Factored
-// keeps F₀ = C0 + G_y (C0 = G_z·P0, formed once per Phase 1 preparation and
-// G_z) and applies the rank-μ correction −(G_z·T)·(R·y) in each round, so a
-// constraint set costs O(q·μ·d) instead of O(q·μ·k). Automatic: Factored for
-// q·k > FusedAlternation::kExplicitMaxEntries.
-enum class FusedForm { Automatic, Explicit, Factored };
-
-// The precision of the factored form's per-set product G_z·T (q × μ × d
-// multiply-adds, most of a set's cost): Float runs it at about twice the BLAS
-// rate, for rounds with AlternatingOptions::float_products (F_b = G_z·M_b
-// then carries float round-off too, and the rounds' double references use
-// the float G_z·T, so a Float set's fixed point is that of the rounded
-// operator; Phase 1's z stays in double). `run` with double rounds after a
-// Float set throws. The explicit form is double either way.
-enum class FusedPrecision { Double, Float };
 
 // Phase 1 folded into Phase 2's input: with z = M_b·b + M_Y·y,
 //     g = G_z·z + G_y·y = F_b·b + F_y·y,   F_b = G_z·M_b (q × m),
@@ -341,13 +190,13 @@ class FusedAlternation {
                FusedPrecision precision = FusedPrecision::Double);
 
   // options.iterations rounds (fewer with options.tolerance or
-  // options.time_budget; AlternatingSummary::stop says which ended them) from
+  // options.time_budget; AlternationResults::stop says which ended them) from
   // the given y (k, warm start), then z = M_b·b + M_Y·y (d). b: m. No heap
   // allocation.
   // Throws std::invalid_argument before a `set`, on sizes other than phase1's,
   // and for double rounds after a FusedPrecision::Float set.
-  AlternatingSummary run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
-                         const Eigen::Ref<const Vector<Scalar>>& b, const AlternatingOptions& options,
+  AlternationResults run(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
+                         const Eigen::Ref<const Vector<Scalar>>& b, const AlternationSettings& options,
                          Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
 
   bool ready() const;
@@ -358,14 +207,17 @@ class FusedAlternation {
   bool constrained_y() const;
   // Whether `run` takes second-order steps for this projection and these
   // options: stiff constraints on y, a projection whose rotation_blocks() is
-  // true, and AlternatingOptions::second_order.
-  bool second_order(const InputProjection<Scalar>& projection, const AlternatingOptions& options) const;
+  // true, and AlternationSettings::second_order.
+  bool second_order(const InputProjection<Scalar>& projection, const AlternationSettings& options) const;
   const Vector<double>& proximal_weights() const;
   // The projection's InputProjection::proximal_block_size(), which the
   // weights D are formed for (0, the default: one scalar weight). Resets
   // ready(): call before `set`. Throws std::invalid_argument when < 0.
   void set_proximal_block_size(Index block);
   bool float_set() const;  // the factored form's G_z·T (and F_b) were formed in float
+  // The G_z, G_y kept by the last set or prepare (empty before any).
+  const Matrix<Scalar>& Gz() const;
+  const Matrix<Scalar>& Gy() const;
 
  private:
   void set_impl(const FixedCoordinateSolver<Scalar>& phase1, const Matrix<Scalar>* Gz, const Matrix<Scalar>* Gy,
