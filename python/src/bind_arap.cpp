@@ -57,6 +57,9 @@ void bind_arap_options(py::module_& m) {
       .rw("tolerance", &ArapSolverOptions::tolerance,
           "Each solve runs until the relative fixed-point residual is at most this. Default 1e-6.")
       .rw("refine", &ArapSolverOptions::refine, "RefineOptions of solve(..., refine=True).")
+      .rw("max_basis_gb", &ArapSolverOptions::max_basis_gb,
+          "Refuse the precompute (NumericalError, status NotRun) when the null-space block N (3n × 3(h + samples)\n"
+          "doubles) would exceed this many GB; 0: no limit. Default 4.")
       .repr()
       .keyword_init<ArapSolverOptions>();
 }

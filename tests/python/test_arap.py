@@ -103,6 +103,16 @@ def test_wrong_inputs_are_named(cylinder):
     assert np.abs(solver.solve(bc)[b] - bc).max() == 0.0  # a refused call loses nothing
 
 
+def test_a_subspace_above_max_basis_gb_is_refused_with_its_size(cylinder):
+    V, F, b, bc = cylinder
+    options = deform.ArapSolverOptions(max_basis_gb=1e-6)
+    with pytest.raises(qpreduce.NumericalError, match=r"held vertices.*GB.*arap\(\)") as refused:
+        deform.ArapSolver(V, F, b, options=options)
+    assert refused.value.status == qpreduce.Status.NotRun
+    with pytest.raises(ValueError, match="max_basis_gb"):
+        deform.ArapSolver(V, F, b, options=deform.ArapSolverOptions(max_basis_gb=-1.0))
+
+
 def test_least_squares_handles_warn_and_raise_under_strict(cylinder):
     V, F, b, bc = cylinder
     deformer = deform.Deformer(V, F)

@@ -250,6 +250,20 @@ TEST_CASE("ArapSolver: a shared .sel handle set, held vertex by vertex, is met e
     CAPTURE(b.size());
     check_exact(m.V, m.F, b, bc);
   }
+  // The Bumpy Plane's 3,417 held vertices are refused before anything is
+  // allocated (ArapSolverOptions::max_basis_gb), with the size and arap().
+  const std::string bs = data + "/meshes/botsch-sorkine/";
+  const TriangleMesh plane = read_triangle_mesh(bs + "bumpy_plane.off");
+  const Selection sel = read_sel(bs + "bumpy_plane.sel");
+  std::vector<Index> held;
+  for (Index v = 0; v < sel.size(); ++v)
+    if (sel.roles[v] != SelRole::Free) held.push_back(v);
+  ArapSolver solver;
+  const PrecomputeSummary refused = solver.precompute(plane.V, plane.F, held);
+  CHECK(refused.status == Status::NotRun);
+  CHECK_THAT(refused.message, Catch::Matchers::Contains("3417 held vertices") &&
+                                  Catch::Matchers::Contains("10.0 GB") && Catch::Matchers::Contains("arap()"));
+  CHECK_FALSE(solver.ready());
 }
 
 TEST_CASE("arap and ArapSolver: bad arguments are refused with their names", "[arap][bad-input]") {
@@ -330,4 +344,33 @@ TEST_CASE("exact_handle_proxies: held vertices become proxies once, patches and 
   Handles outside;
   outside.points.push_back(PointHandle{{m.V.rows()}, {}});
   CHECK_THROWS_WITH(exact_handle_proxies(model, outside, 12), Catch::Matchers::Contains("outside"));
+}
+
+TEST_CASE("ArapSolver: a subspace above max_basis_gb is refused with the size, and the last precompute stays",
+          "[arap][bad-input]") {
+  const TriangleMesh m = capped_cylinder(1.0, 6.0, 12, 16);
+  const std::vector<Index> b = random_vertices(m.V.rows(), 20, 41u);
+  const Vertices bc = bent_targets(m.V, b, 0.01, 3);
+  ArapSolver solver;
+  REQUIRE(solver.precompute(m.V, m.F, b).ok());
+  Vertices before;
+  REQUIRE(solver.solve(bc, &before).ok());
+  // 8 bytes × 3n × 3(h + samples): a few MB here; a limit of 1 kB refuses it.
+  ArapSolverOptions small;
+  small.max_basis_gb = 1e-6;
+  const std::vector<Index> more = random_vertices(m.V.rows(), 40, 43u);
+  const PrecomputeSummary refused = solver.precompute(m.V, m.F, more, small);
+  CHECK(refused.status == Status::NotRun);
+  CHECK_THAT(refused.message, Catch::Matchers::Contains("40 held vertices") &&
+                                  Catch::Matchers::Contains("GB") && Catch::Matchers::Contains("arap()"));
+  REQUIRE(solver.ready());
+  Vertices after;
+  REQUIRE(solver.solve(bc, &after).ok());  // still the 20-vertex solver (40 targets would be needed otherwise)
+  CHECK(handle_error(after, b, bc) <= 1e-8 * diagonal(m.V));
+  CHECK_THROWS_WITH(solver.solve(bent_targets(m.V, more, 0.01, 3), &after), Catch::Matchers::Contains("bc"));
+  ArapSolverOptions bad;
+  bad.max_basis_gb = -1.0;
+  CHECK_THROWS_WITH(solver.precompute(m.V, m.F, b, bad), Catch::Matchers::Contains("max_basis_gb"));
+  small.max_basis_gb = 0.0;  // no limit
+  CHECK(solver.precompute(m.V, m.F, more, small).ok());
 }

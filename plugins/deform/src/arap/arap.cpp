@@ -92,6 +92,9 @@ bool ArapSolverOptions::is_valid(std::string* why) const {
   if (!(tolerance >= 0.0) || !std::isfinite(tolerance)) {
     return fail(fmt::format("tolerance must be finite and ≥ 0, got {}", tolerance));
   }
+  if (!(max_basis_gb >= 0.0) || !std::isfinite(max_basis_gb)) {
+    return fail(fmt::format("max_basis_gb must be finite and ≥ 0 (0: no limit), got {}", max_basis_gb));
+  }
   return true;
 }
 
@@ -125,6 +128,18 @@ PrecomputeSummary ArapSolver::precompute(const Vertices& V, const ElementsRef& F
   // Every held vertex its own linear proxy, then samples around them (as
   // many as the options ask, within what the mesh has).
   st->model.linear = exact_handle_proxies(st->model, st->handles, options.deformer.linear_proxies);
+  const double n = static_cast<double>(V.rows()), d = 3.0 * static_cast<double>(st->model.linear.count());
+  const double gb = 8.0 * 3.0 * n * d / 1e9;
+  if (options.max_basis_gb > 0.0 && gb > options.max_basis_gb) {
+    PrecomputeSummary refused;
+    refused.status = Status::NotRun;
+    refused.message = fmt::format(
+        "refused before any allocation: {} held vertices on a {}-vertex mesh make a subspace whose null-space block N alone is {:.1f} GB "
+        "(3n × {} doubles), above ArapSolverOptions::max_basis_gb = {:g}; for one solve call arap() (full space, no "
+        "subspace), hold regions as patches (Deformer), or raise max_basis_gb",
+        b.size(), V.rows(), gb, static_cast<Index>(d), options.max_basis_gb);
+    return refused;
+  }
   // Its one handle set, on linear proxies that are vertices, is eliminated
   // (docs/engine.md): Phase 1's fast path would be prepared for nothing.
   DeformerOptions deformer_options = options.deformer;

@@ -55,6 +55,12 @@ struct ArapSolverOptions {
   double tolerance = 1e-6;
   // The full-space finish of refine().
   RefineOptions refine;
+  // The precompute is refused (status NotRun, nothing allocated) when the
+  // subspace's null-space block N, 3n × d doubles with d = 3 × (h + the
+  // samples), would exceed this many GB (its peak is a few times that:
+  // docs/performance.md, "Exact handles"); 0: no limit. For one solve with
+  // that many held vertices arap() needs no subspace.
+  double max_basis_gb = 4.0;
 
   bool is_valid(std::string* why) const;
 };
