@@ -1,5 +1,5 @@
 // White-box tests of the precompute's threaded sparse products
-// (plugins/deform/src/sparse_products.h).
+// (plugins/deform/src/deformer/sparse_products.h).
 #include <catch2/catch.hpp>
 
 #include "deformer/sparse_products.h"
