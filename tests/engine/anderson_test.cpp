@@ -172,7 +172,7 @@ TEST_CASE("Anderson: bad options and sizes throw with the words") {
   CHECK_THROWS_WITH(aa.step(v5, v5, out4), Catch::Contains("out"));
 }
 
-TEST_CASE("SafeguardedAnderson: a quadratic's energy judges the steps; refusals restart the history and are counted") {
+TEST_CASE("SafeguardedAnderson: a quadratic's energy judges the steps, and refusals restart the history and are counted") {
   // x ← Mx + c is the gradient step of E(x) = ½xᵀ(I − M)x − cᵀx (I − M ≻ 0),
   // so the safeguarded loop never raises E and reaches x* as the plain one.
   using qpreduce::SafeguardedAnderson;
