@@ -49,8 +49,8 @@ class SparseFactorization {
   // unknowns. The fill-reducing ordering is then computed on the g-node
   // quotient graph (groups i ~ j when some A_ab ≠ 0 with a in i, b in j) and
   // each group's unknowns are eliminated together. For mesh problems (the
-  // coordinates of a vertex) it makes the ordering 5–10× cheaper at about the
-  // same fill. Backends without a separate ordering step ignore it (the
+  // coordinates of a vertex) it makes the ordering cheaper at about the same
+  // fill (measured in docs/performance.md). Backends without a separate ordering step ignore it (the
   // default); an empty vector restores ordering the unknowns themselves.
   virtual void setOrderingGroups(std::vector<Index> group) { (void)group; }
 

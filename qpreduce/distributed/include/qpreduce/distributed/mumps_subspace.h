@@ -69,9 +69,8 @@ struct MumpsOptions {
   // Empty: the factor stays in memory. A directory: MUMPS's out-of-core
   // factorization (ICNTL(22) = 1) writes the factor there (OOC_TMPDIR; one
   // set of files per rank, deleted when the build ends) and reads it back
-  // for the solves, so a rank holds only the active fronts: on the Bumpy
-  // Plane at K = 2 MUMPS's memory per rank fell from 239 to 99 MB, the
-  // solves took 4.9 s instead of 4.3 (docs/scaling.md). It must exist on
+  // for the solves, so a rank holds only the active fronts: less memory per
+  // rank, somewhat slower solves (measured in docs/scaling.md). It must exist on
   // every rank (a local disk per node; at most 255 characters); a rank that
   // cannot write there fails the build with MUMPS's status and message.
   std::string out_of_core_directory;
