@@ -90,6 +90,5 @@ def _raise_if_failed(self, allow_qualified=True):
 
 
 Outcome.raise_if_failed = _raise_if_failed
-Outcome.check = _raise_if_failed
 
 __all__ = [name for name in dir() if not name.startswith("_") and name != "annotations"]
