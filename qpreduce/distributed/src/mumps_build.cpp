@@ -27,7 +27,7 @@ bool MumpsBuild::fail_mumps(const MumpsSolver& solver, const std::string& what) 
 bool MumpsBuild::check_rank_of_C() {
   MatD CtC = MatD(C_rows.transpose() * C_rows);
   allreduce_sum(comm, CtC);
-  const Index rank_c = qpreduce::detail::numerical_rank(qpreduce::detail::symmetric_eigenvalues(CtC),
+  const Index rank_c = qpreduce::numerical_rank(qpreduce::symmetric_eigenvalues(CtC),
                                                         options.rank_tolerance);
   if (rank_c < d) {
     return fail(Status::RankDeficientC,
@@ -205,9 +205,9 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
   MatD S = MatD(C_rows.transpose() * G);
   allreduce_sum(comm, S);
   S = 0.5 * (S + S.transpose()).eval();
-  const auto eig = qpreduce::detail::symmetric_eigenvalues(S);
+  const auto eig = qpreduce::symmetric_eigenvalues(S);
   summary.s_condition = eig.maxCoeff() / std::max(eig.minCoeff(), 1e-300);
-  if (qpreduce::detail::numerical_rank(eig, options.rank_tolerance) < d) {
+  if (qpreduce::numerical_rank(eig, options.rank_tolerance) < d) {
     if (options.check_psd && !psd_by_factorization()) return false;
     return fail(Status::SingularKKT, fmt::format("S = Cᵀ({})⁻¹C is singular (condition {:.2e}): the KKT matrix "
                                                  "is singular to working precision", what, summary.s_condition));
@@ -217,7 +217,7 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
     MatD T(aug.size(), aug.size());
     for (size_t a = 0; a < aug.size(); ++a)
       for (size_t b = 0; b < aug.size(); ++b) T(Index(a), Index(b)) = summary.rho * S(aug[a], aug[b]);
-    const double lambda_max = qpreduce::detail::symmetric_eigenvalues(T).maxCoeff();
+    const double lambda_max = qpreduce::symmetric_eigenvalues(T).maxCoeff();
     if (!(lambda_max - 1.0 <= tau / std::max(hrho_bound, 1e-300)) && !psd_by_factorization()) return false;
   } else if (options.check_psd && options.psd_check_by_factorization && !psd_by_factorization()) {
     return false;
@@ -278,7 +278,7 @@ bool MumpsBuild::kkt_route() {
 bool MumpsBuild::check_ud_rank(const MatD& DtUD) {
   if (!(k > 0 && options.check_dependent_cd)) return true;
   const MatD sym = 0.5 * (DtUD + DtUD.transpose());
-  const auto eig = qpreduce::detail::symmetric_eigenvalues(sym);
+  const auto eig = qpreduce::symmetric_eigenvalues(sym);
   const double hn = std::sqrt(allreduce(comm, H_rows.squaredNorm(), MPI_SUM));
   const double scale = std::max(eig.cwiseAbs().maxCoeff(), hn > 0 ? D_norm * D_norm / hn : 0.0);
   summary.ud_condition = eig.maxCoeff() / std::max(eig.minCoeff(), 1e-300);
@@ -370,7 +370,7 @@ DistributedSummary MumpsBuild::run() {
   if (!(use_kkt ? kkt_route() : augmented_route(aug))) return summary;
   // The rows C fixes exactly, as the single-process build writes them (this
   // rank's rows of N and UD).
-  qpreduce::detail::snap_selected_rows(C, rows.begin, G, F);
+  qpreduce::snap_selected_rows(C, rows.begin, G, F);
 
   MatD DtUD = k > 0 ? MatD(D_rows.transpose() * F) : MatD(0, 0);
   allreduce_sum(comm, DtUD);

@@ -5,9 +5,8 @@
 
 #include "qpreduce/distributed/mumps_subspace.h"
 
-#include "dense.h"
 #include "mumps_solver.h"
-#include "subspace_internal.h"  // kRowBlock, snap_selected_rows
+#include "qpreduce/subspace_steps.h"
 
 #include "qpreduce/support.h"
 
@@ -27,7 +26,7 @@ namespace qpreduce::distributed::detail {
 
 using SpD = SparseMatrix<double>;
 using MatD = Matrix<double>;
-using qpreduce::detail::kRowBlock;
+inline constexpr Index kRowBlock = kSubspaceRowBlock;
 
 // Sums a dense matrix over the ranks, in place.
 inline void allreduce_sum(MPI_Comm comm, MatD& M) {

@@ -22,7 +22,6 @@ namespace qpreduce::distributed {
 using SpD = SparseMatrix<double>;
 using MatD = Matrix<double>;
 using detail::MumpsSolver;
-using qpreduce::detail::kRowBlock;
 using detail::Symmetry;
 
 RowRange owned_rows(Index n, int rank, int ranks) {
