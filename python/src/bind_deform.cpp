@@ -258,16 +258,9 @@ void targets_arg(PyDeformer& self, py::handle targets, py::handle patch_transfor
   }
 }
 
-void bind_deformer_class(py::module_& m) {
-  py::class_<PyDeformer>(
-      m, "Deformer",
-      "The reduced ARAP deformer (deformer.h): precompute once, set_handles per handle set (the\n"
-      "on-site step), then frame per pose. Frames write V′ (n, 3) float64, into out= without a copy.\n\n"
-      "Errors: a bad argument raises TypeError/ValueError naming it and the expected shape; a failed\n"
-      "numerical step raises qpreduce.NumericalError (.status, .message, .summary).\n"
-      "Threads: every call takes the deformer's own lock and the long ones (precompute, load, save,\n"
-      "set_handles, frame) release the GIL, so different deformers run concurrently; one deformer may\n"
-      "be shared, its calls then run one at a time.")
+// The constructor.
+void bind_deformer_setup(py::class_<PyDeformer>& cls) {
+  cls
       .def(
           py::init([](py::handle V, py::handle elements, py::handle options, py::handle clusters,
                       py::handle patch_of_vertex, py::handle patch_types, bool strict) {
@@ -294,7 +287,12 @@ void bind_deformer_class(py::module_& m) {
           "strict=False)\n"
           "Deformer(model, options=None)\n\n"
           "V: (n, 3) rest positions; elements: (m, 3) triangles or (m, 4) tetrahedra (see Model);\n"
-          "options: DeformerOptions. Nothing is computed until precompute (or load).")
+          "options: DeformerOptions. Nothing is computed until precompute (or load).");
+}
+
+// precompute, save and load.
+void bind_deformer_precompute(py::class_<PyDeformer>& cls) {
+  cls
       .def(
           "precompute",
           [](PyDeformer& self, py::handle progress) {
@@ -353,7 +351,12 @@ void bind_deformer_class(py::module_& m) {
           },
           py::arg("path"),
           "load(path) -> PrecomputeSummary\n\nReads a model written by save instead of precomputing; the\n"
-          "deformer's model and options must be those it was made from (IoError otherwise).")
+          "deformer's model and options must be those it was made from (IoError otherwise).");
+}
+
+// set_handles (the on-site step) and frame.
+void bind_deformer_onsite(py::class_<PyDeformer>& cls) {
+  cls
       .def(
           "set_handles",
           [](PyDeformer& self, py::handle handles, py::handle patches, py::handle options) {
@@ -427,7 +430,12 @@ void bind_deformer_class(py::module_& m) {
           "patch_transforms: (s, 3, 4) float64, [A | t] per prescribed patch; out: (n, 3) float64\n"
           "C-contiguous, written in place and returned (no copy); None makes a new array. The\n"
           "summary is in .last_frame. Raises TypeError/ValueError naming a bad argument,\n"
-          "NumericalError when the rounds fail. Releases the GIL.")
+          "NumericalError when the rounds fail. Releases the GIL.");
+}
+
+// The last frame, the rounds' settings and the sizes.
+void bind_deformer_rounds(py::class_<PyDeformer>& cls) {
+  cls
       .def_property_readonly(
           "last_frame", [](PyDeformer& self) { return self.lock(), self.last_frame; },
           "FrameSummary of the last frame: iterations (rounds), fixed_point_residual, model_energy, ...")
@@ -463,7 +471,12 @@ void bind_deformer_class(py::module_& m) {
       .def_property_readonly(
           "options", [](PyDeformer& s) { return s.lock(), s.options; }, "A copy of the options.")
       .def_property_readonly(
-          "handles", [](PyDeformer& s) { return s.lock(), s.handles; }, "The current Handles.")
+          "handles", [](PyDeformer& s) { return s.lock(), s.handles; }, "The current Handles.");
+}
+
+// The state after precompute and the last frame, and handle_residual.
+void bind_deformer_state(py::class_<PyDeformer>& cls) {
+  cls
       .def_property_readonly(
           "model_name",
           [](PyDeformer& s) {
@@ -532,6 +545,23 @@ void bind_deformer_class(py::module_& m) {
         return "Deformer(n=" + std::to_string(s.model.V.rows()) + ", ready=" + (s.deformer.ready() ? "True" : "False") +
                ")";
       });
+}
+
+void bind_deformer_class(py::module_& m) {
+  py::class_<PyDeformer> cls(
+      m, "Deformer",
+      "The reduced ARAP deformer (deformer.h): precompute once, set_handles per handle set (the\n"
+      "on-site step), then frame per pose. Frames write V′ (n, 3) float64, into out= without a copy.\n\n"
+      "Errors: a bad argument raises TypeError/ValueError naming it and the expected shape; a failed\n"
+      "numerical step raises qpreduce.NumericalError (.status, .message, .summary).\n"
+      "Threads: every call takes the deformer's own lock and the long ones (precompute, load, save,\n"
+      "set_handles, frame) release the GIL, so different deformers run concurrently; one deformer may\n"
+      "be shared, its calls then run one at a time.");
+  bind_deformer_setup(cls);
+  bind_deformer_precompute(cls);
+  bind_deformer_onsite(cls);
+  bind_deformer_rounds(cls);
+  bind_deformer_state(cls);
 }
 
 }  // namespace

@@ -62,13 +62,9 @@ py::array_t<Scalar> apply_map(const LockedSolver<Scalar>& self,
   return y;
 }
 
+// The subspace type of a solver (its N and UD).
 template <typename Scalar>
-void bind_solver_type(py::module_& m, const char* name) {
-  using Locked = LockedSolver<Scalar>;
-  using Solver = SubspaceSolver<Scalar>;
-  using MatrixS = Matrix<Scalar>;
-  const std::string dtype = float_name<Scalar>().template cast<std::string>();
-
+void bind_subspace_type(py::module_& m, const char* name) {
   py::class_<VariationalSubspace<Scalar>>(m, (std::string(name) + "Subspace").c_str(),
                                           "The subspace X = N·z + UD·y (subspace.h): N n×d, UD n×k.")
       .def_readonly("N", &VariationalSubspace<Scalar>::N, "n × d")
@@ -77,17 +73,14 @@ void bind_solver_type(py::module_& m, const char* name) {
         return std::string(name) + "Subspace(N: " + std::to_string(s.N.rows()) + "×" + std::to_string(s.N.cols()) +
                ", UD: " + std::to_string(s.UD.rows()) + "×" + std::to_string(s.UD.cols()) + ")";
       });
+}
 
-  const std::string doc =
-      "The reduced solver (subspace_solver.h), " + dtype + ": precompute once, then any demand (A, b, q).\n\n"
-      "Eq. 1  min_X ½XᵀHX − qᵀX  s.t.  AᵀX = b  (H n×n PSD, A n×m) becomes, with X = B·w,\n"
-      "B = [N UD] (n×p, p = d + k, w = [z; y]),  min_w ½wᵀH_r w − q_rᵀw  s.t.  A_r w = b,\n"
-      "H_r = BᵀHB (p×p), A_r = AᵀB (m×p), q_r = Bᵀq (p). set_constraints forms the small\n"
-      "operators; solve is a few matrix–vector products. Bad arguments raise ValueError or\n"
-      "TypeError; numerical failures come back as summaries (summary.raise_if_failed()).\n"
-      "Thread safety: calls on one solver are serialised by a reader–writer lock (the\n"
-      "const calls run concurrently); the GIL is released in the long calls.";
-  py::class_<Locked>(m, name, doc.c_str())
+// precompute, restore and the constraints.
+template <typename Scalar>
+void bind_solver_setup(py::class_<LockedSolver<Scalar>>& cls) {
+  using Locked = LockedSolver<Scalar>;
+  using MatrixS = Matrix<Scalar>;
+  cls
       .def(py::init<>(), "An empty solver (ready is False).")
       .def(
           "precompute",
@@ -151,7 +144,15 @@ void bind_solver_type(py::module_& m, const char* name) {
           py::arg("A_c"), py::arg("options") = py::none(),
           "set_constraints_in_design(A_c, options=None) -> ConstraintSummary\n\n"
           "Constraints given in the design space, A = C·A_c (A_c d×m): A_r = [A_cᵀ 0], no term in n.\n"
-          "Raises ValueError when A_c does not have d rows, holds NaN, or before precompute.")
+          "Raises ValueError when A_c does not have d rows, holds NaN, or before precompute.");
+}
+
+// The solves and the reductions.
+template <typename Scalar>
+void bind_solver_solves(py::class_<LockedSolver<Scalar>>& cls) {
+  using Locked = LockedSolver<Scalar>;
+  using Solver = SubspaceSolver<Scalar>;
+  cls
       .def(
           "solve",
           [](const Locked& self, py::handle b, py::handle q_r, py::handle out) {
@@ -208,7 +209,15 @@ void bind_solver_type(py::module_& m, const char* name) {
                                      {&Solver::p, "p"});
           },
           py::arg("Y"), py::arg("out") = py::none(),
-          "reduce_linear_term_in_D(Y, out=None) -> q_r\n\nq_r = BᵀD·Y (p) for q = D·Y (Y: k). Cost O(p·k).")
+          "reduce_linear_term_in_D(Y, out=None) -> q_r\n\nq_r = BᵀD·Y (p) for q = D·Y (Y: k). Cost O(p·k).");
+}
+
+// Sizes, state and copies of the reduced operators.
+template <typename Scalar>
+void bind_solver_state(py::class_<LockedSolver<Scalar>>& cls, const char* name) {
+  using Locked = LockedSolver<Scalar>;
+  using MatrixS = Matrix<Scalar>;
+  cls
       .def_property_readonly("n", [](const Locked& s) { return s.read(), s.solver.n(); }, "Unknowns.")
       .def_property_readonly("d", [](const Locked& s) { return s.read(), s.solver.d(); }, "Columns of C (N).")
       .def_property_readonly("k", [](const Locked& s) { return s.read(), s.solver.k(); }, "Columns of D (UD).")
@@ -236,6 +245,25 @@ void bind_solver_type(py::module_& m, const char* name) {
                ", k=" + std::to_string(s.solver.k()) + ", m=" + std::to_string(s.solver.m()) +
                ", ready=" + (s.solver.ready() ? "True" : "False") + ")";
       });
+}
+
+template <typename Scalar>
+void bind_solver_type(py::module_& m, const char* name) {
+  const std::string dtype = float_name<Scalar>().template cast<std::string>();
+  bind_subspace_type<Scalar>(m, name);
+  const std::string doc =
+      "The reduced solver (subspace_solver.h), " + dtype + ": precompute once, then any demand (A, b, q).\n\n"
+      "Eq. 1  min_X ½XᵀHX − qᵀX  s.t.  AᵀX = b  (H n×n PSD, A n×m) becomes, with X = B·w,\n"
+      "B = [N UD] (n×p, p = d + k, w = [z; y]),  min_w ½wᵀH_r w − q_rᵀw  s.t.  A_r w = b,\n"
+      "H_r = BᵀHB (p×p), A_r = AᵀB (m×p), q_r = Bᵀq (p). set_constraints forms the small\n"
+      "operators; solve is a few matrix–vector products. Bad arguments raise ValueError or\n"
+      "TypeError; numerical failures come back as summaries (summary.raise_if_failed()).\n"
+      "Thread safety: calls on one solver are serialised by a reader–writer lock (the\n"
+      "const calls run concurrently); the GIL is released in the long calls.";
+  py::class_<LockedSolver<Scalar>> cls(m, name, doc.c_str());
+  bind_solver_setup<Scalar>(cls);
+  bind_solver_solves<Scalar>(cls);
+  bind_solver_state<Scalar>(cls, name);
 }
 
 }  // namespace
