@@ -86,6 +86,14 @@ RowMatrixD reduced_constraints(const Model& model, const ConstraintLayout& layou
   return Ar;
 }
 
+// One Alternation::setup on constraint rows of B = [N UD] (A_r, cols × p):
+// A_z its first nx columns, A_y the 9d others.
+ConstraintSummary setup_rows(const Model& model, const RowMatrixD& rows, const AlternationSetup& setup,
+                             OnSite* onsite) {
+  return onsite->alternation.setup(model.solver, rows.leftCols(model.nx), rows.rightCols(9 * model.d),
+                                   *model.projection, setup);
+}
+
 // T (cols × 9d) of AlternationSetup::follow_y: row 3a + c of tie i follows
 // s_c(a, c) of its patch's cluster k, entry 9k + 3c + a of y (empty without ties).
 SparseMatrix<double> tie_rows(const Model& model, const ConstraintLayout& layout) {
@@ -215,11 +223,9 @@ bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, c
   if (full.rank == 0 || full.rank >= layout.cols || cs->rank < full.rank) return false;
   RowMatrixD ArI(full.rank, Ar.cols());
   for (Index i = 0; i < full.rank; ++i) ArI.row(i) = Ar.row(independent[static_cast<size_t>(i)]);
-  const ConstraintSummary reduced = onsite->alternation.setup(model.solver, ArI.leftCols(model.nx),
-                                                               ArI.rightCols(9 * model.d), *model.projection, setup);
+  const ConstraintSummary reduced = setup_rows(model, ArI, setup, onsite);
   if (reduced.status != Status::Success) {  // back to the least-squares form
-    onsite->alternation.setup(model.solver, Ar.leftCols(model.nx), Ar.rightCols(9 * model.d), *model.projection,
-                              setup);
+    setup_rows(model, Ar, setup, onsite);
     return false;
   }
   onsite->target_projection = target_projection(full.A, independent);
@@ -232,6 +238,45 @@ bool reduce_dependent_rows(const Model& model, const ConstraintLayout& layout, c
       "hold exactly (condition {:.3g})",
       layout.cols, full.rank, full.rank, reduced.condition);
   *cs = out;
+  return true;
+}
+
+// An exact set whose answer cannot be trusted (`why`, from
+// unreachable_reason; empty: nothing to do) solved as soft constraints
+// (Eq. 18) instead: bounded where the exact fit is not. Returns true with
+// *cs the softened summary; false (the exact form kept, *cs as it was) when
+// the soft set fails too or `why` is empty.
+bool soften_unreachable(const Model& model, const RowMatrixD& Ar, const AlternationSetup& setup,
+                        const std::string& why, OnSite* onsite, ConstraintSummary* cs) {
+  if (why.empty()) return false;
+  AlternationSetup soft = setup;
+  soft.constraints.soft = true;
+  // More rows than the subspace has coordinates: the soft term
+  // δ‖A_r·x − b‖² is δ‖R·x − Qᵀb‖² plus a constant (A_r = Q·R, thin), so
+  // the set is solved on the p rows of R with the targets projected by Qᵀ
+  // each frame (OnSite::target_projection): the same minimiser, and few
+  // enough rows for the energy terms (the rounds then step on E′).
+  RowMatrixD Rsoft;
+  if (Ar.rows() > Ar.cols()) {
+    const Eigen::HouseholderQR<Matrix<double>> qr(Ar);
+    const Index p = Ar.cols();
+    Rsoft = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+    onsite->target_projection = (qr.householderQ() * Matrix<double>::Identity(Ar.rows(), p)).transpose();
+  }
+  const RowMatrixD& As = Rsoft.size() > 0 ? Rsoft : Ar;
+  ConstraintSummary ss = setup_rows(model, As, soft, onsite);
+  if (!ss.ok()) {  // keep the exact form, as before
+    onsite->target_projection.resize(0, 0);
+    *cs = setup_rows(model, Ar, setup, onsite);
+    return false;
+  }
+  ss.status = Status::ConstraintsLeastSquares;
+  ss.beyond_subspace = true;
+  ss.message = fmt::format(
+      "the subspace cannot meet these handles reliably: {}; they are met as soft constraints (Eq. 18, δ = "
+      "{:.3g}), the closest fit at bounded energy",
+      why, setup.constraints.delta);
+  *cs = ss;
   return true;
 }
 
@@ -261,51 +306,13 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
       model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, !layout.tied.empty());
   setup.energy_terms = onsite.plain_reason.empty();
   setup.precision = st.fused_precision();
-  const auto solve_rows = [&](const RowMatrixD& rows, const AlternationSetup& with) {
-    return onsite.alternation.setup(model.solver, rows.leftCols(model.nx), rows.rightCols(9 * model.d),
-                                    *model.projection, with);
-  };
-  ConstraintSummary cs = solve_rows(Ar, setup);
+  ConstraintSummary cs = setup_rows(model, Ar, setup, &onsite);
   onsite.target_projection.resize(0, 0);
   const FullSpaceRows full =
       cs.status == Status::ConstraintsLeastSquares ? full_space_rows(layout) : FullSpaceRows{};
-  bool softened = false;
   // (Not with ties: a free Rigid patch's tie to its cluster must hold exactly.)
-  if (st.settings.soften_unreachable_handles && !options.soft && layout.tied.empty()) {
-    const std::string why = unreachable_reason(full, cs);
-    if (!why.empty()) {
-      // Soft constraints (Eq. 18) instead: bounded where the exact fit is not.
-      AlternationSetup soft = setup;
-      soft.constraints.soft = true;
-      // More rows than the subspace has coordinates: the soft term
-      // δ‖A_r·x − b‖² is δ‖R·x − Qᵀb‖² plus a constant (A_r = Q·R, thin),
-      // so the set is solved on the p rows of R with the targets projected by
-      // Qᵀ each frame (OnSite::target_projection): the same minimiser, and
-      // few enough rows for the energy terms (the rounds then step on E′).
-      RowMatrixD Rsoft;
-      if (Ar.rows() > Ar.cols()) {
-        const Eigen::HouseholderQR<Matrix<double>> qr(Ar);
-        const Index p = Ar.cols();
-        Rsoft = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
-        onsite.target_projection = (qr.householderQ() * Matrix<double>::Identity(Ar.rows(), p)).transpose();
-      }
-      const RowMatrixD& As = Rsoft.size() > 0 ? Rsoft : Ar;
-      ConstraintSummary ss = solve_rows(As, soft);
-      if (ss.ok()) {
-        ss.status = Status::ConstraintsLeastSquares;
-        ss.beyond_subspace = true;
-        ss.message = fmt::format(
-            "the subspace cannot meet these handles reliably: {}; they are met as soft constraints (Eq. 18, δ = "
-            "{:.3g}), the closest fit at bounded energy",
-            why, options.delta);
-        cs = ss;
-        softened = true;
-      } else {  // keep the exact form, as before
-        onsite.target_projection.resize(0, 0);
-        cs = solve_rows(Ar, setup);
-      }
-    }
-  }
+  const bool softened = st.settings.soften_unreachable_handles && !options.soft && layout.tied.empty() &&
+                        soften_unreachable(model, Ar, setup, unreachable_reason(full, cs), &onsite, &cs);
   const bool reduced = !softened && reduce_dependent_rows(model, layout, full, Ar, setup, &onsite, &cs);
   // A least-squares set neither softened nor reduced to its independent rows:
   // is it the subspace's doing (a lower rank than in the full space)?
