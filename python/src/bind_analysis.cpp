@@ -54,6 +54,7 @@ void bind_full_solve(py::module_& m) {
       "X: (n,) or None when the summary reports a failure. Releases the GIL.");
 }
 
+// The PSD factor of H, and the H-distance.
 void bind_quotient(py::module_& m) {
   py::class_<PsdFactor>(m, "PsdFactor", "H = LᵀL, rank-revealing (quotient.h).")
       .def_readonly("L", &PsdFactor::L, "r × n")
@@ -104,7 +105,10 @@ void bind_quotient(py::module_& m) {
                           vector_copy_arg<double>("y", y, {Hs.rows(), "n"}));
       },
       py::arg("H"), py::arg("x"), py::arg("y"), "h_distance(H, x, y) -> sqrt(max(0, (x − y)ᵀH(x − y))).");
+}
 
+// The whitened design spaces and demands (Eq. 25–29).
+void bind_whitening(py::module_& m) {
   py::class_<WhitenedDesign> design(m, "WhitenedDesign", "Whitened design spaces (quotient.h, Eq. 25–29).");
   Fields(design, "WhitenedDesign")
       .ro("C_hat", &WhitenedDesign::C_hat, "r × d, Ĉ = (L⁺)ᵀC")
@@ -182,6 +186,7 @@ struct LockedChecker {
   std::unique_lock<std::mutex> lock() { return lock_releasing_gil<std::unique_lock<std::mutex>>(mutex); }
 };
 
+// The bound's terms and one demand's check (Eq. 39).
 void bind_theorem(py::module_& m) {
   py::class_<TheoremBound> bound(m, "TheoremBound", "All terms of Eq. 39 for one demand (theorem.h).");
   Fields(bound, "TheoremBound")
@@ -242,7 +247,10 @@ void bind_theorem(py::module_& m) {
       .ro("X_hat_min", &TheoremSolutions::X_hat_min, "(r,), Eq. 30")
       .ro("X_hat_star", &TheoremSolutions::X_hat_star, "(r,), Eq. 35 (empty when undefined)")
       .ro("demand", &TheoremSolutions::demand, "CompanionDemand");
+}
 
+// TheoremChecker (precompute once, check many demands) and check_theorem.
+void bind_theorem_checker(py::module_& m) {
   py::class_<LockedChecker>(m, "TheoremChecker",
                             "Precompute once per (H, C, D), then check many demands (theorem.h). Calls on one\n"
                             "checker are serialised by a lock (check() mutates the engine's constraints).")
@@ -310,7 +318,9 @@ void bind_theorem(py::module_& m) {
 void bind_analysis(py::module_& m) {
   bind_full_solve(m);
   bind_quotient(m);
+  bind_whitening(m);
   bind_theorem(m);
+  bind_theorem_checker(m);
 }
 
 }  // namespace qpreduce::python

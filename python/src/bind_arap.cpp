@@ -64,37 +64,9 @@ void bind_arap_options(py::module_& m) {
       .keyword_init<ArapSolverOptions>();
 }
 
-void bind_arap_solver(py::module_& m) {
-  py::class_<PyArapSolver>(
-      m, "ArapSolver",
-      "Repeated ARAP solves with the same held vertices b, in libigl's terms (arap.h): every vertex of\n"
-      "b is its own linear proxy of the reduced deformer, so any targets bc are met exactly; solve(bc)\n"
-      "is a reduced solve to its fixed point (milliseconds), solve(bc, refine=True) finishes it to\n"
-      "converged classic ARAP in the full space. For a single solve, deform.arap is cheaper.")
-      .def(py::init([](py::handle V, py::handle F, py::handle b, py::handle options, bool strict) {
-             MeshArgs a = mesh_args(V, F, b);
-             const auto opts = options_arg<ArapSolverOptions>("options", options);
-             auto self = std::make_unique<PyArapSolver>();
-             self->strict = strict;
-             {
-               py::gil_scoped_release release;
-               self->precomputed = self->solver.precompute(a.V, a.F, a.b, opts);
-             }
-             raise_if_unusable(self->precomputed, py::cast(self->precomputed));
-             const ConstraintSummary& hs = self->solver.handle_summary();
-             if (!hs.ok()) {
-               warn_or_raise("ArapSolver: the handles are met only in the least-squares sense: " + hs.message, strict,
-                             hs, py::cast(hs));
-             }
-             return self;
-           }),
-           py::arg("V"), py::arg("F"), py::arg("b"), py::kw_only(), py::arg("options") = py::none(),
-           py::arg("strict") = false,
-           "ArapSolver(V, F, b, *, options=None, strict=False)\n\n"
-           "V (n, 3) float64; F (m, 3) triangles or (m, 4) tetrahedra, integers; b (h,) held vertex\n"
-           "indices, any integer dtype, distinct; options: ArapSolverOptions. Precomputes the reduced\n"
-           "deformer (seconds; cost grows with h, docs/performance.md). ValueError/TypeError naming a bad\n"
-           "argument; NumericalError when the precompute fails. Releases the GIL.")
+// solve(bc, out=None, *, refine=False).
+void bind_arap_solve(py::class_<PyArapSolver>& cls) {
+  cls
       .def(
           "solve",
           [](PyArapSolver& self, py::handle bc, py::handle out, bool refine) {
@@ -135,7 +107,12 @@ void bind_arap_solver(py::module_& m) {
           "bc (h, 3) float64: the targets of b, row i for b[i]. The reduced shape (a frame warm-started\n"
           "from the last solve, run to the tolerance), its rows b equal to bc; refine=True finishes it\n"
           "to converged classic ARAP (full space). out: C-contiguous (n, 3) float64 written in place.\n"
-          "Summaries in .last_solve / .last_refine. Releases the GIL.")
+          "Summaries in .last_solve / .last_refine. Releases the GIL.");
+}
+
+// The summaries and sizes.
+void bind_arap_solver_state(py::class_<PyArapSolver>& cls) {
+  cls
       .def_property_readonly(
           "precompute_summary", [](PyArapSolver& s) { return s.lock(), s.precomputed; }, "PrecomputeSummary.")
       .def_property_readonly(
@@ -154,6 +131,41 @@ void bind_arap_solver(py::module_& m) {
           "handle_vertices", [](PyArapSolver& s) { return s.lock(), s.solver.handle_vertices(); }, "b, as given.")
       .def_property_readonly(
           "vertex_count", [](PyArapSolver& s) { return s.lock(), s.solver.vertex_count(); }, "n.");
+}
+
+void bind_arap_solver(py::module_& m) {
+  py::class_<PyArapSolver> cls(
+      m, "ArapSolver",
+      "Repeated ARAP solves with the same held vertices b, in libigl's terms (arap.h): every vertex of\n"
+      "b is its own linear proxy of the reduced deformer, so any targets bc are met exactly; solve(bc)\n"
+      "is a reduced solve to its fixed point (milliseconds), solve(bc, refine=True) finishes it to\n"
+      "converged classic ARAP in the full space. For a single solve, deform.arap is cheaper.");
+  cls.def(py::init([](py::handle V, py::handle F, py::handle b, py::handle options, bool strict) {
+             MeshArgs a = mesh_args(V, F, b);
+             const auto opts = options_arg<ArapSolverOptions>("options", options);
+             auto self = std::make_unique<PyArapSolver>();
+             self->strict = strict;
+             {
+               py::gil_scoped_release release;
+               self->precomputed = self->solver.precompute(a.V, a.F, a.b, opts);
+             }
+             raise_if_unusable(self->precomputed, py::cast(self->precomputed));
+             const ConstraintSummary& hs = self->solver.handle_summary();
+             if (!hs.ok()) {
+               warn_or_raise("ArapSolver: the handles are met only in the least-squares sense: " + hs.message, strict,
+                             hs, py::cast(hs));
+             }
+             return self;
+           }),
+           py::arg("V"), py::arg("F"), py::arg("b"), py::kw_only(), py::arg("options") = py::none(),
+           py::arg("strict") = false,
+           "ArapSolver(V, F, b, *, options=None, strict=False)\n\n"
+           "V (n, 3) float64; F (m, 3) triangles or (m, 4) tetrahedra, integers; b (h,) held vertex\n"
+           "indices, any integer dtype, distinct; options: ArapSolverOptions. Precomputes the reduced\n"
+           "deformer (seconds; cost grows with h, docs/performance.md). ValueError/TypeError naming a bad\n"
+           "argument; NumericalError when the precompute fails. Releases the GIL.");
+  bind_arap_solve(cls);
+  bind_arap_solver_state(cls);
 }
 
 }  // namespace
