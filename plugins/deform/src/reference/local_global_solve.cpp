@@ -132,188 +132,250 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
   return out;
 }
 
-// LocalGlobalArap::solve in the units-free frame: targets and `initial`
-// (checked; empty: the rest pose) are in it, and so is what it returns.
-ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& targets, ReferenceSolution* out,
-                            const Vertices& initial, const std::function<bool()>& cancel) {
-  const PreparedModel& m = st.m;
-  const bool classic = st.options.energy == ReferenceEnergy::ClassicArap;
-  const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : st.options.frame;
-  const Eigen::Matrix3d Ft = frame.transpose();
+namespace {
 
-  const Timer timer;
+constexpr int kHoldRounds = 16;
+
+// One run of run_rounds: the pose and rotations (Rounds), the fixed-point
+// iterate z = [vec V′; Q] (reference.h), its image G(z) and an
+// extrapolation, Anderson's history, the Newton steps' state and the stop
+// tests' memory, in the solve frame.
+class RoundLoop {
+ public:
+  RoundLoop(const LocalGlobalState& st, const HandleTargets& targets, const Vertices& initial, bool classic,
+            const Eigen::Matrix3d& frame)
+      : st_(st), m_(st.m), cv_(constrained_values(st, targets, frame)),
+        // Pose and rotations in the solve frame; those of the initial pose
+        // (the identities at rest).
+        rounds_(st, classic, initial.size() > 0 ? Vertices(initial * frame) : st.m.V),  // rows: (Fᵀ v)ᵀ = vᵀF
+        nx_(3 * st.n), distance_(nx_, st.n, st.m.diagonal), accelerate_(st.options.anderson_window > 0),
+        // Newton steps after newton_after rounds: classic energy, no weighted
+        // point rows (their Schur solve is not in the preconditioner).
+        newton_possible_(classic && st.options.newton_after > 0 && st.Af.rows() == 0) {
+    summary.energy_kind = st.options.energy;
+    summary.initial_energy = classic || initial.size() > 0 ? rounds_.local_step() : rounds_.rest_rotations_energy();
+    energy_ = summary.initial_energy;
+    summary.status = Status::Success;
+    z_.resize(nx_ + rounds_.Q.size());
+    gz_.resize(z_.size());
+    za_.resize(z_.size());
+    pack(&z_);
+    if (accelerate_) anderson_.reset(z_.size(), AndersonOptions{st.options.anderson_window});
+  }
+
+  // The rounds until a stop test holds, the cap, a cancel or a failure;
+  // returns the number of rounds (and Newton steps) run.
+  int run(const std::function<bool()>& cancel) {
+    int it = 0;
+    for (; it < st_.options.max_iterations; ++it) {
+      if (cancel && cancel()) {
+        summary.cancelled = true;
+        break;
+      }
+      if (newton_ready_) {
+        if (newton_round(&it, cancel)) break;
+        continue;
+      }
+      if (plain_round(&it)) break;
+    }
+    summary.iterations = it;
+    summary.rejected_steps = anderson_.rejected();
+    summary.solve_seconds = timer_.seconds();
+    return it;
+  }
+
+  const Rounds& rounds() const { return rounds_; }
+  double energy() const { return energy_; }
+
   ReferenceSummary summary;
-  summary.energy_kind = st.options.energy;
-  const ConstrainedValues cv = constrained_values(st, targets, frame);
-  // Pose and rotations in the solve frame; those of the initial pose (the
-  // identities at rest).
-  Rounds rounds(st, classic, initial.size() > 0 ? Vertices(initial * frame) : m.V);  // rows: (Fᵀ v)ᵀ = vᵀF
-  summary.initial_energy = classic || initial.size() > 0 ? rounds.local_step() : rounds.rest_rotations_energy();
-  double energy = summary.initial_energy;
-  summary.status = Status::Success;
-  // The fixed-point iterate z = [vec V′; Q] (reference.h) and its image G(z).
-  const Index nx = 3 * st.n;
-  Eigen::VectorXd z(nx + rounds.Q.size()), gz(z.size()), za(z.size());
-  const auto pack = [&](Eigen::VectorXd* v) {
-    v->head(nx) = Eigen::Map<const Eigen::VectorXd>(rounds.X.data(), nx);
-    v->tail(rounds.Q.size()) = rounds.Q;
-  };
-  const auto unpack = [&](const Eigen::VectorXd& v) {
-    Eigen::Map<Eigen::VectorXd>(rounds.X.data(), nx) = v.head(nx);
-    rounds.Q = v.tail(rounds.Q.size());
-  };
-  pack(&z);
-  DistanceEstimate distance(nx, st.n, m.diagonal);
-  constexpr int kHoldRounds = 16;
-  int held_from = -1;  // the first round of the current run of estimates within distance_tolerance
-  const bool accelerate = st.options.anderson_window > 0;
-  // Newton steps after newton_after rounds: classic energy, no weighted
-  // point rows (their Schur solve is not in the preconditioner).
-  const bool newton_possible = classic && st.options.newton_after > 0 && st.Af.rows() == 0;
-  bool newton_ready = false;
-  double previous_newton_step = std::numeric_limits<double>::infinity();  // RMS of the last full Newton step
-  double trust_radius = std::numeric_limits<double>::infinity();          // of the Newton steps, in the K-norm
-  SafeguardedAnderson anderson;
-  if (accelerate) anderson.reset(z.size(), AndersonOptions{st.options.anderson_window});
+
+ private:
+  void pack(Eigen::VectorXd* v) const {
+    v->head(nx_) = Eigen::Map<const Eigen::VectorXd>(rounds_.X.data(), nx_);
+    v->tail(rounds_.Q.size()) = rounds_.Q;
+  }
+  void unpack(const Eigen::VectorXd& v) {
+    Eigen::Map<Eigen::VectorXd>(rounds_.X.data(), nx_) = v.head(nx_);
+    rounds_.Q = v.tail(rounds_.Q.size());
+  }
+
   // Records a round's (or Newton step's) energy and time; returns the
   // reference test (step and energy change) and the refine test (energy
   // change or fixed-point residual), on summary.last_step and
   // summary.fixed_point_residual as the caller set them.
-  const auto end_round = [&](double next) {
-    const double drop = std::abs(energy - next) / std::max(std::abs(next), 1e-300);
-    energy = next;
-    summary.round_energy.push_back(energy);
-    summary.round_seconds.push_back(timer.seconds());
+  std::pair<bool, bool> end_round(double next) {
+    const double drop = std::abs(energy_ - next) / std::max(std::abs(next), 1e-300);
+    energy_ = next;
+    summary.round_energy.push_back(energy_);
+    summary.round_seconds.push_back(timer_.seconds());
     const bool reference_test =
-        summary.last_step <= st.options.step_tolerance * m.diagonal && drop <= st.options.energy_tolerance;
-    const bool refine_test = st.options.tolerance > 0 &&
-                             (drop <= st.options.tolerance || summary.fixed_point_residual <= st.options.tolerance);
-    return std::pair<bool, bool>{reference_test, refine_test};
-  };
-  int it = 0;
-  for (; it < st.options.max_iterations; ++it) {
-    if (cancel && cancel()) {
+        summary.last_step <= st_.options.step_tolerance * m_.diagonal && drop <= st_.options.energy_tolerance;
+    const bool refine_test = st_.options.tolerance > 0 &&
+                             (drop <= st_.options.tolerance || summary.fixed_point_residual <= st_.options.tolerance);
+    return {reference_test, refine_test};
+  }
+
+  // A Newton step after the switch; true when the run ends (*it counts a
+  // step that converged).
+  bool newton_round(int* it, const std::function<bool()>& cancel) {
+    // max_iterations bounds the work: rounds and Hessian products (each a
+    // solve with K, about a round) together.
+    const int budget = st_.options.max_iterations - *it - summary.cg_iterations;
+    if (budget <= 0) return true;
+    const NewtonStep step = newton_step(rounds_, st_, energy_, &trust_radius_, std::min(kNewtonMaxCg, budget), cancel);
+    ++summary.newton_steps;
+    summary.cg_iterations += step.cg;
+    if (step.cancelled) {
       summary.cancelled = true;
-      break;
+      return true;
     }
-    if (newton_ready) {
-      // max_iterations bounds the work: rounds and Hessian products (each a
-      // solve with K, about a round) together.
-      const int budget = st.options.max_iterations - it - summary.cg_iterations;
-      if (budget <= 0) break;
-      const NewtonStep step = newton_step(rounds, st, energy, &trust_radius, std::min(kNewtonMaxCg, budget), cancel);
-      ++summary.newton_steps;
-      summary.cg_iterations += step.cg;
-      if (step.cancelled) {
-        summary.cancelled = true;
-        break;
-      }
-      double next = step.energy;
-      summary.last_step = step.max_move;
-      if (!step.accepted) {  // the plain round, which never raises the energy
-        ++summary.newton_fallbacks;
-        summary.last_step = rounds.global_step(cv);
-        next = rounds.local_step();
-      }
-      summary.fixed_point_residual = step.gradient_step_rms * std::sqrt(static_cast<double>(st.n)) /
-                                     std::max(rounds.X.norm(), std::numeric_limits<double>::min());
-      // The distance left after full steps s_{k−1}, s_k of converged CG
-      // solves that contract, ρ = |s_k| / |s_{k−1}| < 1: |s_k|·ρ / (1 − ρ)
-      // (a linear rate; Newton's is faster). One step alone says nothing:
-      // early in a flat valley CG's residual test is met by the fast modes
-      // while the slow one is still far off.
-      const double ratio = step.step_rms / previous_newton_step;
-      summary.estimated_distance = step.full && std::isfinite(previous_newton_step) && ratio < 1.0
-                                       ? step.step_rms * ratio / (1.0 - ratio) / m.diagonal
-                                       : std::numeric_limits<double>::infinity();
-      previous_newton_step = step.full ? step.step_rms : std::numeric_limits<double>::infinity();
-      const auto [reference_test, refine_test] = end_round(next);
-      const bool distance_test =
-          st.options.distance_tolerance > 0 && summary.estimated_distance <= st.options.distance_tolerance;
-      // The reference test (a move below 1e-10 of the diagonal, the energy
-      // still to 1e-13) after a Newton solve that converged: the distance
-      // left is about that solve's step, kept or refused at round-off.
-      if (reference_test && !std::isfinite(summary.estimated_distance))
-        summary.estimated_distance = step.solved_rms / m.diagonal;
-      if (reference_test || refine_test || distance_test) {
-        summary.converged = true;
-        ++it;
-        break;
-      }
-      continue;
+    double next = step.energy;
+    summary.last_step = step.max_move;
+    if (!step.accepted) {  // the plain round, which never raises the energy
+      ++summary.newton_fallbacks;
+      summary.last_step = rounds_.global_step(cv_);
+      next = rounds_.local_step();
     }
-    if (newton_possible && it >= st.options.newton_after) {
+    summary.fixed_point_residual = step.gradient_step_rms * std::sqrt(static_cast<double>(st_.n)) /
+                                   std::max(rounds_.X.norm(), std::numeric_limits<double>::min());
+    // The distance left after full steps s_{k−1}, s_k of converged CG
+    // solves that contract, ρ = |s_k| / |s_{k−1}| < 1: |s_k|·ρ / (1 − ρ)
+    // (a linear rate; Newton's is faster). One step alone says nothing:
+    // early in a flat valley CG's residual test is met by the fast modes
+    // while the slow one is still far off.
+    const double ratio = step.step_rms / previous_newton_step_;
+    summary.estimated_distance = step.full && std::isfinite(previous_newton_step_) && ratio < 1.0
+                                     ? step.step_rms * ratio / (1.0 - ratio) / m_.diagonal
+                                     : std::numeric_limits<double>::infinity();
+    previous_newton_step_ = step.full ? step.step_rms : std::numeric_limits<double>::infinity();
+    const auto [reference_test, refine_test] = end_round(next);
+    const bool distance_test =
+        st_.options.distance_tolerance > 0 && summary.estimated_distance <= st_.options.distance_tolerance;
+    // The reference test (a move below 1e-10 of the diagonal, the energy
+    // still to 1e-13) after a Newton solve that converged: the distance
+    // left is about that solve's step, kept or refused at round-off.
+    if (reference_test && !std::isfinite(summary.estimated_distance))
+      summary.estimated_distance = step.solved_rms / m_.diagonal;
+    if (reference_test || refine_test || distance_test) {
+      summary.converged = true;
+      ++*it;
+      return true;
+    }
+    return false;
+  }
+
+  // A local-global round, plain or accelerated; true when the run ends (*it
+  // counts a round that converged).
+  bool plain_round(int* it) {
+    if (newton_possible_ && *it >= st_.options.newton_after) {
       // The switch: one plain round, whose local step keeps the curvatures
       // and whose global step sets the control rows the Newton steps move.
-      rounds.keep_curvature();
-      newton_ready = true;
+      rounds_.keep_curvature();
+      newton_ready_ = true;
     }
-    summary.last_step = rounds.global_step(cv);  // (V′, Q) = G(z)
-    if (!rounds.X.allFinite() || !rounds.Q.allFinite()) {
-      unpack(z);  // back to the last accepted pose
-      rounds.local_step();
+    summary.last_step = rounds_.global_step(cv_);  // (V′, Q) = G(z)
+    if (!rounds_.X.allFinite() || !rounds_.Q.allFinite()) {
+      unpack(z_);  // back to the last accepted pose
+      rounds_.local_step();
       summary.status = Status::NumericalFailure;
-      summary.message = fmt::format("non-finite positions in round {}; returned the pose of round {}", it + 1, it);
-      break;
+      summary.message = fmt::format("non-finite positions in round {}; returned the pose of round {}", *it + 1, *it);
+      return true;
     }
-    pack(&gz);
-    summary.fixed_point_residual = (gz - z).norm() / std::max(z.norm(), std::numeric_limits<double>::min());
-    summary.estimated_distance = distance.update(z, gz);
-    double next = 0.0;
-    if (newton_ready) {  // the switching round: plain
-      next = rounds.local_step();
-      z.swap(gz);
-    } else if (accelerate && anderson.history() > 0) {
-      anderson.propose(z, gz, za);
-      unpack(za);
-      next = rounds.local_step();
-      if (anderson.accept(std::isfinite(next) && rounds.X.allFinite() ? next : std::numeric_limits<double>::quiet_NaN(),
-                         energy)) {
-        z.swap(za);
-      } else {  // the safeguard: the plain round, which never raises the energy
-        unpack(gz);
-        next = rounds.local_step();
-        z.swap(gz);
-      }
-    } else {
-      // The first steps after a start or a refusal are G(z): they fill the
-      // history (the extrapolation of the step that makes it 1 is not tried).
-      if (accelerate) anderson.propose(z, gz, za);
-      next = rounds.local_step();
-      z.swap(gz);
-    }
+    pack(&gz_);
+    summary.fixed_point_residual = (gz_ - z_).norm() / std::max(z_.norm(), std::numeric_limits<double>::min());
+    summary.estimated_distance = distance_.update(z_, gz_);
+    const double next = next_pose();
     const auto [reference_test, refine_test] = end_round(next);
     // At the reference test the steps are at round-off, where the
     // estimate's Rayleigh quotient is noise: the distance left is about the
     // last move (as after a converged Newton solve above).
-    if (reference_test) summary.estimated_distance = summary.last_step / m.diagonal;
+    if (reference_test) summary.estimated_distance = summary.last_step / m_.diagonal;
     // The distance test holds once the estimate has stayed within the
     // tolerance for half the rounds so far (at least kHoldRounds): early on
     // the fast modes' progress can hide a slow one from the estimate.
-    held_from = summary.estimated_distance <= st.options.distance_tolerance ? (held_from < 0 ? it : held_from) : -1;
-    const bool distance_test = st.options.distance_tolerance > 0 && held_from >= 0 &&
-                               it - held_from + 1 >= std::max(kHoldRounds, (it + 1) / 2);
+    held_from_ =
+        summary.estimated_distance <= st_.options.distance_tolerance ? (held_from_ < 0 ? *it : held_from_) : -1;
+    const bool distance_test = st_.options.distance_tolerance > 0 && held_from_ >= 0 &&
+                               *it - held_from_ + 1 >= std::max(kHoldRounds, (*it + 1) / 2);
     if (reference_test || refine_test || distance_test) {
       summary.converged = true;
-      ++it;
-      break;
+      ++*it;
+      return true;
     }
+    return false;
   }
-  summary.iterations = it;
-  summary.rejected_steps = anderson.rejected();
-  summary.solve_seconds = timer.seconds();
+
+  // From G(z) in gz_: the next accepted z (G(z), or Anderson's extrapolation
+  // when the safeguard keeps it) and its local step; returns its energy.
+  double next_pose() {
+    double next = 0.0;
+    if (newton_ready_) {  // the switching round: plain
+      next = rounds_.local_step();
+      z_.swap(gz_);
+    } else if (accelerate_ && anderson_.history() > 0) {
+      anderson_.propose(z_, gz_, za_);
+      unpack(za_);
+      next = rounds_.local_step();
+      if (anderson_.accept(
+              std::isfinite(next) && rounds_.X.allFinite() ? next : std::numeric_limits<double>::quiet_NaN(),
+              energy_)) {
+        z_.swap(za_);
+      } else {  // the safeguard: the plain round, which never raises the energy
+        unpack(gz_);
+        next = rounds_.local_step();
+        z_.swap(gz_);
+      }
+    } else {
+      // The first steps after a start or a refusal are G(z): they fill the
+      // history (the extrapolation of the step that makes it 1 is not tried).
+      if (accelerate_) anderson_.propose(z_, gz_, za_);
+      next = rounds_.local_step();
+      z_.swap(gz_);
+    }
+    return next;
+  }
+
+  const Timer timer_;
+  const LocalGlobalState& st_;
+  const PreparedModel& m_;
+  const ConstrainedValues cv_;
+  Rounds rounds_;
+  const Index nx_;
+  DistanceEstimate distance_;
+  const bool accelerate_, newton_possible_;
+  Eigen::VectorXd z_, gz_, za_;
+  double energy_ = 0.0;
+  int held_from_ = -1;  // the first round of the current run of estimates within distance_tolerance
+  bool newton_ready_ = false;
+  double previous_newton_step_ = std::numeric_limits<double>::infinity();  // RMS of the last full Newton step
+  double trust_radius_ = std::numeric_limits<double>::infinity();          // of the Newton steps, in the K-norm
+  SafeguardedAnderson anderson_;
+};
+
+}  // namespace
+
+// LocalGlobalArap::solve in the units-free frame: targets and `initial`
+// (checked; empty: the rest pose) are in it, and so is what it returns.
+ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& targets, ReferenceSolution* out,
+                            const Vertices& initial, const std::function<bool()>& cancel) {
+  const bool classic = st.options.energy == ReferenceEnergy::ClassicArap;
+  const Eigen::Matrix3d frame = classic ? Eigen::Matrix3d::Identity() : st.options.frame;
+  RoundLoop loop(st, targets, initial, classic, frame);
+  const int it = loop.run(cancel);
+  ReferenceSummary summary = std::move(loop.summary);
   // Back to the world frame.
-  out->V = rounds.X * Ft;  // rows: (F x)ᵀ = xᵀFᵀ
+  const Rounds& rounds = loop.rounds();
+  out->V = rounds.X * frame.transpose();  // rows: (F x)ᵀ = xᵀFᵀ
   out->Q = rounds.Q;
   out->rotations = rounds.R;
   if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
-  summary.energy = energy;  // of the returned (V′, R) or (V′, Q, S)
+  summary.energy = loop.energy();  // of the returned (V′, R) or (V′, Q, S)
   summary.handle_residual = handle_residual(st.frame_targets, st.handles, targets, out->V);
   if (summary.status == Status::Success && summary.cancelled) {
     summary.message = fmt::format("cancelled after {} rounds", it);
   } else if (summary.status == Status::Success && !summary.converged) {
     summary.message = fmt::format("iteration limit ({}) reached; last step {:.3e} of the bounding-box diagonal",
-                                  st.options.max_iterations, summary.last_step / m.diagonal);
+                                  st.options.max_iterations, summary.last_step / st.m.diagonal);
   } else if (summary.status == Status::Success) {
     summary.message = fmt::format("converged in {} rounds", it);
   }
