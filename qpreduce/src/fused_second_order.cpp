@@ -14,6 +14,70 @@ namespace qpreduce::detail {
 
 using MatD = Matrix<double>;
 
+namespace {
+
+// With c = g′ − D∘y: the gradient in the tangent coordinates ω, and with
+// `curvature` the blocks' curvature terms tr(M_a)·I − sym M_a, M_a = S_aᵀc_a.
+void gradient_and_curvature(const Vector<double>& D, Index d, bool curvature, FusedWorkspace& W) {
+  W.c = W.g - D.cwiseProduct(W.y_try);
+  for (Index a = 0; a < d; ++a) {
+    const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a), C(W.c.data() + 9 * a);
+    const Eigen::Matrix3d Ma = S.transpose() * C;
+    W.grad.segment<3>(3 * a) = -Eigen::Vector3d(Ma(2, 1) - Ma(1, 2), Ma(0, 2) - Ma(2, 0), Ma(1, 0) - Ma(0, 1));
+    if (curvature) W.curvature[static_cast<size_t>(a)] = Ma.trace() * Eigen::Matrix3d::Identity() -
+                                                        0.5 * (Ma + Ma.transpose());
+  }
+}
+
+// The model Hessian TᵀQT + the curvature terms at y_try (T_a the tangent
+// basis vec(S_a·[e_i]×), Q = −(F − D)), symmetrised, into W.H.
+void form_hessian(const MatD& F, const Vector<double>& D, Index d, FusedWorkspace& W) {
+  for (Index a = 0; a < d; ++a) {
+    const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a);
+    for (int i = 0; i < 3; ++i) {
+      Eigen::Matrix3d Ei = Eigen::Matrix3d::Zero();  // [e_i]×
+      Ei((i + 2) % 3, (i + 1) % 3) = 1.0;
+      Ei((i + 1) % 3, (i + 2) % 3) = -1.0;
+      Eigen::Map<Eigen::Matrix3d>(W.T.col(3 * a + i).data()) = S * Ei;
+    }
+    W.QT.middleCols(3 * a, 3).noalias() = -F.middleCols(9 * a, 9) * W.T.middleCols(3 * a, 3);
+    W.QT.block(9 * a, 3 * a, 9, 3) += D.segment(9 * a, 9).asDiagonal() * W.T.middleCols(3 * a, 3);
+  }
+  for (Index a = 0; a < d; ++a)
+    W.H.middleRows(3 * a, 3).noalias() = W.T.middleCols(3 * a, 3).transpose() * W.QT.middleRows(9 * a, 9);
+  W.Hmu = W.H.transpose();  // symmetrise without a temporary (run does not allocate)
+  W.H += W.Hmu;
+  W.H *= 0.5;
+  for (Index a = 0; a < d; ++a) W.H.block<3, 3>(3 * a, 3 * a) += W.curvature[static_cast<size_t>(a)];
+}
+
+// W.ldlt ← H + μI, with μ raised until it is positive definite; false
+// after 60 raises.
+bool damped_factor(double scale, double* mu, FusedWorkspace& W) {
+  for (int tries = 0;; ++tries) {
+    W.Hmu = W.H;
+    W.Hmu.diagonal().array() += *mu;
+    W.ldlt.compute(W.Hmu);
+    if (W.ldlt.info() == Eigen::Success && W.ldlt.isPositive() && (W.ldlt.vectorD().array() > 0.0).all()) return true;
+    *mu = std::max(4.0 * *mu, 1e-12 * scale);
+    if (tries > 60) return false;
+  }
+}
+
+// y_next = y_try with each block turned by its step, S_a·exp([ω_a]×).
+void step_rotations(Index d, FusedWorkspace& W) {
+  W.y_next = W.y_try;
+  for (Index a = 0; a < d; ++a) {
+    const Eigen::Vector3d w = W.omega.segment<3>(3 * a);
+    const double angle = w.norm();
+    if (angle == 0.0) continue;
+    Eigen::Map<Eigen::Matrix3d> S(W.y_next.data() + 9 * a);
+    S = (S * Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()).eval();
+  }
+}
+
+}  // namespace
+
 AlternationResults run_second_order(const FusedModel& M, FusedWorkspace& W, InputProjection<double>& projection,
                                     const detail::PhaseOneEnergy& E, const Eigen::Ref<const Vector<double>>& b,
                                     const AlternationSettings& options, const detail::StopTest& stop,
@@ -38,32 +102,9 @@ AlternationResults run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
   bool hessian_current = false;
   for (int it = 0; it < options.iterations; ++it) {
     summary.iterations = it + 1;
-    W.c = W.g - D.cwiseProduct(W.y_try);
-    for (Index a = 0; a < d; ++a) {
-      const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a), C(W.c.data() + 9 * a);
-      const Eigen::Matrix3d Ma = S.transpose() * C;
-      W.grad.segment<3>(3 * a) = -Eigen::Vector3d(Ma(2, 1) - Ma(1, 2), Ma(0, 2) - Ma(2, 0), Ma(1, 0) - Ma(0, 1));
-      if (!hessian_current) W.curvature[static_cast<size_t>(a)] = Ma.trace() * Eigen::Matrix3d::Identity() -
-                                                                   0.5 * (Ma + Ma.transpose());
-    }
+    gradient_and_curvature(D, d, !hessian_current, W);
     if (!hessian_current) {
-      for (Index a = 0; a < d; ++a) {
-        const Eigen::Map<const Eigen::Matrix3d> S(W.y_try.data() + 9 * a);
-        for (int i = 0; i < 3; ++i) {
-          Eigen::Matrix3d Ei = Eigen::Matrix3d::Zero();  // [e_i]×
-          Ei((i + 2) % 3, (i + 1) % 3) = 1.0;
-          Ei((i + 1) % 3, (i + 2) % 3) = -1.0;
-          Eigen::Map<Eigen::Matrix3d>(W.T.col(3 * a + i).data()) = S * Ei;
-        }
-        W.QT.middleCols(3 * a, 3).noalias() = -F.middleCols(9 * a, 9) * W.T.middleCols(3 * a, 3);
-        W.QT.block(9 * a, 3 * a, 9, 3) += D.segment(9 * a, 9).asDiagonal() * W.T.middleCols(3 * a, 3);
-      }
-      for (Index a = 0; a < d; ++a)
-        W.H.middleRows(3 * a, 3).noalias() = W.T.middleCols(3 * a, 3).transpose() * W.QT.middleRows(9 * a, 9);
-      W.Hmu = W.H.transpose();  // symmetrise without a temporary (run does not allocate)
-      W.H += W.Hmu;
-      W.H *= 0.5;
-      for (Index a = 0; a < d; ++a) W.H.block<3, 3>(3 * a, 3 * a) += W.curvature[static_cast<size_t>(a)];
+      form_hessian(F, D, d, W);
       hessian_current = true;
       if (mu < 0.0) {
         for (Index a = 0; a < d; ++a) scale = std::max(scale, W.H.block<3, 3>(3 * a, 3 * a).norm());
@@ -76,24 +117,9 @@ AlternationResults run_second_order(const FusedModel& M, FusedWorkspace& W, Inpu
       summary.stop = RoundStop::Tolerance;
       break;
     }
-    // (H + μI)ω = −grad, with μ raised until the system is positive definite.
-    for (int tries = 0;; ++tries) {
-      W.Hmu = W.H;
-      W.Hmu.diagonal().array() += mu;
-      W.ldlt.compute(W.Hmu);
-      if (W.ldlt.info() == Eigen::Success && W.ldlt.isPositive() && (W.ldlt.vectorD().array() > 0.0).all()) break;
-      mu = std::max(4.0 * mu, 1e-12 * scale);
-      if (tries > 60) return summary;  // cannot happen for finite H; keeps y
-    }
+    if (!damped_factor(scale, &mu, W)) return summary;  // cannot happen for finite H; keeps y
     W.omega = W.ldlt.solve(-W.grad);
-    W.y_next = W.y_try;
-    for (Index a = 0; a < d; ++a) {
-      const Eigen::Vector3d w = W.omega.segment<3>(3 * a);
-      const double angle = w.norm();
-      if (angle == 0.0) continue;
-      Eigen::Map<Eigen::Matrix3d> S(W.y_next.data() + 9 * a);
-      S = (S * Eigen::AngleAxisd(angle, w / angle).toRotationMatrix()).eval();
-    }
+    step_rotations(d, W);
     W.g_keep = W.g;
     const double next = evaluate(W.y_next);
     if (std::isfinite(next) && next <= energy + slack) {
