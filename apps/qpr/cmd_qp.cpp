@@ -274,10 +274,10 @@ void run_baseline(const Demand& d, const Vec& q, const Problem& p, Solvers& s, W
 
 // Solves one demand in the subspace (and in full, and by the baseline, when
 // asked), prints its row and returns its record.
-json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
-  json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
-  const qpreduce::Timer t0;
-  // In design coordinates A_r = [A_cᵀ 0]: no product with the n × m A.
+// The demand's constraints on the solver (the on-site step). In design
+// coordinates A_r = [A_cᵀ 0]: no product with the n × m A; over MPI A_r is
+// summed over the ranks' rows.
+qpreduce::ConstraintSummary set_demand_constraints(const Demand& d, Solvers& s) {
   qpreduce::ConstraintSummary cs;
   if (d.A_c.size() > 0) {
     cs = s.solver.set_constraints_in_design(d.A_c, s.copt);
@@ -294,6 +294,59 @@ json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers
   } else {
     cs = s.solver.set_constraints(d.A, s.copt);
   }
+  return cs;
+}
+
+// The reduced answer w for the demand's b and q (or Y), into ws.w; over MPI
+// q_r is summed over the ranks' rows.
+void solve_demand(const Demand& d, Solvers& s, Workspace& ws) {
+  if (d.in_D) {
+    s.solver.solve_in_D(d.b, d.Y, ws.w);
+#ifdef QPREDUCE_HAVE_MPI
+  } else if (s.part) {  // q_r = Σ over the ranks of (rows of B)ᵀ·(rows of q)
+    const auto& b = *s.part;
+    qpreduce::Matrix<double> qr(s.solver.p(), 1);
+    qr.topRows(b.d) = b.N_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
+    qr.bottomRows(b.k) = b.UD_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
+    sum_over_ranks(&qr);
+    ws.qr = qr.col(0);
+    s.solver.solve(d.b, ws.qr, ws.w);
+#endif
+  } else {
+    s.solver.reduce_linear_term(d.q, ws.qr);
+    s.solver.solve(d.b, ws.qr, ws.w);
+  }
+}
+
+// X = N·z + UD·y into ws.X (over MPI each rank its rows, gathered to rank 0).
+void reconstruct_demand(const Problem& p, Solvers& s, Workspace& ws) {
+#ifdef QPREDUCE_HAVE_MPI
+  if (s.part) {  // each rank its rows of X = N·z + UD·y, gathered to rank 0
+    const auto& b = *s.part;
+    const Vec mine = b.N_rows * ws.w.head(b.d) + b.UD_rows * ws.w.tail(b.k);
+    int ranks = 1;
+    MPI_Comm_size(MPI_COMM_WORLD, &ranks);
+    std::vector<int> counts(static_cast<size_t>(ranks)), offsets(static_cast<size_t>(ranks));
+    for (int q = 0; q < ranks; ++q) {
+      const auto rows = qpreduce::distributed::owned_rows(p.n(), q, ranks);
+      counts[static_cast<size_t>(q)] = static_cast<int>(rows.size());
+      offsets[static_cast<size_t>(q)] = static_cast<int>(rows.begin);
+    }
+    MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, ws.X.data(), counts.data(), offsets.data(),
+                MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  } else {
+    s.solver.reconstruct(ws.w, ws.X);
+  }
+#else
+  (void)p;  // the row partition is only read over MPI
+  s.solver.reconstruct(ws.w, ws.X);
+#endif
+}
+
+json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
+  json r = {{"name", d.name}, {"m", d.A.cols()}, {"design_coordinates", d.A_c.size() > 0}};
+  const qpreduce::Timer t0;
+  const qpreduce::ConstraintSummary cs = set_demand_constraints(d, s);
   const double t_op = t0.seconds();
   r["status"] = qpreduce::to_string(cs.status);
   r["message"] = cs.message;
@@ -315,44 +368,10 @@ json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers
     }
   }
   const qpreduce::Timer t1;
-  if (d.in_D) {
-    s.solver.solve_in_D(d.b, d.Y, ws.w);
-#ifdef QPREDUCE_HAVE_MPI
-  } else if (s.part) {  // q_r = Σ over the ranks of (rows of B)ᵀ·(rows of q)
-    const auto& b = *s.part;
-    qpreduce::Matrix<double> qr(s.solver.p(), 1);
-    qr.topRows(b.d) = b.N_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
-    qr.bottomRows(b.k) = b.UD_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
-    sum_over_ranks(&qr);
-    ws.qr = qr.col(0);
-    s.solver.solve(d.b, ws.qr, ws.w);
-#endif
-  } else {
-    s.solver.reduce_linear_term(d.q, ws.qr);
-    s.solver.solve(d.b, ws.qr, ws.w);
-  }
+  solve_demand(d, s, ws);
   const double t_solve = t1.seconds();
   const qpreduce::Timer t2;
-#ifdef QPREDUCE_HAVE_MPI
-  if (s.part) {  // each rank its rows of X = N·z + UD·y, gathered to rank 0
-    const auto& b = *s.part;
-    const Vec mine = b.N_rows * ws.w.head(b.d) + b.UD_rows * ws.w.tail(b.k);
-    int ranks = 1;
-    MPI_Comm_size(MPI_COMM_WORLD, &ranks);
-    std::vector<int> counts(static_cast<size_t>(ranks)), offsets(static_cast<size_t>(ranks));
-    for (int q = 0; q < ranks; ++q) {
-      const auto rows = qpreduce::distributed::owned_rows(p.n(), q, ranks);
-      counts[static_cast<size_t>(q)] = static_cast<int>(rows.size());
-      offsets[static_cast<size_t>(q)] = static_cast<int>(rows.begin);
-    }
-    MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, ws.X.data(), counts.data(), offsets.data(),
-                MPI_DOUBLE, 0, MPI_COMM_WORLD);
-  } else {
-    s.solver.reconstruct(ws.w, ws.X);
-  }
-#else
-  s.solver.reconstruct(ws.w, ws.X);
-#endif
+  reconstruct_demand(p, s, ws);
   const double t_recon = t2.seconds();
   if (s.rank != 0) return r;  // rank 0 checks, writes and prints
   Row row;
