@@ -12,7 +12,10 @@ namespace qpreduce::python {
 
 using namespace qpreduce::deform;
 
-void bind_deformer_options(py::module_& m) {
+namespace {
+
+// The enums and the energy parameters.
+void bind_deformer_enums(py::module_& m) {
   py::enum_<ModelKind>(m, "ModelKind", "The built-in deformation models (deformer.h).")
       .value("Arap", ModelKind::Arap, "Rotations per cluster (paper Eq. 19).")
       .value("Conformal", ModelKind::Conformal, "Scaled rotations ψ·t, ψ ∈ [1/ψ_max, ψ_max] (Eq. 48–49).");
@@ -33,6 +36,10 @@ void bind_deformer_options(py::module_& m) {
       .keyword_init<EnergyParameters>();
   def_validate<decltype(energy), EnergyParameters>(energy);
 
+}
+
+// DeformerOptions.
+void bind_deformer_option_fields(py::module_& m) {
   py::class_<DeformerOptions> options(m, "DeformerOptions",
                                       "Options of Deformer.precompute (deformer.h); keyword construction.");
   Fields(options, "DeformerOptions")
@@ -68,6 +75,10 @@ void bind_deformer_options(py::module_& m) {
       .keyword_init<DeformerOptions>();
   def_validate<decltype(options), DeformerOptions>(options);
 
+}
+
+// The summaries of precompute and of a frame.
+void bind_deformer_summaries(py::module_& m) {
   py::class_<PrecomputeSummary, Outcome> pre(m, "PrecomputeSummary", "Result of Deformer.precompute / load.");
   Fields(pre, "PrecomputeSummary")
       .listed("status")
@@ -105,6 +116,14 @@ void bind_deformer_options(py::module_& m) {
       .repr();
   frame.def_property_readonly(
       "rounds", [](const FrameSummary& s) { return s.iterations; }, "Alias of iterations: the rounds run.");
+}
+
+}  // namespace
+
+void bind_deformer_options(py::module_& m) {
+  bind_deformer_enums(m);
+  bind_deformer_option_fields(m);
+  bind_deformer_summaries(m);
 }
 
 }  // namespace qpreduce::python
