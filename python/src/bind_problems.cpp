@@ -21,7 +21,8 @@ void require_size(const char* what, Index size) {
   if (size < 0) throw py::value_error(std::string(what) + ": expected a size ≥ 0, got " + std::to_string(size));
 }
 
-void bind_families(py::module_& m) {
+// The families and their options.
+void bind_family_options(py::module_& m) {
   py::enum_<fam::Family>(m, "Family", "The seeded QP families (families.h).")
       .value("Gmrf", fam::Family::Gmrf)
       .value("Trajectory", fam::Family::Trajectory)
@@ -67,6 +68,10 @@ void bind_families(py::module_& m) {
       .repr()
       .keyword_init<fam::DemandOptions>();
 
+}
+
+// A family instance, its demands and the constructors.
+void bind_family_instances(py::module_& m) {
   py::class_<fam::QpFamily>(m, "QpFamily", "One family instance: H (n×n), C (n×d), D (n×k) and demand data.")
       .def_readonly("family", &fam::QpFamily::family)
       .def_readonly("seed", &fam::QpFamily::seed)
@@ -162,6 +167,11 @@ void bind_generators(py::module_& m) {
       },
       py::arg("rows"), py::arg("cols"), py::arg("seed"), "rows × cols standard normal.");
 
+}
+
+// The Theorem 4.10 test problems.
+void bind_theorem_problems(py::module_& m) {
+  const auto released = py::call_guard<py::gil_scoped_release>();
   py::enum_<gen::TheoremFamily>(m, "TheoremFamily", "Families of Theorem 4.10 trials (generators.h).")
       .value("DensePsd", gen::TheoremFamily::DensePsd)
       .value("DensePd", gen::TheoremFamily::DensePd)
@@ -200,9 +210,11 @@ void bind_generators(py::module_& m) {
 
 void bind_problems(py::module_& m) {
   auto families = m.def_submodule("families", "Seeded non-graphics QP families (qpreduce/problems/families.h).");
-  bind_families(families);
+  bind_family_options(families);
+  bind_family_instances(families);
   auto generators = m.def_submodule("generators", "Seeded problem generators (qpreduce/problems/generators.h).");
   bind_generators(generators);
+  bind_theorem_problems(generators);
 }
 
 }  // namespace qpreduce::python
