@@ -41,10 +41,24 @@ ConstrainedValues constrained_values(const LocalGlobalState& st, const HandleTar
 constexpr double kNewtonForcing = 1e-6;
 constexpr int kNewtonMaxCg = 500;
 
-NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy, double* radius, int max_products,
-                       const std::function<bool()>& cancel) {
-  NewtonStep out;
-  out.energy = energy;
+namespace {
+
+// Steihaug's truncated CG for the Newton step d (H·d = −g), the state the
+// step's acceptance reads.
+struct TruncatedCg {
+  Eigen::VectorXd d;
+  double dKd = 0.0;    // ‖d‖²_K
+  double model = 0.0;  // gᵀd + ½dᵀHd
+  bool converged = false, boundary = false;
+};
+
+// Steihaug's truncated CG in the K-norm ‖d‖²_K = dᵀKd (K the
+// preconditioner, so the first iterate is the local-global step), inside
+// the trust region ‖d‖_K ≤ radius; dᵀKd, dᵀKp and pᵀKp by recurrence.
+// False when there is no step to take (a zero gradient, or a cancel:
+// out->cancelled); out->cg and out->gradient_step_rms are set either way.
+bool truncated_cg(Rounds& rounds, const LocalGlobalState& st, double* radius, int max_products,
+                  const std::function<bool()>& cancel, NewtonStep* out, TruncatedCg* cg) {
   Eigen::VectorXd g;
   rounds.gradient(&g);
   const Index nf = g.size();
@@ -53,26 +67,24 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
     st.factor->solveInPlace(b, 1);
     *z = b.col(0);
   };
-  // Steihaug's truncated CG in the K-norm ‖d‖²_K = dᵀKd (K the
-  // preconditioner, so the first iterate is the local-global step), inside
-  // the trust region ‖d‖_K ≤ radius; dᵀKd, dᵀKp and pᵀKp by recurrence.
-  Eigen::VectorXd d = Eigen::VectorXd::Zero(nf), r = -g, z, p, Hp;
+  Eigen::VectorXd& d = cg->d;
+  d = Eigen::VectorXd::Zero(nf);
+  Eigen::VectorXd r = -g, z, p, Hp;
   precondition(r, &z);
-  out.gradient_step_rms = rounds.vertex_rms(z);
+  out->gradient_step_rms = rounds.vertex_rms(z);
   p = z;
   double rz = r.dot(z);
   const double r0 = std::sqrt(std::max(rz, 0.0));
-  if (!(r0 > 0.0)) return out;
+  if (!(r0 > 0.0)) return false;
   if (!std::isfinite(*radius)) *radius = r0;  // the first step: as long as the local-global step
-  double dKd = 0.0, dKp = 0.0, pKp = rz, model = 0.0;  // model: gᵀd + ½dᵀHd
-  bool converged = false, boundary = false;
+  double dKd = 0.0, dKp = 0.0, pKp = rz, model = 0.0;
   for (int j = 0; j < max_products; ++j) {
     if (cancel && cancel()) {
-      out.cancelled = true;
-      return out;
+      out->cancelled = true;
+      return false;
     }
     rounds.hessian_vector(p, &Hp);
-    ++out.cg;
+    ++out->cg;
     const double pHp = p.dot(Hp);
     const double alpha = rz / pHp;
     if (!(pHp > 0.0) || dKd + 2 * alpha * dKp + alpha * alpha * pKp >= *radius * *radius) {
@@ -81,7 +93,7 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
       const double tau = (-dKp + std::sqrt(std::max(disc, 0.0))) / pKp;
       d += tau * p;
       model += -tau * rz + 0.5 * tau * tau * pHp;
-      boundary = true;
+      cg->boundary = true;
       break;
     }
     d += alpha * p;
@@ -96,10 +108,26 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
     p = z + beta * p;
     rz = rz_next;
     if (std::sqrt(std::max(rz, 0.0)) <= kNewtonForcing * r0) {
-      converged = true;
+      cg->converged = true;
       break;
     }
   }
+  cg->dKd = dKd;
+  cg->model = model;
+  return true;
+}
+
+}  // namespace
+
+NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy, double* radius, int max_products,
+                       const std::function<bool()>& cancel) {
+  NewtonStep out;
+  out.energy = energy;
+  TruncatedCg cg;
+  if (!truncated_cg(rounds, st, radius, max_products, cancel, &out, &cg)) return out;
+  const Eigen::VectorXd& d = cg.d;
+  const bool converged = cg.converged, boundary = cg.boundary;
+  const double dKd = cg.dKd, model = cg.model;
   const double step_norm = std::sqrt(std::max(boundary ? *radius * *radius : dKd, 0.0));
   const double predicted = -model;
   if (!(predicted > 0.0) || !d.allFinite()) {
