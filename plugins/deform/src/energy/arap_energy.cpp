@@ -307,31 +307,34 @@ SparseMatrix<double> inverse_element_blocks(const SparseMatrix<double>& LQQ, Ind
   return Binv;
 }
 
-// H = L_VV − Σ_k L_Vk·B_k⁻¹·L_kV, element by element into H's final pattern
-// (the union of the elements' coordinate cliques and L_VV's): one nv × nv
-// matrix in memory, where a general sparse product L_VQ·B⁻¹·L_QV (and its
-// symmetrisation) held four to six of them — on a 160k-vertex surface each
-// is about 350 MB, and that product was the precompute's assembly peak.
-// LVQ_Binv = L_VQ·B⁻¹ (nv × nq); its column 4k + b holds element k's rows.
-// Each element's block W·L_kVᵀ is symmetrised before it is added, and every
-// entry (i, j) and (j, i) sums the same terms in the same order, so H is
-// exactly symmetric.
-SparseMatrix<double> eliminated_hessian(const SparseMatrix<double>& LVV, const SparseMatrix<double>& LVQ,
-                                        const SparseMatrix<double>& LVQ_Binv, Index r) {
-  const Index nv = LVV.rows();
-  // The rows (coordinates) of each element, sorted: the union of its 4 columns of L_VQ.
-  std::vector<Index> start(static_cast<size_t>(r) + 1, 0), rows;
+// The rows (coordinates) of each element, sorted: the union of its 4
+// columns of L_VQ, element k's in rows[start[k], start[k + 1]).
+struct ElementRows {
+  std::vector<Index> start, rows;
+};
+ElementRows element_rows(const SparseMatrix<double>& LVQ, Index r, Index nv) {
+  ElementRows er;
+  er.start.assign(static_cast<size_t>(r) + 1, 0);
   std::vector<Index> mark(static_cast<size_t>(nv), -1);
   for (Index k = 0; k < r; ++k) {
     for (int b = 0; b < 4; ++b)
       for (SparseMatrix<double>::InnerIterator it(LVQ, 4 * k + b); it; ++it)
         if (mark[static_cast<size_t>(it.row())] != k) {
           mark[static_cast<size_t>(it.row())] = k;
-          rows.push_back(it.row());
+          er.rows.push_back(it.row());
         }
-    std::sort(rows.begin() + start[static_cast<size_t>(k)], rows.end());
-    start[static_cast<size_t>(k) + 1] = static_cast<Index>(rows.size());
+    std::sort(er.rows.begin() + er.start[static_cast<size_t>(k)], er.rows.end());
+    er.start[static_cast<size_t>(k) + 1] = static_cast<Index>(er.rows.size());
   }
+  return er;
+}
+
+// H's pattern, zero-valued: the union of L_VV's and the elements' coordinate
+// cliques, each column's rows sorted.
+SparseMatrix<double> eliminated_pattern(const SparseMatrix<double>& LVV, const ElementRows& er, Index r) {
+  const Index nv = LVV.rows();
+  const std::vector<Index>& start = er.start;
+  const std::vector<Index>& rows = er.rows;
   // The elements of each coordinate (CSR), then each column's pattern.
   std::vector<Index> cstart(static_cast<size_t>(nv) + 1, 0), elems(rows.size());
   for (Index i : rows) ++cstart[static_cast<size_t>(i) + 1];
@@ -342,7 +345,7 @@ SparseMatrix<double> eliminated_hessian(const SparseMatrix<double>& LVV, const S
       for (Index t = start[static_cast<size_t>(k)]; t < start[static_cast<size_t>(k) + 1]; ++t)
         elems[static_cast<size_t>(next[static_cast<size_t>(rows[static_cast<size_t>(t)])]++)] = k;
   }
-  std::fill(mark.begin(), mark.end(), -1);
+  std::vector<Index> mark(static_cast<size_t>(nv), -1);
   std::vector<int> outer(static_cast<size_t>(nv) + 1, 0);
   std::vector<int> inner;
   std::vector<Index> column;
@@ -372,6 +375,25 @@ SparseMatrix<double> eliminated_hessian(const SparseMatrix<double>& LVV, const S
   std::copy(inner.begin(), inner.end(), H.innerIndexPtr());
   std::vector<int>().swap(inner);
   std::fill(H.valuePtr(), H.valuePtr() + H.nonZeros(), 0.0);
+  return H;
+}
+
+// H = L_VV − Σ_k L_Vk·B_k⁻¹·L_kV, element by element into H's final pattern
+// (the union of the elements' coordinate cliques and L_VV's): one nv × nv
+// matrix in memory, where a general sparse product L_VQ·B⁻¹·L_QV (and its
+// symmetrisation) held four to six of them — on a 160k-vertex surface each
+// is about 350 MB, and that product was the precompute's assembly peak.
+// LVQ_Binv = L_VQ·B⁻¹ (nv × nq); its column 4k + b holds element k's rows.
+// Each element's block W·L_kVᵀ is symmetrised before it is added, and every
+// entry (i, j) and (j, i) sums the same terms in the same order, so H is
+// exactly symmetric.
+SparseMatrix<double> eliminated_hessian(const SparseMatrix<double>& LVV, const SparseMatrix<double>& LVQ,
+                                        const SparseMatrix<double>& LVQ_Binv, Index r) {
+  const Index nv = LVV.rows();
+  const ElementRows er = element_rows(LVQ, r, nv);
+  const std::vector<Index>& start = er.start;
+  const std::vector<Index>& rows = er.rows;
+  SparseMatrix<double> H = eliminated_pattern(LVV, er, r);
   // (i, j) in H: column j's rows are sorted.
   auto slot = [&](Index i, Index j) -> double& {
     const int* begin = H.innerIndexPtr() + H.outerIndexPtr()[j];
