@@ -60,10 +60,11 @@ struct Alternation<Scalar>::Impl {
   FixedCoordinateSolver<Scalar> phase1;
   FusedAlternation<Scalar> fused;
   bool inputs = false;  // G_z, G_y were given (prepare or setup)
-  // While `fused` holds a G_y with a follow_y term, the plain G_z, G_y the
-  // next setup without one starts from (empty otherwise).
+  // While `fused` holds a G_y with a follow_y term, the plain G_y the next
+  // setup without one starts from (empty otherwise; G_z is fused's own,
+  // which follow_y does not change).
   bool fused_followed = false;
-  Matrix<Scalar> Gz_plain, Gy_plain;
+  Matrix<Scalar> Gy_plain;
   Matrix<Scalar> follow_map;  // M_b·T (d × k), empty without T
   ConstraintSummary summary;
   bool energy = false;
@@ -85,6 +86,16 @@ Matrix<double> follow_product(const Matrix<double>& Mb, const SparseMatrix<doubl
   return out;
 }
 
+// G_z (q × d) and G_y (q × k) for `solver`, checked before anything changes.
+void check_inputs(const char* who, const SubspaceSolver<double>& solver, const Matrix<double>& Gz,
+                  const Matrix<double>& Gy) {
+  check_size(fmt::format("{}: G_z columns (d)", who).c_str(), solver.d(), Gz.cols());
+  check_size(fmt::format("{}: G_y columns (k)", who).c_str(), solver.k(), Gy.cols());
+  check_size(fmt::format("{}: G_y rows (as G_z)", who).c_str(), Gz.rows(), Gy.rows());
+  check_finite(fmt::format("{}: G_z", who).c_str(), Gz);
+  check_finite(fmt::format("{}: G_y", who).c_str(), Gy);
+}
+
 }  // namespace
 
 template <typename Scalar>
@@ -103,13 +114,8 @@ ConstraintSummary Alternation<Scalar>::Impl::setup(const SubspaceSolver<Scalar>&
     check_size("Alternation::setup: follow_y columns (k)", Ay.cols(), T.cols());
     check_finite("Alternation::setup: follow_y", T);
   }
-  if (Gz != nullptr) {  // checked before anything changes (Phase 1 checks its own inputs first)
-    check_size("Alternation::setup: G_z columns (d)", solver.d(), Gz->cols());
-    check_size("Alternation::setup: G_y columns (k)", solver.k(), Gy->cols());
-    check_size("Alternation::setup: G_y rows (as G_z)", Gz->rows(), Gy->rows());
-    check_finite("Alternation::setup: G_z", *Gz);
-    check_finite("Alternation::setup: G_y", *Gy);
-  }
+  // Checked before anything changes (Phase 1 checks its own inputs first).
+  if (Gz != nullptr) check_inputs("Alternation::setup", solver, *Gz, *Gy);
   ConstraintSummary cs = phase1.set_reduced_constraints(solver, Az, Ay, options.constraints);
   // From here on a failure (out of memory) leaves no model rather than a
   // Phase 1 and a fused form of two different sets.
@@ -128,30 +134,25 @@ ConstraintSummary Alternation<Scalar>::Impl::setup(const SubspaceSolver<Scalar>&
   const int threads = options.constraints.threads;
   if (follow) {
     follow_map = follow_product(phase1.Mb(), T);
-    if (Gz != nullptr) {
-      Gz_plain = *Gz;
+    if (Gy != nullptr) {
       Gy_plain = *Gy;
     } else if (!fused_followed) {
-      Gz_plain = fused.Gz();
       Gy_plain = fused.Gy();
     }
-    check_size("Alternation::setup: G_z columns (d)", phase1.d(), Gz_plain.cols());
-    const Matrix<Scalar> Gy_followed = Gy_plain + Gz_plain * follow_map;
-    fused.set(phase1, Gz_plain, Gy_followed, threads, options.form, options.precision);
+    const Matrix<Scalar>& gz = Gz != nullptr ? *Gz : fused.Gz();
+    const Matrix<Scalar> Gy_followed = Gy_plain + gz * follow_map;
+    fused.set(phase1, gz, Gy_followed, threads, options.form, options.precision);
     fused_followed = true;
   } else if (Gz != nullptr) {
     fused.set(phase1, *Gz, *Gy, threads, options.form, options.precision);
     fused_followed = false;
   } else if (fused_followed) {
-    fused.set(phase1, Gz_plain, Gy_plain, threads, options.form, options.precision);
+    fused.set(phase1, fused.Gz(), Gy_plain, threads, options.form, options.precision);
     fused_followed = false;
   } else {
     fused.set(phase1, threads, options.form, options.precision);  // the kept inputs, not compared again
   }
-  if (!fused_followed) {
-    Gz_plain.resize(0, 0);
-    Gy_plain.resize(0, 0);
-  }
+  if (!fused_followed) Gy_plain.resize(0, 0);
   inputs = true;
   valid = true;
   return summary;
@@ -189,11 +190,7 @@ void Alternation<Scalar>::prepare(const SubspaceSolver<Scalar>& solver, const Ma
                                   const Matrix<Scalar>& Gy, const InputProjection<Scalar>& projection,
                                   FusedPrecision precision, bool shared_parts) {
   if (!solver.ready()) throw std::invalid_argument("Alternation::prepare: the subspace solver is not ready");
-  check_size("Alternation::prepare: G_z columns (d)", solver.d(), Gz.cols());
-  check_size("Alternation::prepare: G_y columns (k)", solver.k(), Gy.cols());
-  check_size("Alternation::prepare: G_y rows (as G_z)", Gz.rows(), Gy.rows());
-  check_finite("Alternation::prepare: G_z", Gz);
-  check_finite("Alternation::prepare: G_y", Gy);
+  check_inputs("Alternation::prepare", solver, Gz, Gy);
   Impl& I = *impl_;
   I.valid = false;
   if (shared_parts) I.phase1.prepare(solver);
@@ -201,7 +198,6 @@ void Alternation<Scalar>::prepare(const SubspaceSolver<Scalar>& solver, const Ma
   I.fused.prepare(I.phase1, Gz, Gy, precision);  // checks the rest; clears the fused form
   I.inputs = true;
   I.fused_followed = false;
-  I.Gz_plain.resize(0, 0);
   I.Gy_plain.resize(0, 0);
   I.follow_map.resize(0, 0);
   I.summary = ConstraintSummary{};
@@ -229,17 +225,9 @@ ConstraintSummary Alternation<Scalar>::setup(const SubspaceSolver<Scalar>& solve
                                              const Matrix<Scalar>& Gz, const Matrix<Scalar>& Gy,
                                              const InputProjection<Scalar>& projection,
                                              const AlternationSetup& options) {
-  if (!solver.ready()) throw std::invalid_argument("Alternation::setup: the subspace solver is not ready");
-  if (!solver.has_basis()) {
-    throw std::invalid_argument(
-        "Alternation::setup: the subspace solver holds no basis B = [N UD] (restored without it, or released); "
-        "form A_z, A_y with your copy of B and pass them");
-  }
-  check_size("Alternation::setup: A rows", solver.n(), A.rows());
-  check_finite("Alternation::setup: A", A);
   const Timer timer;
-  const Matrix<double> Az = A.transpose() * solver.subspace().N;
-  const Matrix<double> Ay = A.transpose() * solver.subspace().UD;
+  Matrix<double> Az, Ay;
+  detail::full_space_rows("Alternation::setup", solver, A, &Az, &Ay);
   ConstraintSummary summary = impl_->setup(solver, Az, Ay, &Gz, &Gy, projection, options);
   summary.seconds = timer.seconds();
   impl_->summary.seconds = summary.seconds;

@@ -25,6 +25,16 @@ struct FusedWorkspace;
 
 // Phase 1 (Eq. 16–17 with y fixed): z = M_b·b + M_Y·y for one constraint set.
 // Double only. Copies share their (immutable) operators.
+// A_z = AᵀN (m × d) and A_y = AᵀUD (m × k) from full-space constraint
+// columns A (n × m), for FixedCoordinateSolver::set_constraints and
+// Alternation::setup. `who` names the caller in the messages. Throws
+// std::invalid_argument when the solver is not ready or holds no basis, or
+// A has the wrong rows or NaN.
+namespace detail {
+void full_space_rows(const char* who, const SubspaceSolver<double>& solver, const SparseMatrix<double>& A,
+                     Matrix<double>* Az, Matrix<double>* Ay);
+}  // namespace detail
+
 template <typename Scalar>
 class FixedCoordinateSolver {
   static_assert(std::is_same_v<Scalar, double>, "FixedCoordinateSolver is double only");

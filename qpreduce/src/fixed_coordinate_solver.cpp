@@ -12,6 +12,7 @@
 #include "qpreduce/support.h"
 
 #include <Eigen/QR>
+#include <fmt/format.h>
 
 #include <memory>
 #include <optional>
@@ -173,24 +174,29 @@ PhaseOneEnergy phase_one_energy(const SubspaceSolver<double>& solver, const Phas
 
 }  // namespace detail
 
+void detail::full_space_rows(const char* who, const SubspaceSolver<double>& solver, const SparseMatrix<double>& A,
+                             Matrix<double>* Az, Matrix<double>* Ay) {
+  if (!solver.ready()) throw std::invalid_argument(fmt::format("{}: the subspace solver is not ready", who));
+  if (!solver.has_basis()) {
+    throw std::invalid_argument(fmt::format(
+        "{}: the subspace solver holds no basis B = [N UD] (restored without it, or released); form A_z, A_y "
+        "with your copy of B and pass them",
+        who));
+  }
+  check_size(fmt::format("{}: A rows", who).c_str(), solver.n(), A.rows());
+  check_finite(fmt::format("{}: A", who).c_str(), A);
+  *Az = A.transpose() * solver.subspace().N;
+  *Ay = A.transpose() * solver.subspace().UD;
+}
+
 template <typename Scalar>
 ConstraintSummary FixedCoordinateSolver<Scalar>::set_constraints(const SubspaceSolver<Scalar>& solver,
                                                                  const SparseMatrix<Scalar>& A,
                                                                  const ConstraintOptions& options) {
   // (set_reduced_constraints checks the options and the rest.)
-  if (!solver.ready()) {
-    throw std::invalid_argument("FixedCoordinateSolver::set_constraints: the subspace solver is not ready");
-  }
-  if (!solver.has_basis()) {
-    throw std::invalid_argument(
-        "FixedCoordinateSolver::set_constraints: the subspace solver holds no basis B = [N UD] (restored without "
-        "it, or released); form A_z, A_y with your copy of B and call set_reduced_constraints");
-  }
-  check_size("FixedCoordinateSolver::set_constraints: A rows", solver.n(), A.rows());
-  check_finite("FixedCoordinateSolver::set_constraints: A", A);
   const Timer timer;
-  const Matrix<double> Az = A.transpose() * solver.subspace().N;
-  const Matrix<double> Ay = A.transpose() * solver.subspace().UD;
+  Matrix<double> Az, Ay;
+  detail::full_space_rows("FixedCoordinateSolver::set_constraints", solver, A, &Az, &Ay);
   ConstraintSummary summary = set_reduced_constraints(solver, Az, Ay, options);
   summary.seconds = timer.seconds();
   return summary;
