@@ -130,8 +130,8 @@ void set_factored(FusedModel& M, const detail::FactoredPhaseOne& phase1, MatD U,
     fr.U = fr.U_f.cast<double>();  // the same operator for the float rounds' double references
   }
   M.float_set = precision == FusedPrecision::Float;
-  fr.R = phase1.R();
-  fr.R_f = fr.R.cast<float>();
+  fr.Rt = phase1.R().transpose();
+  fr.Rt_f = fr.Rt.cast<float>();
   M.factored = true;
 }
 
@@ -234,7 +234,7 @@ void form_proximal_weights(FusedModel& M, Index k, const MatD* U, const MatD* R)
     double scalar = lambda;
     if (!std::isfinite(scalar)) {  // ‖Q‖_F from Q's parts: safe, if slower rounds
       const auto& fr = M.factored_rounds;
-      scalar = M.factored ? static_cast<double>(fr.F0_f.norm()) + static_cast<double>(fr.U_f.norm()) * fr.R.norm()
+      scalar = M.factored ? static_cast<double>(fr.F0_f.norm()) + static_cast<double>(fr.U_f.norm()) * fr.Rt.norm()
                           : M.explicit_rounds.F.norm();
     }
     M.proximal.setConstant(blocks, scalar);
@@ -279,6 +279,8 @@ void form_factored_base(FusedModel& M) {
   check_finite("FusedAlternation::set: G_y", M.Gy);
   fr.F0 = M.C0 + M.Gy;
   fr.F0_f = fr.F0.cast<float>();
+  fr.symmetric = fr.F0.rows() == fr.F0.cols() &&
+                 (fr.F0 - fr.F0.transpose()).norm() <= detail::CurvatureTest::kSymmetry * fr.F0.norm();
   fr.base_valid = true;
 }
 

@@ -7,7 +7,7 @@
 //   ExplicitRounds  F_y as a matrix (and its float copy);
 //   FactoredRounds  F₀ = C0 + G_y (q × k, kept while Phase 1's preparation,
 //                   G_z and G_y stay the same) and, per constraint set,
-//                   U (q × μ) and R (μ × k): F_y·y = F₀·y − U·(R·y), with
+//                   U (q × μ) and R (μ × k, kept as Rᵀ): F_y·y = F₀·y − U·(R·y), with
 //                   U = G_z·T, or G_z·T + A_yᵀ·K when the rounds correct for
 //                   constraints on y (fused_form.cpp, form_u).
 #pragma once
@@ -55,27 +55,32 @@ class FactoredRounds final : public RoundOperator {
   Matrix<double> F0;                // C0 + G_y (q × k)
   Matrix<float> F0_f;               // in float
   bool base_valid = false;          // F0 is current for (C0, G_y)
-  Matrix<double> U, R;              // U (q × μ; U_f in double after a Float set), R (μ × k)
-  Matrix<float> U_f, R_f;           // in float
+  bool symmetric = false;           // F0 symmetric to CurvatureTest::kSymmetry: whole products read its lower triangle
+  Matrix<double> U, Rt;             // U (q × μ; U_f in double after a Float set), Rᵀ (k × μ: R·y as μ dot products)
+  Matrix<float> U_f, Rt_f;          // in float
   Vector<double> shift;             // diag(D)·y added to the rows (q = k; constraints on y), or empty
 
   void add_rows(const double* y, Index r0, Index r1, double* scratch, double* out) const override {
-    add_rows_of(F0, U, R, y, r0, r1, scratch, out);
+    add_rows_of(F0, U, Rt, y, r0, r1, scratch, out);
   }
   void add_rows(const float* y, Index r0, Index r1, float* scratch, float* out) const override {
-    add_rows_of(F0_f, U_f, R_f, y, r0, r1, scratch, out);
+    add_rows_of(F0_f, U_f, Rt_f, y, r0, r1, scratch, out);
   }
-  Index scratch_size() const override { return R.rows(); }
+  Index scratch_size() const override { return Rt.cols(); }
 
  private:
   // out += F0·y − U·(R·y) + shift∘y on rows [r0, r1); scratch = −R·y (μ).
+  // All rows of a symmetric F0: its lower triangle only (half the bytes of a
+  // product that streams F0 from the caches).
   template <typename T>
-  void add_rows_of(const Matrix<T>& F0, const Matrix<T>& U, const Matrix<T>& R, const T* y, Index r0, Index r1,
+  void add_rows_of(const Matrix<T>& F0, const Matrix<T>& U, const Matrix<T>& Rt, const T* y, Index r0, Index r1,
                    T* scratch, T* out) const {
-    const Index rows = r1 - r0, mu = R.rows();
-    gemv_add(F0.data() + r0, rows, F0.cols(), F0.outerStride(), y, out + r0);
-    std::fill(scratch, scratch + mu, T(0));
-    gemv_add(R.data(), mu, R.cols(), R.outerStride(), y, scratch);
+    const Index rows = r1 - r0, mu = Rt.cols();
+    if (symmetric && r0 == 0 && r1 == F0.rows())
+      symv_lower_add(F0, y, out);
+    else
+      gemv_add(F0.data() + r0, rows, F0.cols(), F0.outerStride(), y, out + r0);
+    gemtv(Rt.data(), Rt.rows(), mu, Rt.outerStride(), y, scratch);
     for (Index i = 0; i < mu; ++i) scratch[i] = -scratch[i];
     gemv_add(U.data() + r0, rows, mu, U.outerStride(), scratch, out + r0);
     if (shift.size() > 0)

@@ -203,6 +203,30 @@ TEST_CASE("fit_rotation equals the SVD polar factor across the closed-form range
   CHECK(worst < 1e-12);
 }
 
+TEST_CASE("fit_rotation of a flat or reflected G is the best rotation U·Vᵀ", "[arap][phase2]") {
+  // G = U·diag(σ₁, σ₂, σ₃)·Vᵀ with U, V rotations, σ₂/σ₁ from 0.02 to 1 and
+  // σ₃ from −0.9σ₂ (a reflection) through 0 (a flat cluster's covariance) to
+  // 10⁻⁷σ₂: det G ≤ 10⁻⁶‖G‖³ or < 0, fit_rotation's SVD path. The best
+  // rotation is U·Vᵀ (σ₃ < 0 is the smallest in magnitude, so flipping it
+  // costs least), to round-off (the closed form would be ~10⁻¹² off at
+  // σ₁/σ₂ = 50).
+  double worst = 0.0;
+  const double third[] = {0.0, 1e-12, 1e-9, 1e-7, -1e-9, -1e-4, -0.1, -0.5, -0.9};
+  for (unsigned seed = 0; seed < 300; ++seed) {
+    const Eigen::VectorXd a = random_vector(10, 9000 + seed);
+    const Eigen::Matrix3d U = rotation(3.0 * a(0), a.segment<3>(1));
+    const Eigen::Matrix3d V = rotation(3.0 * a(4), a.segment<3>(5));
+    const double s1 = 0.5 + std::abs(a(8)), s2 = s1 * (0.02 + 0.98 * (seed % 50) / 49.0);
+    const double s3 = third[seed % 9] * s2;
+    const Eigen::Matrix3d G = U * Eigen::Vector3d(s1, s2, s3).asDiagonal() * V.transpose();
+    const Eigen::Matrix3d F = fit_rotation(G);
+    worst = std::max(worst, (F - U * V.transpose()).norm());
+    CHECK((F.transpose() * F - Eigen::Matrix3d::Identity()).norm() < 1e-13);
+    CHECK(F.determinant() > 0.0);
+  }
+  CHECK(worst < 1e-13);
+}
+
 TEST_CASE("fit_rotation's Newton path for nearly conformal input gives the exact polar factor", "[arap][phase2]") {
   // G = c·R·S with S = I + ε·(symmetric, unit norm), ε from 1e-12 to 0.08:
   // ‖XᵀX − I‖ of X = G·√3/‖G‖ is about 2ε‖E − tr E/3·I‖, below the 0.1 that
