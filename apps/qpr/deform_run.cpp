@@ -350,8 +350,7 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
 // until the relative fixed-point residual is kSettleTolerance (at most
 // kSettleRounds rounds, a few ms even at 100k vertices: one reconstruction).
 // From the fixed point the refine has less to do than from the frame's
-// pose (docs/quality.md, "Refine": the bar 168 rounds to the 1e-4 gap
-// instead of 626). A last frame already at kSettleTolerance (the default
+// pose (docs/quality.md, "Refine"). A last frame already at kSettleTolerance (the default
 // rounds end there unless the time budget ends them first) is its own
 // settled pose: no rounds. *out: that pose, or the frame's when the rounds
 // fail. The deformer's round settings are `options`' again afterwards.

@@ -256,7 +256,8 @@ bool range_space_operators(const RangeSpace& rs, const MatD& A, const Constraint
   // Soft constraints with more rows than unknowns: the bordered form works
   // on m × m matrices (O(m³ + m²·p)), the null-space method on p × p ones
   // (H + 2δAᵀA, O(p³ + p²·m)); 3,000 point handles on the cactus's Phase 1
-  // took 301 s here against 6.6 s there (docs/robustness.md, "Soak").
+  // took 301 s here; the whole set_handles by the null-space method 3.7 s
+  // (docs/robustness.md, "Soak").
   if (options.soft && A.rows() > A.cols()) {
     summary->m = A.rows();
     return false;
