@@ -203,25 +203,54 @@ SparseMatrix<double> axis_block(const LocalGlobalState& st, const SparseMatrix<d
   return Ks;
 }
 
-// The rest edges, the edges at each vertex and the planar elements of the
+// The element–vertex pairs of LocalGlobalState: per element its distinct
+// vertices and a_kv, then the pairs by vertex (a counting sort).
+void element_vertex_pairs(LocalGlobalState* st) {
+  const RotationElements& el = st->m.elements;
+  const Index r = el.size();
+  st->pair_offsets.assign(static_cast<size_t>(r + 1), 0);
+  st->pair_vertex.clear();
+  st->pair_element.clear();
+  std::vector<Eigen::Vector3d> a;
+  for (Index k = 0; k < r; ++k) {
+    const Index first = static_cast<Index>(st->pair_vertex.size());
+    auto add = [&](Index v, const Eigen::Vector3d& x) {
+      for (Index p = first; p < static_cast<Index>(st->pair_vertex.size()); ++p)
+        if (st->pair_vertex[p] == v) {
+          a[p] += x;
+          return;
+        }
+      st->pair_vertex.push_back(v);
+      st->pair_element.push_back(k);
+      a.push_back(x);
+    };
+    for (Index e = el.offsets[k]; e < el.offsets[k + 1]; ++e) {
+      const Eigen::Vector3d ce = el.weight[e] * st->rest_edge.col(e);
+      add(el.edge_i[e], ce);
+      add(el.edge_j[e], -ce);
+    }
+    st->pair_offsets[k + 1] = static_cast<Index>(st->pair_vertex.size());
+  }
+  const Index pairs = static_cast<Index>(st->pair_vertex.size());
+  st->pair_a.resize(3, pairs);
+  for (Index p = 0; p < pairs; ++p) st->pair_a.col(p) = a[p];
+  st->vertex_pair_offsets.assign(static_cast<size_t>(st->n + 1), 0);
+  for (Index p = 0; p < pairs; ++p) ++st->vertex_pair_offsets[st->pair_vertex[p] + 1];
+  for (Index v = 0; v < st->n; ++v) st->vertex_pair_offsets[v + 1] += st->vertex_pair_offsets[v];
+  st->vertex_pairs.resize(static_cast<size_t>(pairs));
+  std::vector<Index> next(st->vertex_pair_offsets.begin(), st->vertex_pair_offsets.end() - 1);
+  for (Index p = 0; p < pairs; ++p) st->vertex_pairs[next[st->pair_vertex[p]]++] = p;
+}
+
+// The rest edges, the element–vertex pairs and the planar elements of the
 // classic local step (LocalGlobalState).
 void classic_local_data(LocalGlobalState* st) {
   const RotationElements& el = st->m.elements;
   const Index E = static_cast<Index>(el.weight.size()), r = el.size();
   st->rest_edge.resize(3, E);
-  std::vector<Index> count(static_cast<size_t>(st->n) + 1, 0);
-  for (Index e = 0; e < E; ++e) {
+  for (Index e = 0; e < E; ++e)
     st->rest_edge.col(e) = (st->m.V.row(el.edge_i[e]) - st->m.V.row(el.edge_j[e])).transpose();
-    ++count[el.edge_i[e] + 1];
-    ++count[el.edge_j[e] + 1];
-  }
-  for (Index v = 0; v < st->n; ++v) count[v + 1] += count[v];
-  st->incident_offsets = count;
-  st->incident_edges.resize(static_cast<size_t>(2 * E));
-  for (Index e = 0; e < E; ++e) {
-    st->incident_edges[count[el.edge_i[e]]++] = e + 1;
-    st->incident_edges[count[el.edge_j[e]]++] = -(e + 1);
-  }
+  element_vertex_pairs(st);
   // Planar: every rest edge within 1e-12 of its length of the plane n⊥, so
   // that ‖G n‖ ≤ 1e-12·Σ|c|‖e′‖‖e‖ (fit_rotation_planar's precondition).
   st->plane_normal = Eigen::Matrix<double, 3, Eigen::Dynamic>::Zero(3, r);

@@ -44,14 +44,20 @@ struct LocalGlobalState {
   std::vector<Index> control_of_free;  // first control row of a free vertex, −1 in a patch
   SparseMatrix<double> P;              // 3n × n_u
   SparseMatrix<double> Hu;             // n_u × n_u
-  // Classic: the rest edges e (3 × E, the elements' edges in order); the
-  // edges at each vertex (CSR over n + 1 offsets; e + 1 where the vertex is
-  // edge_i, −(e + 1) where it is edge_j); and per element the unit normal n
-  // when all its rest edges lie in n⊥ (fit_rotation_planar), else zero.
+  // Classic: the rest edges e (3 × E, the elements' edges in order); per
+  // element the unit normal n when all its rest edges lie in n⊥
+  // (fit_rotation_planar), else zero; and the element–vertex pairs: per
+  // element k its distinct vertices v (CSR over r + 1 pair_offsets,
+  // pair_vertex) with a_kv = Σ_{e∈k, i_e = v} c_e·e_e − Σ_{e∈k, j_e = v} c_e·e_e
+  // (pair_a, 3 × pairs), and by vertex the pairs at it (CSR over n + 1
+  // vertex_pair_offsets, vertex_pairs; pair_element the pair's k). Then
+  // Σ_e c_e·(d_i − d_j)·e_eᵀ = Σ_v d_v·a_kvᵀ and the vertex sums of
+  // ±c_e·M_k·e_e are Σ_k M_k·a_kv: one vertex per pair (about 7 an element)
+  // instead of two per edge (about 12).
   Eigen::Matrix<double, 3, Eigen::Dynamic> rest_edge;
-  std::vector<Index> incident_offsets;
-  std::vector<Index> incident_edges;
   Eigen::Matrix<double, 3, Eigen::Dynamic> plane_normal;
+  std::vector<Index> pair_offsets, pair_vertex, pair_element, vertex_pair_offsets, vertex_pairs;
+  Eigen::Matrix<double, 3, Eigen::Dynamic> pair_a;
   // Classic: nothing more (the linear term is assembled per round).
   // Modified: q = D_s·S; Q = L_QQ⁻¹(D_Q S − L_QV V′); S-coefficient Dᵀ[V′; Q].
   SparseMatrix<double> Ds, D, DV, DQ, LQV;
@@ -97,7 +103,6 @@ class Rounds {
         qV_(3 * n_), qu_(st.nu), u_(st.nu), rhs_(st.nu - static_cast<Index>(st.pinned_rows.size()), 1) {
     if (classic_) {
       XT_.resize(3, n_);
-      t_.resize(3, st.rest_edge.cols());
       element_energy_.resize(r_);
     }
   }
@@ -105,9 +110,8 @@ class Rounds {
   // Rotations from the pose X (and Q for E′); returns the energy.
   double local_step() {
     if (classic_) {
-      // Per element k: G_k = Σ c e′eᵀ, R_k = argmax tr(RᵀG_k), its energy
-      // ½Σ c‖e′ − R_k e‖², and t_e = c·R_k·e for the global step's linear
-      // term. Elements in parallel; the energies are summed in element order
+      // Per element k: G_k = Σ c e′eᵀ, R_k = argmax tr(RᵀG_k) and its energy
+      // ½Σ c‖e′ − R_k e‖² (the global step's linear term: linear_term). Elements in parallel; the energies are summed in element order
       // afterwards, so the result does not depend on the thread count.
       XT_ = X.transpose();
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && r_ >= 2048)
@@ -124,7 +128,6 @@ class Rounds {
         for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e) {
           const Eigen::Vector3d re = Rk * st_.rest_edge.col(e);
           energy += 0.5 * el_.weight[e] * (XT_.col(el_.edge_i[e]) - XT_.col(el_.edge_j[e]) - re).squaredNorm();
-          t_.col(e) = el_.weight[e] * re;
         }
         element_energy_(k) = energy;
       }
@@ -182,7 +185,7 @@ class Rounds {
     keep_curvature_ = true;
     curvature_.resize(9 * r_);
     dx_.resize(3 * n_);
-    dt_.resize(3, st_.rest_edge.cols());
+    dR_.resize(9 * r_);
     dq_.resize(3 * n_);
   }
   // The control-row vector u of the last global step (pinned rows at their
@@ -219,22 +222,21 @@ class Rounds {
     for (Index row = 0; row < st_.nu; ++row)
       if (st_.free_index[row] >= 0) vu(row) = vf(st_.free_index[row]);
     dx_ = st_.P * vu;
+    // dG_k = Σ_v dx_v·a_kvᵀ over the element's vertices (LocalGlobalState's pairs).
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && r_ >= 2048)
     for (Index k = 0; k < r_; ++k) {
       Eigen::Matrix3d dG = Eigen::Matrix3d::Zero();
-      for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e)
-        dG.noalias() += (el_.weight[e] * (dx_.segment<3>(3 * el_.edge_i[e]) - dx_.segment<3>(3 * el_.edge_j[e]))) *
-                        st_.rest_edge.col(e).transpose();
+      for (Index p = st_.pair_offsets[k]; p < st_.pair_offsets[k + 1]; ++p)
+        dG.noalias() += dx_.segment<3>(3 * st_.pair_vertex[p]) * st_.pair_a.col(p).transpose();
       const Eigen::Map<const Eigen::Matrix3d> Rk(R.data() + 9 * k);
       const Eigen::Matrix3d W = Rk.transpose() * dG;
       const Eigen::Vector3d w(W(2, 1) - W(1, 2), W(0, 2) - W(2, 0), W(1, 0) - W(0, 1));
       const Eigen::Vector3d om = Eigen::Map<const Eigen::Matrix3d>(curvature_.data() + 9 * k) * w;
       Eigen::Matrix3d skew;
       skew << 0.0, -om(2), om(1), om(2), 0.0, -om(0), -om(1), om(0), 0.0;
-      const Eigen::Matrix3d dR = Rk * skew;
-      for (Index e = el_.offsets[k]; e < el_.offsets[k + 1]; ++e) dt_.col(e) = el_.weight[e] * (dR * st_.rest_edge.col(e));
+      Eigen::Map<Eigen::Matrix3d>(dR_.data() + 9 * k) = Rk * skew;
     }
-    gather(dt_, &dq_);
+    vertex_sums(dR_, &dq_);
     const Eigen::VectorXd hv = st_.Hu * vu - st_.P.transpose() * dq_;
     out->resize(vf.size());
     for (Index row = 0; row < st_.nu; ++row)
@@ -267,17 +269,16 @@ class Rounds {
     for (int i = 0; i < 3; ++i) inv(i) = std::abs(lam(i)) > 1e-12 * top ? 1.0 / lam(i) : 0.0;
     return eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose();
   }
-  // Σ over the edges at each vertex of ±t_e (+ where it is edge_i).
-  void gather(const Eigen::Matrix<double, 3, Eigen::Dynamic>& t, Eigen::VectorXd* q) const {
-    const std::vector<Index>& offsets = st_.incident_offsets;
-    const std::vector<Index>& edges = st_.incident_edges;
+  // q_v = Σ_k M_k·a_kv over the element–vertex pairs at each vertex (the
+  // vertex sums of ±c_e·M_k·e_e, + where v is edge_i), M_k the 3 × 3 blocks
+  // of M (9r).
+  void vertex_sums(const Eigen::VectorXd& M, Eigen::VectorXd* q) const {
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && n_ >= 2048)
     for (Index v = 0; v < n_; ++v) {
       Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-      for (Index a = offsets[v]; a < offsets[v + 1]; ++a) {
-        const Index e = edges[a];
-        if (e > 0) sum += t.col(e - 1);
-        else sum -= t.col(-e - 1);
+      for (Index a = st_.vertex_pair_offsets[v]; a < st_.vertex_pair_offsets[v + 1]; ++a) {
+        const Index p = st_.vertex_pairs[a];
+        sum.noalias() += Eigen::Map<const Eigen::Matrix3d>(M.data() + 9 * st_.pair_element[p]) * st_.pair_a.col(p);
       }
       q->segment<3>(3 * v) = sum;
     }
@@ -289,8 +290,8 @@ class Rounds {
       qV_ = st_.Ds * R;
       return;
     }
-    // Gathered per vertex from the t_e of the last local step (which set R).
-    gather(t_, &qV_);
+    // Per vertex from the rotations of the last local step.
+    vertex_sums(R, &qV_);
   }
 
   const LocalGlobalState& st_;
@@ -299,16 +300,14 @@ class Rounds {
   const bool classic_;
   const Index n_, r_;
   const int threads_;
-  // Classic: X transposed (3 × n, a vertex's coordinates together), t_e
-  // (3 × E) and the element energies (r) of the last local step.
-  Eigen::Matrix<double, 3, Eigen::Dynamic> XT_, t_;
+  // Classic: X transposed (3 × n, a vertex's coordinates together) and the
+  // element energies (r) of the last local step.
+  Eigen::Matrix<double, 3, Eigen::Dynamic> XT_;
   Eigen::VectorXd element_energy_;
   // Newton (keep_curvature): M_k⁻¹ per element (9r), and hessian_vector's
-  // work: P·v (3n), the t_e of dR (3 × E), their per-vertex sums (3n).
+  // work: P·v (3n), dR_k (9r), their per-vertex sums (3n).
   bool keep_curvature_ = false;
-  Eigen::VectorXd curvature_, dx_;
-  Eigen::Matrix<double, 3, Eigen::Dynamic> dt_;
-  Eigen::VectorXd dq_;
+  Eigen::VectorXd curvature_, dx_, dR_, dq_;
 
  public:
   Vertices X;         // n × 3
