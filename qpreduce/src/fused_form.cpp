@@ -273,14 +273,22 @@ void form_c0(FusedModel& M, const std::shared_ptr<const detail::FixedCoordinateP
   M.prep = prep;
 }
 
+// F₀ = C0 + G_y square, nonzero and symmetric to CurvatureTest::kSymmetry
+// (relative, Frobenius): the test both the factored rounds' lower-triangle
+// product and the curvature test rely on.
+bool symmetric_to_round_off(const MatD& F0) {
+  const double size = F0.norm();
+  return F0.rows() == F0.cols() && size > 0.0 &&
+         (F0 - F0.transpose()).norm() <= detail::CurvatureTest::kSymmetry * size;
+}
+
 void form_factored_base(FusedModel& M) {
   detail::FactoredRounds& fr = M.factored_rounds;
   if (fr.base_valid) return;
   check_finite("FusedAlternation::set: G_y", M.Gy);
   fr.F0 = M.C0 + M.Gy;
   fr.F0_f = fr.F0.cast<float>();
-  fr.symmetric = fr.F0.rows() == fr.F0.cols() &&
-                 (fr.F0 - fr.F0.transpose()).norm() <= detail::CurvatureTest::kSymmetry * fr.F0.norm();
+  fr.symmetric = symmetric_to_round_off(fr.F0);
   fr.base_valid = true;
 }
 
@@ -291,10 +299,13 @@ void form_curvature_test(FusedModel& M) {
   ct.factor.resize(0, 0);
   const Index k = M.Gy.cols();
   if (M.Gy.rows() != k || k == 0 || !M.Gy.allFinite()) return;
-  MatD F0 = M.C0 + M.Gy;
-  const double size = F0.norm();
-  if (!(size > 0.0) || (F0 - F0.transpose()).norm() > detail::CurvatureTest::kSymmetry * size) return;
-  ct.floor = detail::CurvatureTest::kFloor * size;
+  // The factored base's F₀ and its test when formed, else F₀ here.
+  const detail::FactoredRounds& fr = M.factored_rounds;
+  const bool from_base = fr.base_valid && fr.F0.rows() == k;
+  if (from_base && !fr.symmetric) return;
+  MatD F0 = from_base ? fr.F0 : MatD(M.C0 + M.Gy);
+  if (!from_base && !symmetric_to_round_off(F0)) return;
+  ct.floor = detail::CurvatureTest::kFloor * F0.norm();
   F0.diagonal().array() += ct.floor;
   Eigen::LLT<MatD> llt(F0);  // reads the lower triangle
   if (llt.info() != Eigen::Success || !llt.matrixLLT().allFinite()) return;

@@ -111,7 +111,8 @@ class Rounds {
   double local_step() {
     if (classic_) {
       // Per element k: G_k = Σ c e′eᵀ, R_k = argmax tr(RᵀG_k) and its energy
-      // ½Σ c‖e′ − R_k e‖² (the global step's linear term: linear_term). Elements in parallel; the energies are summed in element order
+      // ½Σ c‖e′ − R_k e‖² (the global step's linear term: linear_term).
+      // Elements in parallel; the energies are summed in element order
       // afterwards, so the result does not depend on the thread count.
       XT_ = X.transpose();
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && r_ >= 2048)
