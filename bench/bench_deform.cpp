@@ -69,10 +69,10 @@
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/proxies/proxies.h>
 #include <qpreduce/deform/io/tet_io.h>
-#include <qpreduce/deform/reference/refine.h>
+#include <qpreduce/deform/refine/refine.h>
 #include <qpreduce/point_reconstruction.h>
 
-#include <qpreduce/support.h>
+#include <qpreduce/util/timer.h>
 
 #include <benchmark/benchmark.h>
 #include <fmt/format.h>

@@ -50,8 +50,8 @@
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/mesh/shapes.h>
 
-#include <qpreduce/atomic_file.h>
-#include <qpreduce/support.h>
+#include <qpreduce/util/atomic_file.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/Geometry>
 #include <fmt/format.h>
@@ -432,6 +432,65 @@ std::string json_report(const Args& a, const std::string& label, const Precomput
       t.violations);
 }
 
+// --first-set: the sets before it are drawn (so the random stream is the
+// same), not run.
+void skip_first_sets(const Args& a, SetMaker* maker) {
+  if (a.first_set > 0 && a.first_set % kInvalidEvery == kInvalidEvery - 1)
+    usage(fmt::format("--first-set {} is an invalid handle set (every {}th); start one later", a.first_set, kInvalidEvery));
+  for (long index = 0; index < a.first_set; ++index) {
+    const SetKind kind = maker->kind_of(index, a.hostile);
+    std::string what;
+    if (kind == SetKind::Invalid && index > 0) maker->make_invalid(&what);
+    else maker->motion(maker->make(kind == SetKind::Invalid ? SetKind::FewPoints : kind, index < 4, a.hostile));
+  }
+}
+
+// The run's one-line verdict.
+void print_summary(const Tally& tally, double seconds, bool rss_checked) {
+  std::printf(
+      "soak: %s: %ld frames, %ld handle sets (%ld invalid refused, %ld least-squares), wall %.1f s, frame median "
+      "%.3f ms, set_handles median %.3f ms, RSS %.0f → %.0f KiB (%+.0f KiB after warm-up%s), max E/(G²E(2V)) %.3g, "
+      "%ld violations\n",
+      tally.violations ? "FAIL" : "ok", tally.frames, tally.sets, tally.rejected, tally.least_squares_sets, seconds,
+      1e3 * median(tally.frame_seconds), 1e3 * median(tally.set_seconds), tally.rss_warm_kib, tally.rss_end_kib,
+      tally.rss_end_kib - tally.rss_warm_kib, rss_checked ? "" : ", not checked: no frames after it",
+      tally.max_ratio, tally.violations);
+}
+
+// Frame f starts a new handle set: an invalid one must be refused with a
+// message; any other must be usable, and becomes *motion (its summary *cs).
+void new_handle_set(Deformer& deformer, SetMaker& maker, const Args& a, long f, Tally* tally_out, Motion* motion,
+                    ConstraintSummary* cs_out) {
+  Tally& tally = *tally_out;
+  ConstraintSummary& cs = *cs_out;
+  const long index = f / a.set_every;
+  const SetKind kind = maker.kind_of(index, a.hostile);
+  ++tally.sets;
+  if (kind == SetKind::Invalid && index > 0) {
+    std::string what;
+    const Handles bad = maker.make_invalid(&what);
+    try {
+      deformer.set_handles(bad);
+      violation(&tally, f, "set_handles accepted an invalid handle set (" + what + ")");
+    } catch (const std::invalid_argument& e) {
+      ++tally.rejected;
+      if (std::string(e.what()).empty()) violation(&tally, f, "an invalid handle set refused without a message");
+    }
+  } else {
+    Motion next = maker.motion(maker.make(kind == SetKind::Invalid ? SetKind::FewPoints : kind, index < 4, a.hostile));
+    const Timer t;
+    cs = deformer.set_handles(next.handles);
+    tally.set_seconds[static_cast<size_t>(tally.sets - tally.rejected - 1)] = t.seconds();
+    if (!cs.usable()) violation(&tally, f, std::string(to_string(kind)) + " set refused: " + cs.brief_report());
+    if (cs.status == Status::ConstraintsLeastSquares) ++tally.least_squares_sets;
+    if (a.verbose)
+      std::printf("set %ld at frame %ld: %s, %zu point handles, %s (rank %ld of %ld rows, condition %.3g)\n", index, f,
+                  to_string(kind), next.handles.points.size(), cs.brief_report().c_str(),
+                  static_cast<long>(cs.rank), static_cast<long>(cs.m), cs.condition);
+    *motion = std::move(next);
+  }
+}
+
 int run(const Args& a) {
   std::string label;
   const TriangleMesh mesh = load_model(a.model, &label);
@@ -464,49 +523,15 @@ int run(const Args& a) {
   ConstraintSummary cs;
   const long warm_frames = std::min(a.frames, (a.first_set + a.warmup_sets) * a.set_every);
   const Timer wall;
-  if (a.first_set > 0 && a.first_set % kInvalidEvery == kInvalidEvery - 1)
-    usage(fmt::format("--first-set {} is an invalid handle set (every {}th); start one later", a.first_set, kInvalidEvery));
-  for (long index = 0; index < a.first_set; ++index) {  // --first-set: drawn, not run
-    const SetKind kind = maker.kind_of(index, a.hostile);
-    std::string what;
-    if (kind == SetKind::Invalid && index > 0) maker.make_invalid(&what);
-    else maker.motion(maker.make(kind == SetKind::Invalid ? SetKind::FewPoints : kind, index < 4, a.hostile));
-  }
+  skip_first_sets(a, &maker);
   for (long f = a.first_set * a.set_every; f < a.frames; ++f) {
-    if (f % a.set_every == 0) {  // a new handle set
-      const long index = f / a.set_every;
-      const SetKind kind = maker.kind_of(index, a.hostile);
-      ++tally.sets;
-      if (kind == SetKind::Invalid && index > 0) {
-        std::string what;
-        const Handles bad = maker.make_invalid(&what);
-        try {
-          deformer.set_handles(bad);
-          violation(&tally, f, "set_handles accepted an invalid handle set (" + what + ")");
-        } catch (const std::invalid_argument& e) {
-          ++tally.rejected;
-          if (std::string(e.what()).empty()) violation(&tally, f, "an invalid handle set refused without a message");
-        }
-      } else {
-        Motion next = maker.motion(maker.make(kind == SetKind::Invalid ? SetKind::FewPoints : kind, index < 4, a.hostile));
-        const Timer t;
-        cs = deformer.set_handles(next.handles);
-        tally.set_seconds[static_cast<size_t>(tally.sets - tally.rejected - 1)] = t.seconds();
-        if (!cs.usable()) violation(&tally, f, std::string(to_string(kind)) + " set refused: " + cs.brief_report());
-        if (cs.status == Status::ConstraintsLeastSquares) ++tally.least_squares_sets;
-        if (a.verbose)
-          std::printf("set %ld at frame %ld: %s, %zu point handles, %s (rank %ld of %ld rows, condition %.3g)\n", index, f,
-                      to_string(kind), next.handles.points.size(), cs.brief_report().c_str(),
-                      static_cast<long>(cs.rank), static_cast<long>(cs.m), cs.condition);
-        motion = std::move(next);
-      }
-    }
+    if (f % a.set_every == 0) new_handle_set(deformer, maker, a, f, &tally, &motion, &cs);  // a new handle set
     targets_at(motion, maker.centroid(), &targets);
     ++motion.t;
     const FrameSummary fs = deformer.frame(targets, &out);
     tally.frame_seconds[static_cast<size_t>(f)] = fs.total_seconds;
     ++tally.frames;
-        // The classic energy costs a few frames' time (an SVD per element): every
+    // The classic energy costs a few frames' time (an SVD per element): every
     // E-th frame, and the first and last of every handle set.
     const bool classic = f % a.energy_every == 0 || f % a.set_every == 0 || (f + 1) % a.set_every == 0;
     check_frame(f, fs, cs, out, elements, model.V, e2, motion.gradient, a.energy_bound, classic, maker, &tally);
@@ -533,14 +558,7 @@ int run(const Args& a) {
   if (tally.rejected == 0 && tally.sets > kInvalidEvery)
     violation(&tally, a.frames, "no invalid handle set was tried");
 
-  std::printf(
-      "soak: %s: %ld frames, %ld handle sets (%ld invalid refused, %ld least-squares), wall %.1f s, frame median "
-      "%.3f ms, set_handles median %.3f ms, RSS %.0f → %.0f KiB (%+.0f KiB after warm-up%s), max E/(G²E(2V)) %.3g, "
-      "%ld violations\n",
-      tally.violations ? "FAIL" : "ok", tally.frames, tally.sets, tally.rejected, tally.least_squares_sets, seconds,
-      1e3 * median(tally.frame_seconds), 1e3 * median(tally.set_seconds), tally.rss_warm_kib, tally.rss_end_kib,
-      tally.rss_end_kib - tally.rss_warm_kib, rss_checked ? "" : ", not checked: no frames after it",
-      tally.max_ratio, tally.violations);
+  print_summary(tally, seconds, rss_checked);
   const std::string report = json_report(a, label, pre, tally, e2, seconds);
   if (a.json.empty()) {
     std::fputs(report.c_str(), stdout);

@@ -1,10 +1,13 @@
 #include "app_support.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <type_traits>
+#include <utility>
+#include <variant>
 
 namespace qpr {
 
@@ -22,6 +25,39 @@ double upper_median(std::vector<double> samples) {
 }
 
 nlohmann::json finite_or_null(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr); }
+
+nlohmann::json to_json(const qpreduce::Report& report) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const qpreduce::Report::Entry& e : report.entries()) {
+    std::visit(
+        [&](const auto& v) {
+          using T = std::decay_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, double>) {
+            out[e.key] = finite_or_null(v);
+          } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+            nlohmann::json list = nlohmann::json::array();
+            for (const double x : v) list.push_back(finite_or_null(x));
+            out[e.key] = std::move(list);
+          } else if constexpr (std::is_same_v<T, std::shared_ptr<const qpreduce::Report>>) {
+            out[e.key] = to_json(*v);
+          } else {
+            out[e.key] = v;
+          }
+        },
+        e.value);
+  }
+  return out;
+}
+
+nlohmann::json refine_json(const qpreduce::deform::RefineSummary& summary,
+                           const qpreduce::deform::RefineOptions& options) {
+  nlohmann::json r = to_json(summary.report());
+  r["distance_tolerance"] = options.distance_tolerance;
+  r["tolerance"] = options.tolerance;
+  r["anderson_window"] = options.anderson_window;
+  r["newton_after"] = options.newton_after;
+  return r;
+}
 
 void write_json(const std::string& path, const nlohmann::json& doc, const std::string& what) {
   try {

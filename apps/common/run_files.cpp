@@ -1,6 +1,6 @@
 #include "run_files.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/util/file_error.h>
 
 #include <unistd.h>
 

@@ -7,7 +7,7 @@
 #include "guard.h"
 #include "preflight.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <qpreduce/deform/io/file_kind.h>
 #include <qpreduce/deform/io/handles_io.h>
 #include <qpreduce/deform/io/mesh_io.h>

@@ -119,13 +119,33 @@ void print_comparison(const CompareArgs& a, const std::string& primary, const nl
              report["energy_ratio"].get<double>(), report["speedup"].get<double>(), a.out_dir);
 }
 
-int run_compare(const CompareArgs& a) {
+// Throws std::invalid_argument for a value outside its choices, or an
+// unwritable report path, before any work.
+void check_compare_args(const CompareArgs& a) {
   if (a.reference != "ceres" && a.reference != "local-global" && a.reference != "both" && a.reference != "none")
     throw std::invalid_argument("--reference must be ceres, local-global, both or none, got " + a.reference);
   if (a.reference == "none" && !a.convergence) throw std::invalid_argument("--reference none needs --convergence");
   if (a.energy != "classic" && a.energy != "modified")
     throw std::invalid_argument("--energy must be classic or modified, got " + a.energy);
   if (!a.report.empty()) qpreduce::check_destination(a.report, "report");
+}
+
+// Full-space classic ARAP from the reduced rounds' fixed point at the last
+// frame (the hands stop, as `qpr deform --refine`) and from rest, plain and
+// accelerated, each to the relative energy change or fixed-point residual
+// --convergence-tolerance (no distance test: these runs measure it).
+nlohmann::json run_convergence_study(const CompareArgs& a, const Scenario& sc, const Vertices& settled) {
+  RefineArgs ra;
+  ra.anderson_window = a.anderson_window;
+  RefineOptions o = refine_options(ra);
+  o.distance_tolerance = 0.0;
+  o.tolerance = a.convergence_tolerance;
+  o.max_iterations = a.reference_iterations;
+  return convergence_study(sc, settled, o, a.gap);
+}
+
+int run_compare(const CompareArgs& a) {
+  check_compare_args(a);
   LoadedScenario ls = load_scenario(a);
   const OutputPaths path{a.out_dir, ls.tet ? (ls.solid.F.rows() > 0 ? "off" : "mesh") : "off"};
   run_files().create_directories(a.out_dir);
@@ -174,17 +194,7 @@ int run_compare(const CompareArgs& a) {
   }
   report["references"] = refs;
   if (a.convergence) {
-    // Full-space classic ARAP from the reduced pose and from rest, plain and accelerated.
-    // Each run to the relative energy change or fixed-point residual
-    // --convergence-tolerance (no distance test: these runs measure it).
-    RefineArgs ra;
-    ra.anderson_window = a.anderson_window;
-    RefineOptions o = refine_options(ra);
-    o.distance_tolerance = 0.0;
-    o.tolerance = a.convergence_tolerance;
-    o.max_iterations = a.reference_iterations;
-    // From the reduced rounds' fixed point at the last frame (the hands stop), as `qpr deform --refine`.
-    report["convergence"] = convergence_study(sc, reduced.settled, o, a.gap);
+    report["convergence"] = run_convergence_study(a, sc, reduced.settled);
     report["convergence"]["settle"] = rep["settle"];
   }
   if (a.reference == "none") {

@@ -27,7 +27,7 @@
 #include "qp_demands.h"
 #include "validators.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <qpreduce/deform/io/json_keys.h>
 #include <qpreduce/full_solve.h>
 #include <qpreduce/problems/matrix_market.h>
@@ -39,7 +39,7 @@
 
 #include "mpi_session.h"
 #endif
-#include <qpreduce/support.h>
+#include <qpreduce/util/timer.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -283,13 +283,8 @@ qpreduce::ConstraintSummary set_demand_constraints(const Demand& d, Solvers& s) 
     cs = s.solver.set_constraints_in_design(d.A_c, s.copt);
 #ifdef QPREDUCE_HAVE_MPI
   } else if (s.part) {  // A_r = Σ over the ranks of (rows of A)ᵀ·(rows of B)
-    const auto& b = *s.part;
-    const qpreduce::SparseMatrix<double> At = d.A.middleRows(b.rows.begin, b.rows.size()).transpose();
-    qpreduce::Matrix<double> Ar(d.A.cols(), s.solver.p());
-    Ar.leftCols(b.d) = At * b.N_rows;
-    Ar.rightCols(b.k) = At * b.UD_rows;
-    sum_over_ranks(&Ar);
-    cs = s.solver.set_constraints_reduced(d.A, std::move(Ar), s.copt);
+    cs = s.solver.set_constraints_reduced(
+        d.A, qpreduce::distributed::reduced_constraints(MPI_COMM_WORLD, *s.part, d.A), s.copt);
 #endif
   } else {
     cs = s.solver.set_constraints(d.A, s.copt);
@@ -304,12 +299,7 @@ void solve_demand(const Demand& d, Solvers& s, Workspace& ws) {
     s.solver.solve_in_D(d.b, d.Y, ws.w);
 #ifdef QPREDUCE_HAVE_MPI
   } else if (s.part) {  // q_r = Σ over the ranks of (rows of B)ᵀ·(rows of q)
-    const auto& b = *s.part;
-    qpreduce::Matrix<double> qr(s.solver.p(), 1);
-    qr.topRows(b.d) = b.N_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
-    qr.bottomRows(b.k) = b.UD_rows.transpose() * d.q.segment(b.rows.begin, b.rows.size());
-    sum_over_ranks(&qr);
-    ws.qr = qr.col(0);
+    ws.qr = qpreduce::distributed::reduced_linear_term(MPI_COMM_WORLD, *s.part, d.q);
     s.solver.solve(d.b, ws.qr, ws.w);
 #endif
   } else {
@@ -319,28 +309,14 @@ void solve_demand(const Demand& d, Solvers& s, Workspace& ws) {
 }
 
 // X = N·z + UD·y into ws.X (over MPI each rank its rows, gathered to rank 0).
-void reconstruct_demand(const Problem& p, Solvers& s, Workspace& ws) {
+void reconstruct_demand(Solvers& s, Workspace& ws) {
 #ifdef QPREDUCE_HAVE_MPI
   if (s.part) {  // each rank its rows of X = N·z + UD·y, gathered to rank 0
-    const auto& b = *s.part;
-    const Vec mine = b.N_rows * ws.w.head(b.d) + b.UD_rows * ws.w.tail(b.k);
-    int ranks = 1;
-    MPI_Comm_size(MPI_COMM_WORLD, &ranks);
-    std::vector<int> counts(static_cast<size_t>(ranks)), offsets(static_cast<size_t>(ranks));
-    for (int q = 0; q < ranks; ++q) {
-      const auto rows = qpreduce::distributed::owned_rows(p.n(), q, ranks);
-      counts[static_cast<size_t>(q)] = static_cast<int>(rows.size());
-      offsets[static_cast<size_t>(q)] = static_cast<int>(rows.begin);
-    }
-    MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, ws.X.data(), counts.data(), offsets.data(),
-                MPI_DOUBLE, 0, MPI_COMM_WORLD);
-  } else {
-    s.solver.reconstruct(ws.w, ws.X);
+    qpreduce::distributed::gather_solution(MPI_COMM_WORLD, *s.part, ws.w, 0, &ws.X);
+    return;
   }
-#else
-  (void)p;  // the row partition is only read over MPI
-  s.solver.reconstruct(ws.w, ws.X);
 #endif
+  s.solver.reconstruct(ws.w, ws.X);
 }
 
 json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers& s, Workspace& ws, Tally& tally) {
@@ -371,7 +347,7 @@ json run_demand(const Demand& d, const QpOptions& opt, const Problem& p, Solvers
   solve_demand(d, s, ws);
   const double t_solve = t1.seconds();
   const qpreduce::Timer t2;
-  reconstruct_demand(p, s, ws);
+  reconstruct_demand(s, ws);
   const double t_recon = t2.seconds();
   if (s.rank != 0) return r;  // rank 0 checks, writes and prints
   Row row;
@@ -407,10 +383,7 @@ json report_json(const QpOptions& opt, const Problem& p, const Solvers& s, const
               {"k", p.D.cols()},
               {"soft", opt.soft > 0.0},
               {"delta", opt.soft},
-              {"precompute", {{"status", qpreduce::to_string(pre.status)},
-                              {"message", pre.message},
-                              {"seconds", pre.total_seconds},
-                              {"kkt_residual", pre.kkt_residual}}},
+              {"precompute", to_json(pre.report())},  // every SubspaceSummary field (docs/formats.md)
               {"theorem_skipped", s.theorem_skipped.empty() ? json(nullptr) : json(s.theorem_skipped)},
               {"failures", tally.failures},
               {"warnings", tally.warnings},

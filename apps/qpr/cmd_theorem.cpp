@@ -9,9 +9,9 @@
 #include "guard.h"
 #include "validators.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <qpreduce/problems/generators.h>
-#include <qpreduce/support.h>
+#include <qpreduce/util/timer.h>
 #include <qpreduce/theorem.h>
 
 #include <CLI/CLI.hpp>

@@ -11,7 +11,7 @@
 #include <qpreduce/deform/io/file_kind.h>
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/io/tet_io.h>
-#include <qpreduce/support.h>
+#include <qpreduce/util/timer.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -444,6 +444,58 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
                               : std::string());
 }
 
+// The on-site step (OP) for the scenario's handles, timed into *op_ms.
+// Throws when the set is unusable, or not exact under `strict`; warns when
+// the subspace cannot follow it, saying what makes it exact.
+ConstraintSummary set_scenario_handles(Deformer* deformer, const Scenario& scenario, bool strict, double* op_ms) {
+  const Timer op_timer;
+  const ConstraintSummary cs = deformer->set_handles(scenario.handles, scenario.constraints);
+  *op_ms = 1e3 * op_timer.seconds();
+  if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
+  if (cs.status != Status::Success && strict)
+    throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
+  if (cs.status != Status::Success) {
+    std::fprintf(stderr, "  warning: %s%s\n", cs.message.c_str(),
+                 cs.beyond_subspace ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
+                                : "");
+  }
+  return cs;
+}
+
+// The report's precompute keys.
+void report_precompute(const PrecomputeSummary& pre, bool cache_loaded, double peak_mb, nlohmann::json& report) {
+  report["precompute_s"] = pre.total_seconds;
+  report["precompute_from_cache"] = cache_loaded;
+  report["precompute_breakdown_s"] = {{"clustering", pre.clustering_seconds},
+                                      {"assembly", pre.assembly_seconds},
+                                      {"subspace", pre.subspace_seconds},
+                                      {"reduction", pre.reduction_seconds}};
+  report["precompute_peak_mb"] = peak_mb;
+  report["subspace_backend"] = to_string(pre.subspace.backend_used);
+  report["kkt_residual"] = pre.subspace.kkt_residual;
+}
+
+// The report's per-frame keys: timings (medians), residuals, rounds, stops.
+void report_frames(const FrameSeries& s, nlohmann::json& report) {
+  report["iteration_us"] = median(s.iter_us);
+  report["reconstruction_ms"] = median(s.recon_ms);
+  report["frame_ms"] = median(s.frame_ms);
+  report["handle_residual_max"] = *std::max_element(s.residual.begin(), s.residual.end());
+  // How far the last pose is from the alternation's fixed point, and the rounds it took.
+  report["fixed_point_residual"] = s.last.fixed_point_residual;
+  report["rounds"] = s.last.iterations;
+  report["rounds_total"] = std::accumulate(s.rounds.begin(), s.rounds.end(), 0);
+  report["rounds_per_frame"] = s.rounds;
+  report["stop"] = to_string(s.last.stop);  // what ended the last frame's rounds
+  report["stop_per_frame"] = s.stops;
+  report["fixed_point_residual_per_frame"] = s.fixed_point_residual;
+  report["second_order_steps"] = s.last.second_order;  // the last frame took Newton steps, not rounds
+  if (std::isfinite(s.last.model_energy)) {
+    report["model_energy"] = s.last.model_energy;
+    report["rejected_steps"] = s.last.rejected_steps;
+  }
+}
+
 }  // namespace
 
 nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
@@ -457,18 +509,8 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   const PrecomputeSummary pre = precompute_or_load(&deformer, scenario, options, settings, &cache_loaded);
   const double peak_mb = peak_rss_mb();
 
-  const Timer op_timer;
-  const ConstraintSummary cs = deformer.set_handles(scenario.handles, scenario.constraints);
-  const double op_ms = 1e3 * op_timer.seconds();
-  if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
-  if (cs.status != Status::Success && settings.strict)
-    throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
-  // A set the subspace cannot follow: say what makes it exact.
-  if (cs.status != Status::Success) {
-    std::fprintf(stderr, "  warning: %s%s\n", cs.message.c_str(),
-                 cs.beyond_subspace ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
-                                : "");
-  }
+  double op_ms = 0.0;
+  const ConstraintSummary cs = set_scenario_handles(&deformer, scenario, settings.strict, &op_ms);
 
   const double diag = bounding_box_diagonal(scenario.model.V);
   const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);
@@ -504,35 +546,11 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   nlohmann::json report;
   report["name"] = settings.name;
   report_model(deformer, scenario, options, pre, report);
-  report["precompute_s"] = pre.total_seconds;
-  report["precompute_from_cache"] = cache_loaded;
-  report["precompute_breakdown_s"] = {{"clustering", pre.clustering_seconds},
-                                      {"assembly", pre.assembly_seconds},
-                                      {"subspace", pre.subspace_seconds},
-                                      {"reduction", pre.reduction_seconds}};
-  report["precompute_peak_mb"] = peak_mb;
-  report["subspace_backend"] = to_string(pre.subspace.backend_used);
-  report["kkt_residual"] = pre.subspace.kkt_residual;
+  report_precompute(pre, cache_loaded, peak_mb, report);
   report["op_ms"] = op_ms;
   report["op_status"] = to_string(cs.status);
-  report["iteration_us"] = median(s.iter_us);
-  report["reconstruction_ms"] = median(s.recon_ms);
-  report["frame_ms"] = median(s.frame_ms);
-  report["handle_residual_max"] = *std::max_element(s.residual.begin(), s.residual.end());
+  report_frames(s, report);
   report["arap_energy"] = energy;
-  // How far the last pose is from the alternation's fixed point, and the rounds it took.
-  report["fixed_point_residual"] = s.last.fixed_point_residual;
-  report["rounds"] = s.last.iterations;
-  report["rounds_total"] = std::accumulate(s.rounds.begin(), s.rounds.end(), 0);
-  report["rounds_per_frame"] = s.rounds;
-  report["stop"] = to_string(s.last.stop);  // what ended the last frame's rounds
-  report["stop_per_frame"] = s.stops;
-  report["fixed_point_residual_per_frame"] = s.fixed_point_residual;
-  report["second_order_steps"] = s.last.second_order;  // the last frame took Newton steps, not rounds
-  if (std::isfinite(s.last.model_energy)) {
-    report["model_energy"] = s.last.model_energy;
-    report["rejected_steps"] = s.last.rejected_steps;
-  }
   report["bounding_box_diagonal"] = diag;
   if (!settle.is_null()) report["settle"] = settle;
   if (settings.refine) report["refine"] = refined;

@@ -4,9 +4,9 @@
 // and writes the meshes and the JSON report.
 #pragma once
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <qpreduce/deform/io/scenario.h>
-#include <qpreduce/deform/reference/refine.h>
+#include <qpreduce/deform/refine/refine.h>
 
 #include <nlohmann/json.hpp>
 

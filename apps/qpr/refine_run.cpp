@@ -71,22 +71,6 @@ RefineOptions refine_options(const RefineArgs& a) {
 
 namespace {
 
-nlohmann::json summary_json(const RefineSummary& s) {
-  return {{"status", to_string(s.status)},
-          {"message", s.message},
-          {"converged", s.converged},
-          {"rounds", s.rounds},
-          {"seconds", s.seconds},
-          {"setup_seconds", s.setup_seconds},
-          {"rejected_steps", s.rejected_steps},
-          {"newton_steps", s.newton_steps},
-          {"cg_iterations", s.cg_iterations},
-          {"arap_energy", s.arap_energy},
-          {"initial_arap_energy", s.initial_energy},
-          {"fixed_point_residual", s.fixed_point_residual},
-          {"estimated_distance", finite_or_null(s.estimated_distance)}};
-}
-
 // The first round whose energy is within `gap` of `best` (relative): rounds
 // and seconds to reach it, or nulls when no round did. The starting pose
 // counts (0 rounds) only when it meets the handles (not the rest pose, whose
@@ -107,14 +91,7 @@ nlohmann::json refine_last_frame(const Scenario& scenario, const Vertices& reduc
   refiner.precompute(scenario.model, options);
   const RefineSummary s = refiner.refine(scenario.handles, scenario.frames.back(), reduced, refined);
   if (!s.usable()) throw std::runtime_error("refine: " + s.message);
-  nlohmann::json r = summary_json(s);
-  r["distance_tolerance"] = options.distance_tolerance;
-  r["tolerance"] = options.tolerance;
-  r["anderson_window"] = options.anderson_window;
-  r["newton_after"] = options.newton_after;
-  r["rms_from_reduced"] = s.rms_from_input;
-  r["max_from_reduced"] = s.max_from_input;
-  return r;
+  return refine_json(s, options);
 }
 
 void print_refine_line(const nlohmann::json& r) {
@@ -128,8 +105,8 @@ void print_refine_line(const nlohmann::json& r) {
           ? fmt::format(", {} of them Newton steps with {} CG products", r["newton_steps"].get<int>(),
                         r["cg_iterations"].get<int>())
           : std::string(),
-      r["initial_arap_energy"].get<double>(), r["arap_energy"].get<double>(), r["rms_from_reduced"].get<double>(),
-      r["max_from_reduced"].get<double>(),
+      r["initial_energy"].get<double>(), r["arap_energy"].get<double>(), r["rms_from_input"].get<double>(),
+      r["max_from_input"].get<double>(),
       r["estimated_distance"].is_null() ? std::numeric_limits<double>::infinity() : r["estimated_distance"].get<double>(),
       r["converged"].get<bool>() ? "" : "; not converged");
 }
@@ -183,7 +160,7 @@ nlohmann::json convergence_study(const Scenario& scenario, const Vertices& reduc
   fmt::print("  {:<18}{:>10}{:>12}{:>12}{:>12}{:>10}{:>14}\n", "", "rounds", "seconds", "to gap: rds", "seconds",
              "rejected", "RMS to best");
   for (const Run& run : runs) {
-    nlohmann::json r = summary_json(run.summary);
+    nlohmann::json r = to_json(run.summary.report());
     r["to_gap"] = time_to_gap(run.summary, run.from_rest, best, gap);
     const Eigen::VectorXd d = (run.pose - best_run->pose).rowwise().norm();
     r["rms_from_converged"] = std::sqrt(d.squaredNorm() / static_cast<double>(d.size())) / diag;

@@ -4,7 +4,7 @@
 #pragma once
 
 #include <qpreduce/deform/io/scenario.h>
-#include <qpreduce/deform/reference/refine.h>
+#include <qpreduce/deform/refine/refine.h>
 
 #include <nlohmann/json.hpp>
 
@@ -34,9 +34,9 @@ qpreduce::deform::RefineOptions refine_options(const RefineArgs& args);
 
 // Refines `reduced` (the last frame's pose) under the scenario's handles at
 // its last frame's targets; writes the refined pose to *refined and returns
-// the report's "refine" object (rounds, seconds, arap_energy,
-// rms_from_reduced, max_from_reduced, …). Throws std::runtime_error when
-// the refine fails.
+// the report's "refine" object: the RefineSummary's report (rounds,
+// seconds, arap_energy, rms_from_input, …; docs/formats.md, "Summaries")
+// and the options used. Throws std::runtime_error when the refine fails.
 nlohmann::json refine_last_frame(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::Vertices& reduced,
                                  const qpreduce::deform::RefineOptions& options, qpreduce::deform::Vertices* refined);
 // The console table's line for that object.

@@ -5,7 +5,6 @@
 #include "context.h"
 #include "view_support.h"
 
-#include <qpreduce/support.h>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -89,22 +88,7 @@ nlohmann::json refine_shown_pose(Session& session, MeshRenderer& renderer, const
   if (st.state != RefineStatus::State::Done || !worker.poll(refined))
     throw std::runtime_error(fmt::format("refine {}: {}", to_string(st.state), st.message));
   session.show_pose(*refined, &renderer);
-  const RefineSummary& r = st.summary;
-  return {{"rounds", r.rounds},
-          {"seconds", r.seconds},
-          {"setup_seconds", r.setup_seconds},
-          {"converged", r.converged},
-          {"distance_tolerance", options.distance_tolerance},
-          {"tolerance", options.tolerance},
-          {"estimated_distance", qpr::finite_or_null(r.estimated_distance)},
-          {"anderson_window", options.anderson_window},
-          {"newton_after", options.newton_after},
-          {"newton_steps", r.newton_steps},
-          {"cg_iterations", r.cg_iterations},
-          {"initial_arap_energy", r.initial_energy},
-          {"arap_energy", r.arap_energy},
-          {"rms_from_reduced", r.rms_from_input},
-          {"max_from_reduced", r.max_from_input}};
+  return qpr::refine_json(st.summary, options);  // the keys of `qpr deform --refine`
 }
 
 // Renders the last pose into the screenshot (and the mesh file when asked).
@@ -150,9 +134,9 @@ void print_summary(const Session& session, const GlContext& context, const Headl
     fmt::print(
         "  refine {} rounds, {:.3f} s: ARAP energy {:.6g} -> {:.6g}, from the reduced pose RMS {:.2e}, max {:.2e} "
         "(/ bbox diagonal)\n",
-        refine["rounds"].get<int>(), refine["seconds"].get<double>(), refine["initial_arap_energy"].get<double>(),
-        refine["arap_energy"].get<double>(), refine["rms_from_reduced"].get<double>(),
-        refine["max_from_reduced"].get<double>());
+        refine["rounds"].get<int>(), refine["seconds"].get<double>(), refine["initial_energy"].get<double>(),
+        refine["arap_energy"].get<double>(), refine["rms_from_input"].get<double>(),
+        refine["max_from_input"].get<double>());
   fmt::print("  wrote {}\n", o.screenshot);
 }
 

@@ -1,6 +1,6 @@
 #include "image.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <stb_image.h>
 #include <stb_image_write.h>
 

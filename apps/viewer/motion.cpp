@@ -1,6 +1,6 @@
 #include "motion.h"
 
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 #include <qpreduce/deform/io/json_keys.h>
 
 #include <fmt/format.h>

@@ -16,7 +16,7 @@
 //   RefineStatus s = worker.status();               // for the panel
 #pragma once
 
-#include <qpreduce/deform/reference/refine.h>
+#include <qpreduce/deform/refine/refine.h>
 
 #include <atomic>
 #include <condition_variable>

@@ -4,7 +4,8 @@
 #include <qpreduce/deform/energy/arap_energy.h>
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/proxies/proxies.h>
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <fmt/format.h>
 

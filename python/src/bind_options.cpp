@@ -112,7 +112,13 @@ void bind_summaries(py::module_& m) {
       .def_readonly("message", &Outcome::message, "Message for a person.")
       .def("ok", &Outcome::ok, "Status.Success alone.")
       .def("usable", &Outcome::usable, "Success, or a qualified answer (Status.ConstraintsLeastSquares).")
-      .def("brief_report", &Outcome::brief_report, "'<status>' or '<status>: <message>', one line.");
+      .def("brief_report", &Outcome::brief_report,
+           "One line: '<status>' or '<status>: <message>' (some summaries say more).")
+      .def("full_report", &Outcome::full_report, "Every field, one 'key: value' line each (nested summaries indented).")
+      .def(
+          "to_dict", [](const Outcome& o) { return report_dict(o.report()); },
+          "Every field as a dict under the C++ names: the keys of qpr's JSON reports (docs/formats.md, "
+          "'Summaries'); nested summaries as dicts, enums as their names.");
 
   py::class_<SubspaceSummary, Outcome> subspace(m, "SubspaceSummary", "Result of precompute (subspace.h).");
   Fields(subspace, "SubspaceSummary")
@@ -133,7 +139,6 @@ void bind_summaries(py::module_& m) {
       .ro("solve_seconds", &SubspaceSummary::solve_seconds, "Seconds.")
       .ro("total_seconds", &SubspaceSummary::total_seconds, "Seconds.")
       .repr();
-  subspace.def("brief_report", &SubspaceSummary::brief_report, "One-line human summary.");
 
   py::class_<ConstraintSummary, Outcome> constraints(m, "ConstraintSummary",
                                                      "Result of set_constraints (subspace_solver.h).");

@@ -1,5 +1,5 @@
 // qpreduce.deform.Refiner: the full-space finish of a reduced pose
-// (deform/reference/refine.h). Classic ARAP (Eq. 6) or E′ (Eq. 8–10) by
+// (deform/refine/refine.h). Classic ARAP (Eq. 6) or E′ (Eq. 8–10) by
 // local-global rounds, optionally Anderson-accelerated, warm-started from the
 // pose given (e.g. Deformer.frame's), re-factoring only when the handle set
 // changes. refine releases the GIL and takes the refiner's lock; cancel()
@@ -9,7 +9,7 @@
 #include "fields.h"
 #include "locking.h"
 
-#include <qpreduce/deform/reference/refine.h>
+#include <qpreduce/deform/refine/refine.h>
 
 #include <pybind11/stl.h>
 

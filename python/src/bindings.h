@@ -16,7 +16,7 @@ void bind_deform_io(py::module_& m);      // deform/io/*, mesh/shapes.h, referen
 void bind_deformer(py::module_& deform);  // deform/deformer/*: options, Model, Deformer
 void bind_deformer_options(py::module_& deform);  // deformer.h: options and summaries (bind_deform_options.cpp)
 void bind_handles(py::module_& deform);   // deform/deformer/handles.h: PointHandle, Handles, HandleTargets
-void bind_refiner(py::module_& deform);   // deform/reference/refine.h: RefineOptions, Refiner
+void bind_refiner(py::module_& deform);   // deform/refine/refine.h: RefineOptions, Refiner
 void bind_arap(py::module_& deform);      // deform/arap/arap.h: arap, ArapSolverOptions, ArapSolver
 
 }  // namespace qpreduce::python

@@ -1,8 +1,26 @@
 #include "fields.h"
 
+#include <pybind11/stl.h>
+
 #include <algorithm>
+#include <type_traits>
+#include <variant>
 
 namespace qpreduce::python {
+
+py::dict report_dict(const Report& report) {
+  py::dict out;
+  for (const Report::Entry& e : report.entries()) {
+    out[py::str(e.key)] = std::visit(
+        [](const auto& v) -> py::object {
+          using T = std::decay_t<decltype(v)>;
+          if constexpr (std::is_same_v<T, std::shared_ptr<const Report>>) return report_dict(*v);
+          else return py::cast(v);
+        },
+        e.value);
+  }
+  return out;
+}
 
 std::string fields_repr(py::handle self, const std::string& type_name, const std::vector<std::string>& names) {
   std::string text = type_name + "(";

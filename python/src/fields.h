@@ -3,6 +3,8 @@
 // (SubspaceOptions(rho_scale=2.0, augment=False)).
 #pragma once
 
+#include <qpreduce/report.h>
+
 #include <pybind11/pybind11.h>
 
 #include <string>
@@ -12,6 +14,10 @@
 namespace qpreduce::python {
 
 namespace py = pybind11;
+
+// A summary's report (Outcome::report()) as a dict: reals, ints, bools and
+// texts as themselves, lists as lists, nested reports as dicts.
+py::dict report_dict(const Report& report);
 
 // "Name(field=value, ...)": enums print as Status.Success, the rest by repr().
 std::string fields_repr(py::handle self, const std::string& type_name, const std::vector<std::string>& names);

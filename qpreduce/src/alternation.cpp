@@ -6,7 +6,8 @@
 #include "alternation_parts.h"
 
 #include "qpreduce/anderson.h"
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include <fmt/format.h>
 

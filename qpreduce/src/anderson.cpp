@@ -1,7 +1,7 @@
 // Anderson acceleration (type II), anderson.h.
 #include "qpreduce/anderson.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 
 #include "simd_kernels.h"
 

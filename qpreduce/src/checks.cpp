@@ -1,27 +1,12 @@
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <utility>
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
 
 namespace qpreduce {
-
-namespace {
-std::string file_error_message(const std::string& file, long line, const std::string& problem) {
-  return line > 0 ? fmt::format("{}:{}: {}", file, line, problem) : fmt::format("{}: {}", file, problem);
-}
-}  // namespace
-
-FileError::FileError(std::string file, long line, std::string problem)
-    : std::runtime_error(file_error_message(file, line, problem)),
-      file_(std::move(file)),
-      line_(line),
-      problem_(std::move(problem)) {}
 
 void check_size(const char* what, Index expected, Index got) {
   if (expected != got) {
@@ -80,12 +65,6 @@ void check_symmetric(const char* what, const SparseMatrix<Scalar>& H, double tol
         fmt::format("{}: not symmetric (‖H − Hᵀ‖_F = {:.3e} > {:.1e}·‖H‖_F = {:.3e})", what, asym,
                     tolerance, tolerance * scale));
   }
-}
-
-void release_free_heap() {
-#ifdef __GLIBC__
-  malloc_trim(0);
-#endif
 }
 
 template void check_symmetric<double>(const char*, const SparseMatrix<double>&, double);

@@ -17,6 +17,17 @@ const char* to_string(Status status) {
   return "unknown";
 }
 
+Report Outcome::report() const {
+  Report r;
+  r.add("status", to_string(status)).add("message", message);
+  add_details(&r);
+  return r;
+}
+
+std::string Outcome::full_report() const { return report().text(); }
+
+void Outcome::add_details(Report*) const {}
+
 std::string Outcome::brief_report() const {
   return message.empty() ? std::string(to_string(status)) : std::string(to_string(status)) + ": " + message;
 }

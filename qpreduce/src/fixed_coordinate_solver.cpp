@@ -9,7 +9,8 @@
 #include "qp_operators.h"
 #include "range_space.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include <Eigen/QR>
 #include <fmt/format.h>

@@ -1,6 +1,7 @@
 #include "qpreduce/full_solve.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 namespace qpreduce {
 
@@ -45,5 +46,11 @@ template FullSolveSummary solve_full<double>(const SparseMatrix<double>&, const 
 template FullSolveSummary solve_full<float>(const SparseMatrix<float>&, const SparseMatrix<float>&,
                                             const Vector<float>&, const Vector<float>&, Vector<float>*,
                                             const SubspaceOptions&);
+
+void FullSolveSummary::add_details(Report* out) const {
+  out->add("backend_used", backend_used)
+      .add("kkt_residual", kkt_residual)
+      .add("seconds", seconds);
+}
 
 }  // namespace qpreduce

@@ -12,7 +12,7 @@
 #include "round_stop.h"
 #include "simd_kernels.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 
 #include <fmt/format.h>
 

@@ -4,7 +4,7 @@
 #include "blas.h"
 #include "simd_kernels.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 
 #include <Eigen/Eigenvalues>
 #include <Spectra/SymEigsSolver.h>

@@ -1,4 +1,4 @@
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 #include "qpreduce/point_reconstruction.h"
 
 #include "simd_kernels.h"

@@ -1,6 +1,7 @@
 #include "qpreduce/quotient.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include "quotient_internal.h"
 
@@ -226,6 +227,17 @@ bool subspace_companion_solution(const WhitenedDesign& design, const CompanionDe
   *X_hat = design.I_hat * demand.q_hat - s.U * (s.U.transpose() * demand.q_hat) +
            s.U * (s.sigma.cwiseInverse().asDiagonal() * (s.V.transpose() * demand.b_hat));
   return true;
+}
+
+void FactorSummary::add_details(Report* out) const {
+  out->add("n", n)
+      .add("rank", rank)
+      .add("nullity", nullity)
+      .add("lambda_max", lambda_max)
+      .add("lambda_min", lambda_min)
+      .add("lambda_min_kept", lambda_min_kept)
+      .add("residual", residual)
+      .add("seconds", seconds);
 }
 
 }  // namespace qpreduce

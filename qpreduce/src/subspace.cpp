@@ -5,7 +5,6 @@
 #include "subspace_internal.h"
 
 #include "dense.h"
-#include "qpreduce/support.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>
@@ -221,4 +220,21 @@ MatD sparse_transpose_times(const SpD& S, const MatD& X) {
 }
 
 }  // namespace detail
+void SubspaceSummary::add_details(Report* out) const {
+  out->add("backend_used", backend_used)
+      .add("n", n)
+      .add("d", d)
+      .add("k", k)
+      .add("rho", rho)
+      .add("factor_nonzeros", factor_nonzeros)
+      .add("kkt_residual", kkt_residual)
+      .add("probe_error", probe_error)
+      .add("s_condition", s_condition)
+      .add("ud_condition", ud_condition)
+      .add("check_psd_seconds", check_psd_seconds)
+      .add("factorize_seconds", factorize_seconds)
+      .add("solve_seconds", solve_seconds)
+      .add("total_seconds", total_seconds);
+}
+
 }  // namespace qpreduce

@@ -7,7 +7,9 @@
 #include "dense.h"
 #include "subspace_internal.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
+#include "qpreduce/util/heap.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>

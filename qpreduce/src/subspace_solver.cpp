@@ -7,7 +7,8 @@
 #include "subspace_internal.h"
 
 #include "qp_operators.h"
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
@@ -312,6 +313,49 @@ ConstraintSummary SubspaceSolver<Scalar>::set_constraints_in_design(const Matrix
   return summary;
 }
 
+// The fast path's operators, in the range space: the factored form
+// when `factored`, the explicit one otherwise; false when the range space
+// refuses (rank, conditioning) and the reference path must form them.
+template <typename Scalar>
+bool SubspaceSolver<Scalar>::fast_operators(const MatD& Ar, const ConstraintOptions& options, bool factored,
+                                            ConstraintSummary* summary_out, MatD* Mb_out, MatD* Mq_out,
+                                            MatD* MY_out) {
+  ConstraintSummary& summary = *summary_out;
+  MatD &Mb = *Mb_out, &Mq = *Mq_out, &MY = *MY_out;
+  const Index m = Ar.rows();
+  // The BLAS runs single-threaded here unless the caller asked for more.
+  std::optional<detail::ScopedBlasThreads> blas;
+  if (options.threads > 0) blas.emplace(options.threads);
+  detail::RangeSpaceOperators rso;
+  if (factored) {
+    if (detail::range_space_rank(*range_, Ar, options, &summary)) {
+      const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
+      // Copies of the solver share the operators: write into a fresh set when shared.
+      if (!factored_ops_ || factored_ops_.use_count() > 1)
+        factored_ops_ = std::make_shared<detail::FactoredOperators>();
+      factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
+                                             options.rank_tolerance,
+                                             (Ar * range_->scale.asDiagonal()).squaredNorm(),  // ‖Ā‖_F²
+                                             factored_ops_.get());
+    }
+    return factored_;
+  }
+  if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
+    // M_q = M_g (lower triangle), M_b = T's first m columns,
+    // M_Y = P0 − T·(Y'ᵀBᵀD).
+    Mq = std::move(rso.Mg);
+    Mb = rso.T.leftCols(m);
+    MY = P0_;
+    if (k() > 0) {
+      MatD YtBd(rso.Y.cols(), k());
+      detail::blas_gemm(true, false, 1.0, rso.Y, BtD_d_, 0.0, YtBd);
+      detail::blas_gemm(false, false, -1.0, rso.T, YtBd, 1.0, MY);
+    }
+    return Mb.allFinite() && MY.allFinite();
+  }
+  return false;
+}
+
 template <typename Scalar>
 ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const ConstraintOptions& options) {
   if (!range_) prepare_range_space();
@@ -341,38 +385,7 @@ ConstraintSummary SubspaceSolver<Scalar>::apply_constraints(MatD Ar, const Const
   }
   MatD &Mb = *Mb_out, &Mq = *Mq_out, &MY = *MY_out;
 
-  bool fast = false;
-  if (options.fast_path) {
-    // The BLAS runs single-threaded here unless the caller asked for more.
-    std::optional<detail::ScopedBlasThreads> blas;
-    if (options.threads > 0) blas.emplace(options.threads);
-    detail::RangeSpaceOperators rso;
-    if (factored) {
-      if (detail::range_space_rank(*range_, Ar, options, &summary)) {
-        const Eigen::SparseMatrix<double> At = Ar.transpose().sparseView(0.0, 0.0);  // exact zeros dropped
-        // Copies of the solver share the operators: write into a fresh set when shared.
-        if (!factored_ops_ || factored_ops_.use_count() > 1)
-          factored_ops_ = std::make_shared<detail::FactoredOperators>();
-        factored_ = detail::factored_operators(*range_, P0_, lift_btd_, At, options.soft, options.delta,
-                                               options.rank_tolerance,
-                                               (Ar * range_->scale.asDiagonal()).squaredNorm(),  // ‖Ā‖_F²
-                                               factored_ops_.get());
-      }
-      fast = factored_;
-    } else if (detail::range_space_operators(*range_, Ar, options, &summary, &rso)) {
-      // M_q = M_g (lower triangle), M_b = T's first m columns,
-      // M_Y = P0 − T·(Y'ᵀBᵀD).
-      Mq = std::move(rso.Mg);
-      Mb = rso.T.leftCols(m);
-      MY = P0_;
-      if (k() > 0) {
-        MatD YtBd(rso.Y.cols(), k());
-        detail::blas_gemm(true, false, 1.0, rso.Y, BtD_d_, 0.0, YtBd);
-        detail::blas_gemm(false, false, -1.0, rso.T, YtBd, 1.0, MY);
-      }
-      fast = Mb.allFinite() && MY.allFinite();
-    }
-  }
+  const bool fast = options.fast_path && fast_operators(Ar, options, factored, &summary, &Mb, &Mq, &MY);
   if (!fast) {
     summary = ConstraintSummary{};
     summary.m = m;
@@ -490,5 +503,16 @@ void SubspaceSolver<Scalar>::reconstruct(const ConstRef& w, Ref X) const {
 
 template class SubspaceSolver<double>;
 template class SubspaceSolver<float>;
+
+void ConstraintSummary::add_details(Report* out) const {
+  out->add("m", m)
+      .add("rank", rank)
+      .add("condition", condition)
+      .add("fast_path", fast_path)
+      .add("factored", factored)
+      .add("dropped", dropped)
+      .add("beyond_subspace", beyond_subspace)
+      .add("seconds", seconds);
+}
 
 }  // namespace qpreduce

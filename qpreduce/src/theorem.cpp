@@ -1,6 +1,7 @@
 #include "qpreduce/theorem.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include "quotient_internal.h"
 
@@ -260,6 +261,13 @@ TheoremCheck check_theorem(const SparseMatrix<double>& H, const SparseMatrix<dou
     return out;
   }
   return checker.check(A, b, q, solutions);
+}
+
+void TheoremSetupSummary::add_details(Report* out) const {
+  out->add("factor", factor.report())
+      .add("subspace", subspace.report())
+      .add("design_rank", design_rank)
+      .add("seconds", seconds);
 }
 
 }  // namespace qpreduce

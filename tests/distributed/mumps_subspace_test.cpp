@@ -95,6 +95,24 @@ void check_against_single_process(const SpD& H, const SpD& C, const SpD& D, cons
   CHECK(whole.N.middleRows(rows.begin, rows.size()) == out.N_rows);
   CHECK(whole.UD.middleRows(rows.begin, rows.size()) == out.UD_rows);
   if (D.cols() > 0) CHECK(relative_difference(out.BtD, reference.reduced_linear_map()) < kTolerance);
+
+  // The on-site products over the ranks' rows equal those with the whole B.
+  const Index n = H.rows(), p = C.cols() + D.cols();
+  MatD B(n, p);
+  B << whole.N, whole.UD;
+  std::vector<Eigen::Triplet<double>> t;
+  for (Index j = 0; j < 3; ++j)
+    for (Index i = j; i < n; i += 7) t.emplace_back(i, j, 1.0 + 0.1 * static_cast<double>(i % 5) - 0.3 * j);
+  SpD A(n, 3);
+  A.setFromTriplets(t.begin(), t.end());
+  const Vector<double> q = Vector<double>::LinSpaced(n, -1.0, 2.0), w = Vector<double>::LinSpaced(p, 0.5, -0.25);
+  CHECK(relative_difference(distributed::reduced_constraints(MPI_COMM_WORLD, out, A), MatD(A.transpose() * B)) < 1e-12);
+  CHECK(relative_difference(distributed::reduced_linear_term(MPI_COMM_WORLD, out, q), MatD(B.transpose() * q)) < 1e-12);
+  Vector<double> X;
+  distributed::gather_solution(MPI_COMM_WORLD, out, w, 0, &X);
+  if (rank == 0) CHECK(relative_difference(X, MatD(B * w)) < 1e-12);
+  CHECK_THROWS_WITH(distributed::reduced_linear_term(MPI_COMM_WORLD, out, Vector<double>::Zero(n + 1)),
+                    Catch::Contains("q size"));
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 // AtomicFile: the earlier file survives every failure and no temporary stays
 // behind (a full device, a file-size limit, a missing directory, an
 // exception before commit).
-#include <qpreduce/atomic_file.h>
+#include <qpreduce/util/atomic_file.h>
 
 #include "../file_size_limit.h"
 

@@ -15,7 +15,7 @@
 #include <qpreduce/deform/io/tet_io.h>
 #include <qpreduce/deform/mesh/shapes.h>
 #include <qpreduce/problems/matrix_market.h>
-#include <qpreduce/support.h>
+#include <qpreduce/util/file_error.h>
 
 #include <algorithm>
 #include <array>

@@ -186,3 +186,23 @@ def test_a_failed_factorization_raises_numerical_error(posed):
     with pytest.raises(qpreduce.NumericalError) as raised:
         refiner.refine(deform.Handles(), deform.HandleTargets())
     assert raised.value.status == qpreduce.Status.NumericalFailure and raised.value.message
+
+
+def test_summaries_report_every_field_as_the_json_reports_do(posed):
+    deformer, scenario, _ = posed
+    refiner = deform.Refiner(scenario.model)
+    _, summary = refiner.refine(scenario.handles, scenario.frames[-1])
+    d = summary.to_dict()
+    assert list(d)[:2] == ["status", "message"]
+    assert d["status"] == "success"
+    assert d["rounds"] == summary.rounds and d["arap_energy"] == summary.arap_energy
+    assert d["rms_from_input"] == summary.rms_from_input
+    assert "round_energy" not in d  # per-round histories stay on the object
+    text = summary.full_report()
+    assert text.startswith("status: success\n") and f"\nrounds: {summary.rounds}\n" in text
+    # A nested summary comes back as a dict; brief_report says more for a SubspaceSummary.
+    pre = deform.Deformer(scenario.model, deform.DeformerOptions(rotational_proxies=4, linear_proxies=4)).precompute()
+    nested = pre.to_dict()["subspace"]
+    assert isinstance(nested, dict) and nested["n"] == pre.subspace.n > 0
+    assert pre.subspace.brief_report().startswith("success: ")
+    assert "\nsubspace:\n  status: success\n" in pre.full_report()

@@ -150,19 +150,37 @@ bool MumpsBuild::psd_by_factorization() {
                                      check.message()));
 }
 
+namespace {
+
+// The columns `which` of C (n × |which|), and the sum of their squared norms
+// in *norm2.
+SpD selected_columns(const SpD& C, const std::vector<Index>& which, double* norm2) {
+  SpD out(C.rows(), static_cast<Index>(which.size()));
+  std::vector<Eigen::Triplet<double>> t;
+  *norm2 = 0.0;
+  for (size_t c = 0; c < which.size(); ++c) {
+    *norm2 += C.col(which[c]).squaredNorm();
+    for (SpD::InnerIterator it(C, which[c]); it; ++it) t.emplace_back(it.row(), Index(c), it.value());
+  }
+  out.setFromTriplets(t.begin(), t.end());
+  return out;
+}
+
+// The largest absolute row sum of A (0 when A has no rows).
+double max_abs_row_sum(const SpD& A) {
+  Vector<double> row_sums = Vector<double>::Zero(A.rows());
+  for (Index j = 0; j < A.outerSize(); ++j)
+    for (SpD::InnerIterator it(A, j); it; ++it) row_sums(it.row()) += std::abs(it.value());
+  return row_sums.size() > 0 ? row_sums.maxCoeff() : 0.0;
+}
+
+}  // namespace
+
 // Augmented route (or plain H when aug is empty): SPD factorization, G, F,
 // S = CᵀG, the PSD certificate of subspace.h, then N and UD row by row.
 bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
   double col_norm2 = 0.0;
-  SpD Cp(n, static_cast<Index>(aug.size()));
-  {
-    std::vector<Eigen::Triplet<double>> t;
-    for (size_t c = 0; c < aug.size(); ++c) {
-      col_norm2 += C.col(aug[c]).squaredNorm();
-      for (SpD::InnerIterator it(C, aug[c]); it; ++it) t.emplace_back(it.row(), Index(c), it.value());
-    }
-    Cp.setFromTriplets(t.begin(), t.end());
-  }
+  const SpD Cp = selected_columns(C, aug, &col_norm2);
   const double mean_diag = allreduce(comm, local_diagonal().cwiseAbs().sum(), MPI_SUM) / static_cast<double>(n);
   summary.rho = aug.empty() ? 0.0
                             : options.rho_scale * (mean_diag > 0 ? mean_diag : 1.0) /
@@ -174,14 +192,7 @@ bool MumpsBuild::augmented_route(const std::vector<Index>& aug) {
   }
   const SpD& Hrho_rows = aug.empty() ? H_rows : augmented;
   // Gershgorin bound on λ_max(H_ρ): the largest absolute row sum.
-  double bound = 0.0;
-  {
-    Vector<double> row_sums = Vector<double>::Zero(Hrho_rows.rows());
-    for (Index j = 0; j < Hrho_rows.outerSize(); ++j)
-      for (SpD::InnerIterator it(Hrho_rows, j); it; ++it) row_sums(it.row()) += std::abs(it.value());
-    if (row_sums.size() > 0) bound = row_sums.maxCoeff();
-  }
-  const double hrho_bound = allreduce(comm, bound, MPI_MAX);
+  const double hrho_bound = allreduce(comm, max_abs_row_sum(Hrho_rows), MPI_MAX);
 
   const char* what = aug.empty() ? "H" : "H + ρCCᵀ";
   MumpsSolver solver(comm, Symmetry::PositiveDefinite, mumps);

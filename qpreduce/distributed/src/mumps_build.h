@@ -8,7 +8,7 @@
 #include "mumps_solver.h"
 #include "qpreduce/subspace_steps.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/util/timer.h"
 
 #include <Eigen/Cholesky>
 #include <fmt/format.h>

@@ -3,7 +3,7 @@
 // MumpsBuild's (mumps_build.h, mumps_build.cpp).
 #include "mumps_build.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
 
 #include <Eigen/Cholesky>
 #include <fmt/format.h>
@@ -167,6 +167,58 @@ DistributedSummary build_subspace_mumps_on_root(MPI_Comm comm, const SpD& H, con
   *Hr = std::move(part.Hr);
   *BtD = std::move(part.BtD);
   return summary;
+}
+
+Matrix<double> reduced_constraints(MPI_Comm comm, const DistributedSubspace& part, const SpD& A) {
+  check_size("reduced_constraints: A rows", part.n, A.rows());
+  const SpD At = A.middleRows(part.rows.begin, part.rows.size()).transpose();
+  Matrix<double> Ar(A.cols(), part.d + part.k);
+  Ar.leftCols(part.d) = At * part.N_rows;
+  Ar.rightCols(part.k) = At * part.UD_rows;
+  if (Ar.size() > 0)
+    MPI_Allreduce(MPI_IN_PLACE, Ar.data(), static_cast<int>(Ar.size()), MPI_DOUBLE, MPI_SUM, comm);
+  return Ar;
+}
+
+Vector<double> reduced_linear_term(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& q) {
+  check_size("reduced_linear_term: q size", part.n, q.size());
+  Vector<double> qr(part.d + part.k);
+  const auto mine = q.segment(part.rows.begin, part.rows.size());
+  qr.head(part.d) = part.N_rows.transpose() * mine;
+  qr.tail(part.k) = part.UD_rows.transpose() * mine;
+  if (qr.size() > 0)
+    MPI_Allreduce(MPI_IN_PLACE, qr.data(), static_cast<int>(qr.size()), MPI_DOUBLE, MPI_SUM, comm);
+  return qr;
+}
+
+void gather_solution(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& w, int root,
+                     Vector<double>* X) {
+  check_size("gather_solution: w size", part.d + part.k, w.size());
+  const Vector<double> mine = part.N_rows * w.head(part.d) + part.UD_rows * w.tail(part.k);
+  int rank = 0, ranks = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &ranks);
+  std::vector<int> counts(static_cast<size_t>(ranks)), offsets(static_cast<size_t>(ranks));
+  for (int q = 0; q < ranks; ++q) {
+    const RowRange rows = owned_rows(part.n, q, ranks);
+    counts[static_cast<size_t>(q)] = static_cast<int>(rows.size());
+    offsets[static_cast<size_t>(q)] = static_cast<int>(rows.begin);
+  }
+  if (rank == root) X->resize(part.n);
+  MPI_Gatherv(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, rank == root ? X->data() : nullptr,
+              counts.data(), offsets.data(), MPI_DOUBLE, root, comm);
+}
+
+void DistributedSummary::add_details(Report* out) const {
+  SubspaceSummary::add_details(out);
+  out->add("ranks", ranks)
+      .add("kkt_route", kkt_route)
+      .add("ordering", ordering)
+      .add("mumps_infog1", mumps_infog1)
+      .add("mumps_infog2", mumps_infog2)
+      .add("factor_megabytes_max", factor_megabytes_max)
+      .add("factor_megabytes_total", factor_megabytes_total)
+      .add("reduce_seconds", reduce_seconds);
 }
 
 }  // namespace qpreduce::distributed

@@ -18,6 +18,9 @@ struct FullSolveSummary : Outcome {
   Backend backend_used = Backend::Auto;
   double kkt_residual = -1.0;  // as SubspaceSummary::kkt_residual, for [X]
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // Throws std::invalid_argument on wrong sizes or NaN input. `X` is resized to n

@@ -71,6 +71,9 @@ struct FactorSummary : Outcome {  // status: Success or IndefiniteH
   double lambda_min_kept = 0.0;  // smallest eigenvalue kept in L (0 when r = 0)
   double residual = -1.0;        // ‖H − LᵀL‖_F / ‖H‖_F
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // Rank-revealing factor of a symmetric PSD H. Throws std::invalid_argument on

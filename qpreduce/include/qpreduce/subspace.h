@@ -129,7 +129,10 @@ struct SubspaceSummary : Outcome {
   double ud_condition = 0.0;       // λ_max/λ_min of Dᵀ·UD (0 when k = 0)
   double check_psd_seconds = 0.0, factorize_seconds = 0.0, solve_seconds = 0.0,
          total_seconds = 0.0;
-  std::string brief_report() const;  // one-line human summary
+  std::string brief_report() const override;  // one-line human summary
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // The subspace X = N·Z + UD·Y. Columns are in the order of C's and D's columns.

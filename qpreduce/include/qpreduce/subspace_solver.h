@@ -92,6 +92,9 @@ struct ConstraintSummary : Outcome {
   // constrained entries (e.g. proxies at the held vertices) make it exact.
   bool beyond_subspace = false;
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 template <typename Scalar>
@@ -214,6 +217,8 @@ class SubspaceSolver {
   void prepare_range_space();
   // Everything of set_constraints after A_r (m × p) is formed; sets all but `seconds`.
   ConstraintSummary apply_constraints(MatD Ar, const ConstraintOptions& options);
+  bool fast_operators(const MatD& Ar, const ConstraintOptions& options, bool factored, ConstraintSummary* summary,
+                      MatD* Mb, MatD* Mq, MatD* MY);
   void reference_operators(const MatD& Abar, const ConstraintOptions& options, ConstraintSummary* summary, MatD* Mb,
                            MatD* Mq, MatD* MY) const;
 

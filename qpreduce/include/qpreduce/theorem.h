@@ -95,6 +95,9 @@ struct TheoremSetupSummary : Outcome {
   SubspaceSummary subspace;
   Index design_rank = 0;  // dim(Span(Ĉ) + Span(D̂))
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // Precompute once per (H, C, D), then check many demands.

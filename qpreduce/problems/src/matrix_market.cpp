@@ -1,6 +1,6 @@
 #include "qpreduce/problems/matrix_market.h"
 
-#include "qpreduce/atomic_file.h"
+#include "qpreduce/util/atomic_file.h"
 
 #include <fmt/format.h>
 

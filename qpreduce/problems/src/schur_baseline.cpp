@@ -1,6 +1,7 @@
 #include "qpreduce/problems/schur_baseline.h"
 
-#include "qpreduce/support.h"
+#include "qpreduce/checks.h"
+#include "qpreduce/util/timer.h"
 
 #include <Eigen/QR>
 #include <fmt/format.h>
@@ -102,6 +103,11 @@ SchurBaselineSummary CachedCholeskySchur::solve(const SparseMatrix<double>& A, c
   summary.message = fmt::format("{} constraints, {} solves", m, m + 1);
   summary.seconds = timer.seconds();
   return summary;
+}
+
+void SchurBaselineSummary::add_details(Report* out) const {
+  out->add("factor_nonzeros", factor_nonzeros)
+      .add("seconds", seconds);
 }
 
 }  // namespace qpreduce

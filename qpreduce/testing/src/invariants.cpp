@@ -8,7 +8,7 @@
 
 namespace qpreduce::testing {
 
-namespace detail_testing {
+namespace detail {
 
 Eigen::VectorXd random_vector(Index size, double scale, std::mt19937_64& rng) {
   std::normal_distribution<double> normal(0.0, scale);
@@ -25,9 +25,9 @@ CheckResult fail(double worst, std::string message) {
   return r;
 }
 
-}  // namespace detail_testing
+}  // namespace detail
 
-using detail_testing::fail;
+using detail::fail;
 
 CheckResult check_symmetric_psd(const SparseMatrix<double>& H, const PsdOptions& options) {
   if (H.rows() != H.cols()) {
@@ -68,7 +68,7 @@ CheckResult check_gradient(const EnergyFunction& energy, const Eigen::VectorXd& 
   const double h = options.step * std::max(1.0, x.size() ? x.cwiseAbs().maxCoeff() : 0.0);
   CheckResult r;
   for (int k = 0; k < options.directions; ++k) {
-    Eigen::VectorXd v = detail_testing::random_vector(x.size(), 1.0, rng);
+    Eigen::VectorXd v = detail::random_vector(x.size(), 1.0, rng);
     v.normalize();
     const double fd = (energy(x + h * v) - energy(x - h * v)) / (2.0 * h);
     const double exact = gradient.dot(v);
@@ -93,7 +93,7 @@ CheckResult check_quadratic_model(const EnergyFunction& energy, const SparseMatr
   const double e0 = energy(Eigen::VectorXd::Zero(q.size()));
   CheckResult r;
   for (int k = 0; k < options.points; ++k) {
-    const Eigen::VectorXd x = detail_testing::random_vector(q.size(), options.scale, rng);
+    const Eigen::VectorXd x = detail::random_vector(q.size(), options.scale, rng);
     const Eigen::VectorXd Hx = H * x;
     const double quad = 0.5 * x.dot(Hx), lin = q.dot(x);
     const double err = std::abs(energy(x) - e0 - (quad - lin)) / (1.0 + std::abs(quad) + std::abs(lin));

@@ -1,5 +1,5 @@
 // Writing through a temporary file renamed on success; see atomic_file.h.
-#include "qpreduce/atomic_file.h"
+#include "qpreduce/util/atomic_file.h"
 
 #include <fmt/format.h>
 

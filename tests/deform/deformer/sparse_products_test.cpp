@@ -11,8 +11,8 @@
 #include <vector>
 
 using namespace qpreduce;
-using qpreduce::deform::detail_deformer::is_identity;
-using qpreduce::deform::detail_deformer::parallel_product;
+using qpreduce::deform::detail::is_identity;
+using qpreduce::deform::detail::parallel_product;
 
 namespace {
 

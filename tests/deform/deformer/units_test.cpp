@@ -10,7 +10,7 @@
 #include "qpreduce/deform/energy/arap_energy.h"
 #include "qpreduce/deform/mesh/shapes.h"
 #include "qpreduce/deform/reference/reference.h"
-#include "qpreduce/deform/reference/refine.h"
+#include "qpreduce/deform/refine/refine.h"
 
 #include <Eigen/Geometry>
 

@@ -5,7 +5,7 @@
 // Botsch–Sorkine scenarios the refined shapes match the converged CGAL ones.
 #include <catch2/catch.hpp>
 
-#include "reference_test_util.h"
+#include "../reference/reference_test_util.h"
 #include "../io/io_test_util.h"
 
 #include "qpreduce/deform/deformer/deformer.h"
@@ -13,7 +13,7 @@
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/tet_io.h"
 #include "qpreduce/deform/mesh/geometry.h"
-#include "qpreduce/deform/reference/refine.h"
+#include "qpreduce/deform/refine/refine.h"
 
 #include <qpreduce/anderson.h>
 

@@ -23,8 +23,8 @@
 
 #include "state.h"
 
-#include <qpreduce/atomic_file.h>
-#include <qpreduce/support.h>
+#include <qpreduce/util/atomic_file.h>
+#include <qpreduce/util/timer.h>
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -41,7 +41,7 @@ namespace qpreduce::deform {
 
 namespace {
 
-using detail_deformer::Model;
+using detail::Model;
 
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
 // 2: the model's name and parameters, Q kept or not; 3: the rotation step;
@@ -416,7 +416,7 @@ bool may_replace_with_cache(const std::string& path) {
 
 void Deformer::save(const std::string& path) const {
   if (!state_->ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
-  const detail_deformer::Model& model = state_->model;
+  const detail::Model& model = state_->model;
   if (!model.whole_basis()) {
     throw std::invalid_argument(fmt::format(
         "Deformer::save: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (precompute_part); "
@@ -524,7 +524,7 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& 
   PrecomputeSummary summary;
   summary.status = Status::Success;
   summary.message = "loaded from " + path;
-  detail_deformer::describe(state_->model, &summary);
+  detail::describe(state_->model, &summary);
   summary.total_seconds = total.seconds();
   return summary;
 }

@@ -9,7 +9,7 @@
 
 #include <vector>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 // Appends to *t the control-layer entries of coordinate a (0, 1 or 2) of
 // vertex v, scaled by `scale`, in column `col`: the entries (row, col, value)
@@ -35,4 +35,4 @@ inline void add_control_row(const std::vector<int>& patch_of_vertex, const Verti
   t->emplace_back(base + 9 + a, col, scale);
 }
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

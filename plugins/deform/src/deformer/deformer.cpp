@@ -8,7 +8,7 @@
 
 #include "state.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <Eigen/LU>
 
@@ -85,8 +85,8 @@ Eigen::VectorXd Deformer::cluster_scales() const {
 }
 const std::shared_ptr<const DeformationModel>& Deformer::model() const { return state_->model.energy_model; }
 Eigen::Matrix<double, 3, 4> Deformer::patch_transform(Index p) const {
-  const detail_deformer::Model& model = state_->model;
-  const detail_deformer::Pose& pose = state_->pose;
+  const detail::Model& model = state_->model;
+  const detail::Pose& pose = state_->pose;
   if (p < 0 || p >= model.s) {
     throw std::invalid_argument(fmt::format("patch_transform: patch {} outside [0, {})", p, model.s));
   }
@@ -118,7 +118,7 @@ Deformer::RowBlock Deformer::basis_rows() const {
 void Deformer::basis_block(Index first, Index count, BasisRows* rows) const {
   if (!state_) throw std::invalid_argument("Deformer::basis_block: call precompute or load first");
   if (rows == nullptr) throw std::invalid_argument("Deformer::basis_block: output pointer is null");
-  const detail_deformer::Model& model = state_->model;
+  const detail::Model& model = state_->model;
   const RowBlock mine = basis_rows();
   if (count < 0 || first < mine.first || first + count > mine.first + mine.count) {
     throw std::invalid_argument(fmt::format("Deformer::basis_block: rows [{}, {}) outside this deformer's rows [{}, {})",
@@ -160,6 +160,36 @@ SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d&
   sc.targets.points.resize(0, 3);
   sc.targets.patch_transforms = {def.topRows<3>()};
   return sc;
+}
+
+void PrecomputeSummary::add_details(Report* out) const {
+  out->add("vertices", vertices)
+      .add("elements", elements)
+      .add("rotational_proxies", rotational_proxies)
+      .add("linear_proxies", linear_proxies)
+      .add("patches", patches)
+      .add("reduced_size", reduced_size)
+      .add("assembled_elements", assembled_elements)
+      .add("subspace", subspace.report())
+      .add("clustering_seconds", clustering_seconds)
+      .add("assembly_seconds", assembly_seconds)
+      .add("subspace_seconds", subspace_seconds)
+      .add("reduction_seconds", reduction_seconds)
+      .add("total_seconds", total_seconds);
+}
+
+void FrameSummary::add_details(Report* out) const {
+  out->add("iterations", iterations)
+      .add("last_change", last_change)
+      .add("fixed_point_residual", fixed_point_residual)
+      .add("model_energy", model_energy)
+      .add("rejected_steps", rejected_steps)
+      .add("second_order", second_order)
+      .add("cold_start", cold_start)
+      .add("stop", stop)
+      .add("solve_seconds", solve_seconds)
+      .add("reconstruct_seconds", reconstruct_seconds)
+      .add("total_seconds", total_seconds);
 }
 
 }  // namespace qpreduce::deform

@@ -9,7 +9,8 @@
 
 #include <qpreduce/anderson.h>
 #include <qpreduce/point_reconstruction.h>
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/LU>
 
@@ -21,10 +22,10 @@
 namespace qpreduce::deform {
 namespace {
 
-using detail_deformer::Model;
-using detail_deformer::OnSite;
-using detail_deformer::Pose;
-using detail_deformer::Workspace;
+using detail::Model;
+using detail::OnSite;
+using detail::Pose;
+using detail::Workspace;
 
 // Sizes and finiteness of the targets, and how far they reach from the rest
 // pose in its frame (reach_in_frame; beyond kMaxReach diagonals they would
@@ -101,7 +102,7 @@ void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& f
 // The first frame after set_handles runs to DeformerOptions::
 // cold_start_tolerance, within cold_start_rounds rounds (second-order steps
 // count kRoundsPerSecondOrderStep each), without a time budget.
-void cold_start(const detail_deformer::Settings& settings, bool second_order, AlternationSettings* opts) {
+void cold_start(const detail::Settings& settings, bool second_order, AlternationSettings* opts) {
   const int cap = second_order ? std::max(1, settings.cold_start_rounds / DeformerOptions::kRoundsPerSecondOrderStep)
                                : settings.cold_start_rounds;
   opts->iterations = std::max(opts->iterations, cap);

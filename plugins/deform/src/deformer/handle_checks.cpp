@@ -1,6 +1,6 @@
 #include "handle_checks.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 
@@ -9,7 +9,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 void check_mesh_elements(const DeformableMesh& mesh, const char* who) {
   const bool tet = mesh.is_tet();
@@ -72,4 +72,4 @@ void check_handles(const Handles& handles, Index n, const std::vector<PatchType>
   }
 }
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

@@ -8,7 +8,7 @@
 
 #include <vector>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 // Throws std::invalid_argument unless exactly one of mesh.F and mesh.T is set
 // and that mesh is valid (check_mesh). Messages start with `who`.
@@ -25,4 +25,4 @@ void check_patch_labels(const DeformableMesh& mesh, const char* who);
 // Fixed, or listed twice.
 void check_handles(const Handles& handles, Index n, const std::vector<PatchType>& patch_types);
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

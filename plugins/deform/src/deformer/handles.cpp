@@ -4,7 +4,7 @@
 
 #include "qpreduce/deform/mesh/mesh_check.h"  // kMaxReach
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 
@@ -92,8 +92,8 @@ double handle_residual(const DeformableMesh& m, const Handles& handles, const Ha
                        const Eigen::Ref<const Vertices>& deformed) {
   check_size("handle_residual: deformed vertex count", m.V.rows(), deformed.rows());
   check_size("handle_residual: deformed columns", 3, deformed.cols());
-  detail_deformer::check_patch_labels(m, "handle_residual");
-  detail_deformer::check_handles(handles, m.V.rows(), m.patch_types);
+  detail::check_patch_labels(m, "handle_residual");
+  detail::check_handles(handles, m.V.rows(), m.patch_types);
   if (targets.points.rows() != static_cast<Index>(handles.points.size()) ||
       (targets.points.rows() > 0 && targets.points.cols() != 3) ||
       targets.patch_transforms.size() != handles.patches.size()) {
@@ -130,7 +130,7 @@ double handle_residual(const DeformableMesh& m, const Handles& handles, const Ha
 LinearProxies exact_handle_proxies(const DeformableMesh& model, const Handles& handles, Index more) {
   const Index n = model.V.rows();
   try {
-    detail_deformer::check_handles(handles, n, model.patch_types);
+    detail::check_handles(handles, n, model.patch_types);
   } catch (const std::invalid_argument& e) {
     throw std::invalid_argument(std::string("exact handles: ") + e.what());
   }

@@ -21,10 +21,10 @@
 namespace qpreduce::deform {
 namespace {
 
-using detail_deformer::Model;
-using detail_deformer::OnSite;
-using detail_deformer::RowMatrixD;
-using detail_deformer::Triplets;
+using detail::Model;
+using detail::OnSite;
+using detail::RowMatrixD;
+using detail::Triplets;
 
 // The constraint matrix A (n_u × cols, as triplets over control rows) of a
 // handle set, in the order of the right-hand side b: 3 rows per point
@@ -194,7 +194,7 @@ std::string unreachable_reason(const FullSpaceRows& full, const ConstraintSummar
 
 }  // namespace
 
-namespace detail_deformer {
+namespace detail {
 
 std::string plain_reason(const Model& model, bool exact_rotation_fit, bool tied) {
   // The energy terms assume no ties and the exact Phase 2 input; a custom
@@ -207,7 +207,7 @@ std::string plain_reason(const Model& model, bool exact_rotation_fit, bool tied)
   return {};
 }
 
-}  // namespace detail_deformer
+}  // namespace detail
 
 // A dependent set that the subspace meets as well as the full space does (a
 // vertex held twice, a group over held vertices; no ties, hard constraints):
@@ -291,7 +291,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
         model.basis_first, model.basis_first + model.basis_count(), 3 * model.n));
   }
   OnSite& onsite = st.onsite;
-  detail_deformer::check_handles(handles, model.n, model.patch_types);
+  detail::check_handles(handles, model.n, model.patch_types);
   ConstraintLayout layout;
   add_point_rows(model, handles, &layout);
   add_patch_rows(model, handles, &layout);
@@ -302,7 +302,7 @@ ConstraintSummary Deformer::set_handles(const Handles& handles, const Constraint
   AlternationSetup setup;
   setup.constraints = options;
   setup.follow_y = tie_rows(model, layout);
-  onsite.plain_reason = detail_deformer::plain_reason(
+  onsite.plain_reason = detail::plain_reason(
       model, st.inputs.options.rotation_fit == ClusterRotationFit::Exact, !layout.tied.empty());
   setup.energy_terms = onsite.plain_reason.empty();
   setup.precision = st.fused_precision();

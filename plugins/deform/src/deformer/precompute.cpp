@@ -8,7 +8,9 @@
 #include "sparse_products.h"
 #include "state.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
+#include <qpreduce/util/heap.h>
 
 #include <fmt/format.h>
 
@@ -21,20 +23,20 @@
 namespace qpreduce::deform {
 namespace {
 
-using detail_deformer::CompactMesh;
-using detail_deformer::Model;
-using detail_deformer::Triplets;
-using detail_deformer::Groups;
-using detail_deformer::ControlRows;
-using detail_deformer::ControlSystem;
-using detail_deformer::control_rows;
-using detail_deformer::free_sparse;
-using detail_deformer::whole_then_rows;
-using detail_deformer::q_separable;
-using detail_deformer::control_system_rows;
-using detail_deformer::kept_q_control_rows;
-using detail_deformer::kept_q_blocks;
-using detail_deformer::assemble_control_system;
+using detail::CompactMesh;
+using detail::Model;
+using detail::Triplets;
+using detail::Groups;
+using detail::ControlRows;
+using detail::ControlSystem;
+using detail::control_rows;
+using detail::free_sparse;
+using detail::whole_then_rows;
+using detail::q_separable;
+using detail::control_system_rows;
+using detail::kept_q_control_rows;
+using detail::kept_q_blocks;
+using detail::assemble_control_system;
 
 // The mesh the automatic proxies are placed on: the referenced part (a
 // compacted copy when some vertex is unreferenced, else the mesh itself).
@@ -145,16 +147,16 @@ ControlSystem eliminated_control_system(const Model& model, ModifiedArapSystem* 
   free_sparse(&full->L);
   free_sparse(&full->D);
   cs.P = model.control_matrix();
-  if (detail_deformer::is_identity(cs.P)) {  // every vertex free, no patch: u = V′
+  if (detail::is_identity(cs.P)) {  // every vertex free, no patch: u = V′
     cs.Hu = std::move(elim.H);
     cs.Du = std::move(elim.Ds);
   } else {
     const SparseMatrix<double> Pt = cs.P.transpose();
-    SparseMatrix<double> HP = detail_deformer::parallel_product(elim.H, cs.P);
+    SparseMatrix<double> HP = detail::parallel_product(elim.H, cs.P);
     free_sparse(&elim.H);
-    cs.Hu = detail_deformer::parallel_product(Pt, HP);
+    cs.Hu = detail::parallel_product(Pt, HP);
     free_sparse(&HP);
-    cs.Du = detail_deformer::parallel_product(Pt, elim.Ds);
+    cs.Du = detail::parallel_product(Pt, elim.Ds);
   }
   cs.DV = std::move(elim.DV);
   cs.K = std::move(elim.K);
@@ -168,7 +170,7 @@ ControlSystem eliminated_control_system(const Model& model, ModifiedArapSystem* 
 // blockdiag(P, I): the subset's [V′; Q] from u. P: control_matrix().
 }  // namespace
 
-ControlSystem detail_deformer::kept_q_blocks(const Model& model, const ModifiedArapSystem& sys,
+ControlSystem detail::kept_q_blocks(const Model& model, const ModifiedArapSystem& sys,
                                              const SparseMatrix<double>& P, const std::vector<Index>* which) {
   const Index nv = 3 * model.n, w = which != nullptr ? static_cast<Index>(which->size()) : model.elements.size();
   const Index q0 = model.patch_base + 12 * model.s;
@@ -210,7 +212,7 @@ ControlSystem kept_q_control_system(Model& model, const ModifiedArapSystem& full
 // control layer. The full system is freed before the factorization.
 }  // namespace
 
-ControlSystem detail_deformer::assemble_control_system(Model& model, const DeformableMesh& mesh) {
+ControlSystem detail::assemble_control_system(Model& model, const DeformableMesh& mesh) {
   ModifiedArapSystem full = model.energy_model->assemble(mesh.V, model.elements, model.clusters, model.d);
   check_size("DeformationModel::assemble: L rows", 3 * model.n + 4 * model.elements.size(), full.L.rows());
   check_size("DeformationModel::assemble: D columns", 9 * model.d, full.D.cols());
@@ -374,7 +376,7 @@ struct Assembled {
 // Returns false with *summary set when the clustering fails.
 // With `sum` (precompute_part) only this process's rows of H_u and D_u.
 bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const ProgressFn& progress, Model& model,
-              detail_deformer::Inputs* inputs, PrecomputeSummary* summary, Assembled* out,
+              detail::Inputs* inputs, PrecomputeSummary* summary, Assembled* out,
               Deformer::Partition partition = {}, const Deformer::SumOverProcesses& sum = {}) {
   auto report = [&](const char* stage, double f) {
     if (progress) progress(stage, f);
@@ -388,7 +390,7 @@ bool assemble(const DeformableMesh& mesh, const DeformerOptions& options, const 
   const ElementsRef E = mesh.is_tet() ? ElementsRef(mesh.T) : ElementsRef(mesh.F);
   std::optional<CompactMesh> compact;
   if (!model.unreferenced.empty() && (mesh.clusters.empty() || mesh.linear.count() == 0)) {
-    compact = detail_deformer::compact_mesh(mesh.V, E, model.unreferenced);
+    compact = detail::compact_mesh(mesh.V, E, model.unreferenced);
   }
   const ProxyMesh pm{compact ? &*compact : nullptr, compact ? VerticesRef(compact->V) : VerticesRef(mesh.V),
                      compact ? ElementsRef(compact->E) : E};
@@ -520,7 +522,7 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
 
   summary.status = Status::Success;
   summary.message = "precomputed";
-  detail_deformer::describe(state_->model, &summary);
+  detail::describe(state_->model, &summary);
   summary.total_seconds = total.seconds();
   return summary;
 }

@@ -9,7 +9,7 @@
 
 #include <vector>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 using Groups = std::vector<std::vector<Index>>;
 
@@ -78,4 +78,4 @@ ControlSystem kept_q_blocks(const Model& model, const ModifiedArapSystem& sys, c
 // control layer. The full system is freed before the factorization.
 ControlSystem assemble_control_system(Model& model, const DeformableMesh& mesh);
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

@@ -4,7 +4,7 @@
 
 #include "sparse_products.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 
@@ -14,7 +14,7 @@
 #include <tuple>
 #include <utility>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 // ---- The distributed assembly (Deformer::precompute_part) ----
 //
@@ -191,9 +191,9 @@ SparseMatrix<double> owned_control_rows(const Model& model, ControlRows rows, co
   SparseMatrix<double> free_rows(free_count, width);
   if (free_count > 0) {
     const SparseMatrix<double> PfT = P.middleCols(rows.first, free_count).transpose();
-    free_rows = detail_deformer::parallel_product(PfT, X);
+    free_rows = detail::parallel_product(PfT, X);
     if (right != nullptr) {
-      SparseMatrix<double> times_right = detail_deformer::parallel_product(free_rows, *right);
+      SparseMatrix<double> times_right = detail::parallel_product(free_rows, *right);
       free_rows.swap(times_right);
     }
   }
@@ -278,7 +278,7 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
   if (model.s > 0) {
     patch_row_columns(model, &cols, &position);
     const SparseMatrix<double> PpT = cs.P.rightCols(12 * model.s).transpose();  // 12s × 3n
-    patch_H = dense_on(detail_deformer::parallel_product(PpT, own.H) * cs.P, position, static_cast<Index>(cols.size()));
+    patch_H = dense_on(detail::parallel_product(PpT, own.H) * cs.P, position, static_cast<Index>(cols.size()));
     patch_D = dense_on(PpT * own.Ds, {}, 9 * model.d);
     sum(&patch_H);
     sum(&patch_D);
@@ -294,6 +294,29 @@ ControlSystem control_system_rows(const Model& model, const DeformableMesh& mesh
   if (with_dv) cs.DV = owned_control_rows(model, rows, cs.P, own.DV, patch_DV, {});
   return cs;
 }
+
+namespace {
+
+// The elements whose assembly completes this process's rows of Q (those
+// from q0 on, 4 per element): the elements of those rows and their
+// neighbours, sorted; empty when the process holds no row of Q.
+std::vector<Index> q_row_elements(const RotationElements& el, const ControlRows& rows, Index q0) {
+  std::vector<Index> out;
+  if (rows.end <= q0) return out;
+  const Index r = el.size();
+  std::vector<char> keep(static_cast<size_t>(r), 0), here(static_cast<size_t>(r), 0);
+  for (Index k = (std::max(rows.first, q0) - q0) / 4; k <= (rows.end - 1 - q0) / 4; ++k)
+    here[static_cast<size_t>(k)] = keep[static_cast<size_t>(k)] = 1;
+  for (const auto& [k, j] : element_neighbours(el)) {
+    if (here[static_cast<size_t>(k)]) keep[static_cast<size_t>(j)] = 1;
+    if (here[static_cast<size_t>(j)]) keep[static_cast<size_t>(k)] = 1;
+  }
+  for (Index k = 0; k < r; ++k)
+    if (keep[static_cast<size_t>(k)]) out.push_back(k);
+  return out;
+}
+
+}  // namespace
 
 // ---- γ > 0: Q kept in u = [control (patch_base + 12s); Q (4r)] ----
 //
@@ -311,7 +334,7 @@ ControlSystem kept_q_control_rows(Model& model, const DeformableMesh& mesh, Defo
   model.keep_rotation_corrections();
   const ControlRows rows = control_rows(model.nu, part);
   const RotationElements& el = model.elements;
-  const Index r = el.size(), q0 = model.patch_base + 12 * model.s, c9 = 9 * model.d;
+  const Index q0 = model.patch_base + 12 * model.s, c9 = 9 * model.d;
   const bool with_dv = fit == ClusterRotationFit::PaperPhase2;
   ControlSystem cs;
   cs.P = model.control_matrix();
@@ -366,19 +389,8 @@ ControlSystem kept_q_control_rows(Model& model, const DeformableMesh& mesh, Defo
   vertex_elements.insert(vertex_elements.end(), split.ghosts.begin(), split.ghosts.end());
   std::sort(vertex_elements.begin(), vertex_elements.end());
   for_each_chunk(vertex_elements, [&](const std::vector<Index>& chunk) { add_rows(chunk, true); });
-  std::vector<Index> q_elements;
-  if (rows.end > q0) {
-    std::vector<char> keep(static_cast<size_t>(r), 0), here(static_cast<size_t>(r), 0);
-    for (Index k = (std::max(rows.first, q0) - q0) / 4; k <= (rows.end - 1 - q0) / 4; ++k)
-      here[static_cast<size_t>(k)] = keep[static_cast<size_t>(k)] = 1;
-    for (const auto& [k, j] : element_neighbours(el)) {
-      if (here[static_cast<size_t>(k)]) keep[static_cast<size_t>(j)] = 1;
-      if (here[static_cast<size_t>(j)]) keep[static_cast<size_t>(k)] = 1;
-    }
-    for (Index k = 0; k < r; ++k)
-      if (keep[static_cast<size_t>(k)]) q_elements.push_back(k);
-    add_rows(q_elements, false);
-  }
+  const std::vector<Index> q_elements = q_row_elements(el, rows, q0);
+  if (!q_elements.empty()) add_rows(q_elements, false);
   std::vector<Index> both;
   std::set_union(vertex_elements.begin(), vertex_elements.end(), q_elements.begin(), q_elements.end(),
                  std::back_inserter(both));
@@ -406,4 +418,4 @@ ControlSystem whole_then_rows(Model& model, const DeformableMesh& mesh, Deformer
   return cs;
 }
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

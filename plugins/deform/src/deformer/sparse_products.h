@@ -11,7 +11,7 @@
 #include <cstring>
 #include <vector>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 // True when P is the identity (square, one unit entry per column on the
 // diagonal): the control matrix of a mesh with every vertex free and no patch.
@@ -67,4 +67,4 @@ inline SparseMatrix<double> parallel_product(const SparseMatrix<double>& A, cons
   return R;
 }
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail

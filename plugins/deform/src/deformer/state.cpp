@@ -7,7 +7,7 @@
 #include "deformer/control_layer.h"
 #include "deformer/handle_checks.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 
@@ -15,7 +15,7 @@
 #include <utility>
 
 namespace qpreduce::deform {
-namespace detail_deformer {
+namespace detail {
 
 CompactMesh compact_mesh(const Vertices& V, const ElementsRef& E,
                                           const std::vector<Index>& unreferenced) {
@@ -280,7 +280,7 @@ void describe(const Model& model, PrecomputeSummary* summary) {
   summary->reduced_size = model.nx + 9 * model.d;
 }
 
-}  // namespace detail_deformer
+}  // namespace detail
 
 void Deformer::State::finish(const DeformerOptions& options) {
   model.finish_reduction();

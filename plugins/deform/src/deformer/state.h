@@ -27,7 +27,7 @@
 #include <utility>
 #include <vector>
 
-namespace qpreduce::deform::detail_deformer {
+namespace qpreduce::deform::detail {
 
 using Triplets = std::vector<Eigen::Triplet<double>>;
 using RowMatrixF = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
@@ -216,17 +216,17 @@ struct Settings {
 // patches, reduced size).
 void describe(const Model& model, PrecomputeSummary* summary);
 
-}  // namespace qpreduce::deform::detail_deformer
+}  // namespace qpreduce::deform::detail
 
 namespace qpreduce::deform {
 
 struct Deformer::State {
-  detail_deformer::Inputs inputs;
-  detail_deformer::Model model;
-  detail_deformer::Settings settings;
-  detail_deformer::OnSite onsite;
-  detail_deformer::Pose pose;
-  detail_deformer::Workspace work;
+  detail::Inputs inputs;
+  detail::Model model;
+  detail::Settings settings;
+  detail::OnSite onsite;
+  detail::Pose pose;
+  detail::Workspace work;
   bool ready = false;
 
   // With float rounds, G_z·T (the largest product of a new handle set) in

@@ -1,4 +1,4 @@
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 #include "qpreduce/deform/energy/arap_energy.h"
 
 #include "../deformer/sparse_products.h"
@@ -442,13 +442,13 @@ EliminatedArapSystem eliminate_rotation_corrections(const ModifiedArapSystem& sy
   const SparseMatrix<double> Binv = inverse_element_blocks(sys.L.bottomRightCorner(nq, nq), sys.r);
   const SparseMatrix<double> DV = sys.D.topRows(nv);
   const SparseMatrix<double> DQ = sys.D.bottomRows(nq);
-  const SparseMatrix<double> LVQ_Binv = detail_deformer::parallel_product(LVQ, Binv);
+  const SparseMatrix<double> LVQ_Binv = detail::parallel_product(LVQ, Binv);
   EliminatedArapSystem out;
   out.H = eliminated_hessian(SparseMatrix<double>(sys.L.topLeftCorner(nv, nv)), LVQ, LVQ_Binv, sys.r);
-  out.Ds = (DV - detail_deformer::parallel_product(LVQ_Binv, DQ)).pruned(1e-300);
+  out.Ds = (DV - detail::parallel_product(LVQ_Binv, DQ)).pruned(1e-300);
   out.DV = DV;
-  out.K = detail_deformer::parallel_product(SparseMatrix<double>(DQ.transpose()),
-                                            detail_deformer::parallel_product(Binv, DQ))
+  out.K = detail::parallel_product(SparseMatrix<double>(DQ.transpose()),
+                                            detail::parallel_product(Binv, DQ))
               .pruned(1e-300);
   return out;
 }

@@ -1,7 +1,7 @@
 // The built-in deformation models of the plugin contract (model.h): ARAP
 // (rotations) and conformal-like (scaled rotations), both over the energy E′
 // of Eq. 8–11.
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 #include "qpreduce/deform/energy/model.h"
 
 #include <Eigen/LU>

@@ -2,7 +2,7 @@
 // buffered output shared by the readers and writers; see io_detail.h.
 #include "io_detail.h"
 
-#include "qpreduce/atomic_file.h"
+#include "qpreduce/util/atomic_file.h"
 
 #include <algorithm>
 #include <cctype>

@@ -1,5 +1,4 @@
 // Scenarios from .sel/.def, .anim and JSON scenes (docs/formats.md); see scenario.h.
-#include <qpreduce/support.h>
 #include "qpreduce/deform/io/scenario.h"
 #include "qpreduce/deform/mesh/geometry.h"
 
@@ -194,8 +193,8 @@ void check_handle_targets(const DeformableMesh& model, const Handles& handles, c
 
 std::vector<char> anchored_vertices(const Scenario& sc) {
   // A Scenario from Python may have had its model or handles replaced.
-  detail_deformer::check_patch_labels(sc.model, "anchored_vertices");
-  detail_deformer::check_handles(sc.handles, sc.model.V.rows(), sc.model.patch_types);
+  detail::check_patch_labels(sc.model, "anchored_vertices");
+  detail::check_handles(sc.handles, sc.model.V.rows(), sc.model.patch_types);
   std::vector<char> anchored(static_cast<size_t>(sc.model.V.rows()), 0);
   for (const PointHandle& h : sc.handles.points)
     for (Index v : h.vertices) anchored[static_cast<size_t>(v)] = 1;

@@ -1,6 +1,6 @@
 #include "qpreduce/deform/mesh/mesh.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 

@@ -3,7 +3,7 @@
 #include "finding_builder.h"
 #include "orientation.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/Geometry>  // cross
 

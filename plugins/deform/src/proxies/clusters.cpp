@@ -5,7 +5,8 @@
 
 #include "proxies_internal.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <fmt/format.h>
 
@@ -218,6 +219,18 @@ std::vector<int> element_clusters_from_vertex_labels(const std::vector<int>& per
     out[static_cast<std::size_t>(e)] = per_vertex[static_cast<std::size_t>(v)];
   }
   return out;
+}
+
+void ClusterSummary::add_details(Report* out) const {
+  out->add("spectral", spectral.report())
+      .add("elements", elements)
+      .add("clusters", clusters)
+      .add("components", components)
+      .add("kmeans_objective", kmeans_objective)
+      .add("kmeans_iterations", kmeans_iterations)
+      .add("kmeans_converged", kmeans_converged)
+      .add("kmeans_seconds", kmeans_seconds)
+      .add("total_seconds", total_seconds);
 }
 
 }  // namespace qpreduce::deform

@@ -5,7 +5,8 @@
 
 #include "proxies_internal.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/Dense>
 

@@ -5,7 +5,8 @@
 
 #include "proxies_internal.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
@@ -479,6 +480,17 @@ SpectralSummary spectral_embedding(const VerticesRef& V, const SparseMatrix<doub
   *embedding = std::move(result);
   summary.total_seconds = total.seconds();
   return summary;
+}
+
+void SpectralSummary::add_details(Report* out) const {
+  out->add("components", components)
+      .add("eigenpairs", eigenpairs)
+      .add("lanczos_operations", lanczos_operations)
+      .add("deflation_rounds", deflation_rounds)
+      .add("max_relative_residual", max_relative_residual)
+      .add("factorize_seconds", factorize_seconds)
+      .add("eigen_seconds", eigen_seconds)
+      .add("total_seconds", total_seconds);
 }
 
 }  // namespace qpreduce::deform

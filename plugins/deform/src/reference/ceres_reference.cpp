@@ -3,7 +3,8 @@
 // constrained vertices as constant parameter blocks, automatic derivatives.
 #include "reference_internal.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #ifdef QPREDUCE_NO_CERES
 
@@ -37,7 +38,7 @@ namespace qpreduce::deform {
 
 namespace {
 
-using detail_reference::PreparedModel;
+using detail::PreparedModel;
 
 // One residual block: the corners of one triangle (tet) of an element, and
 // B (corners − 1 rows) with BᵀB = Σ_e c_e (ξ_i − ξ_j)(ξ_i − ξ_j)ᵀ over the
@@ -260,16 +261,16 @@ ReferenceSummary solve_ceres_in_frame(const DeformableMesh& model, const Handles
                                       const ReferenceOptions& options, ReferenceSolution* out,
                                       const Vertices& initial) {
   const Timer setup;
-  const PreparedModel m = detail_reference::prepare_model(model, options);
-  detail_reference::check_handles(m, handles);
-  detail_reference::check_anchored(m, handles);
+  const PreparedModel m = detail::prepare_model(model, options);
+  detail::check_handles(m, handles);
+  detail::check_anchored(m, handles);
   check_supported(m, handles);
   const Index n = m.V.rows();
   if (initial.size() > 0) {
     ::qpreduce::check_size("solve_ceres_reference: initial guess rows", n, initial.rows());
     ::qpreduce::check_finite("solve_ceres_reference: initial guess", initial);
   }
-  const DeformableMesh targets_model = detail_reference::targets_model(m);
+  const DeformableMesh targets_model = detail::targets_model(m);
   const VertexTargets pinned = vertex_targets(targets_model, handles, targets, 1e-9 * m.diagonal);
 
   const bool classic = options.energy == ReferenceEnergy::ClassicArap;
@@ -311,11 +312,11 @@ ReferenceSummary solve_ceres_in_frame(const DeformableMesh& model, const Handles
   read_ceres_summary(cs, X.allFinite(), &summary);
   Eigen::VectorXd R(9 * nrot);
   for (Index i = 0; i < nrot; ++i) Eigen::Map<Eigen::Matrix3d>(R.data() + 9 * i) = to_rotation(quats.data() + 4 * i);
-  summary.energy = detail_reference::energy_of(m, options.energy, X, Q, R);
+  summary.energy = detail::energy_of(m, options.energy, X, Q, R);
   out->V = X * frame.transpose();
   out->Q = Q;
   out->rotations = R;
-  if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
+  if (!classic) detail::rotations_to_world(frame, &out->rotations);
   summary.handle_residual = handle_residual(targets_model, handles, targets, out->V);
   return summary;
 }
@@ -329,7 +330,7 @@ ReferenceSummary solve_ceres_reference(const DeformableMesh& model, const Handle
                                        ReferenceSolution* out, const Vertices& initial) {
   // In the units-free frame (reference_internal.h): Ceres' gradient
   // tolerance, for one, is absolute.
-  return detail_reference::solve_in_frame(model, targets, initial, out,
+  return detail::solve_in_frame(model, targets, initial, out,
                                           [&](const DeformableMesh& local_model, const HandleTargets& local_targets,
                                               const Vertices& local_initial, ReferenceSolution* local_out) {
                                             return solve_ceres_in_frame(local_model, handles, local_targets, options,

@@ -7,13 +7,13 @@
 
 namespace qpreduce::deform {
 
-struct LocalGlobalArap::State : detail_reference::LocalGlobalState {};
+struct LocalGlobalArap::State : detail::LocalGlobalState {};
 
 namespace {
 
-using detail_reference::LocalGlobalState;
-using detail_reference::PreparedModel;
-using detail_reference::Triplets;
+using detail::LocalGlobalState;
+using detail::PreparedModel;
+using detail::Triplets;
 
 // ---- set_handles
 
@@ -280,10 +280,10 @@ void LocalGlobalArap::precompute(const DeformableMesh& model, const ReferenceOpt
   State& st = *owned;
   st.options = options;
   st.units = normalization_of(model.V);
-  st.m = detail_reference::prepare_model(normalised(model, st.units), options);
+  st.m = detail::prepare_model(normalised(model, st.units), options);
   st.energy_unit = energy_unit(st.units, st.m.tet);
   st.given_elements = in_given_units(st.m.elements, st.units);
-  st.frame_targets = detail_reference::targets_model(st.m);
+  st.frame_targets = detail::targets_model(st.m);
   st.given_targets = st.frame_targets;
   st.given_targets.V = model.V;
   st.n = st.m.V.rows();
@@ -343,8 +343,8 @@ HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
   State& st = *state_;
   HandleSetSummary summary;
   if (st.n == 0) throw std::invalid_argument("LocalGlobalArap::set_handles: call precompute first");
-  detail_reference::check_handles(st.m, handles);
-  detail_reference::check_anchored(st.m, handles);
+  detail::check_handles(st.m, handles);
+  detail::check_anchored(st.m, handles);
   st.has_handles = false;
   st.handles = handles;
   Triplets tg;  // general rows over the whole control layer
@@ -388,17 +388,17 @@ ReferenceSummary LocalGlobalArap::solve(const HandleTargets& targets, ReferenceS
   const State& st = *state_;
   if (!st.has_handles) throw std::invalid_argument("LocalGlobalArap::solve: call precompute and set_handles first");
   if (out == nullptr) throw std::invalid_argument("LocalGlobalArap::solve: out is null");
-  detail_reference::check_targets(st.handles, targets);
+  detail::check_targets(st.handles, targets);
   if (initial.size() > 0) {
     ::qpreduce::check_size("LocalGlobalArap::solve: initial guess rows", st.n, initial.rows());
     ::qpreduce::check_finite("LocalGlobalArap::solve: initial guess", initial);
   }
   const Normalization& f = st.units;
   vertex_targets(st.given_targets, st.handles, targets, 1e-9 * f.scale);  // throws on conflicts, in the given units
-  ReferenceSummary summary = detail_reference::run_rounds(
+  ReferenceSummary summary = detail::run_rounds(
       st, normalised(targets, f), out,
       initial.size() > 0 ? Vertices((initial.rowwise() - f.centre.transpose()) / f.scale) : Vertices(), cancel);
-  detail_reference::to_given_units(f, st.energy_unit, &summary, out);
+  detail::to_given_units(f, st.energy_unit, &summary, out);
   const bool accelerate = st.options.anderson_window > 0;
   summary.solver_report = fmt::format(
       "local-global ({}{}): {} rounds, energy {:.12g} -> {:.12g}, {}", to_string(st.options.energy),

@@ -7,7 +7,8 @@
 #include "deformer/control_layer.h"
 
 #include <qpreduce/anderson.h>
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
+#include <qpreduce/util/timer.h>
 
 #include <Eigen/Dense>
 #include <Eigen/SparseCholesky>
@@ -21,7 +22,7 @@
 #include <utility>
 #include <vector>
 
-namespace qpreduce::deform::detail_reference {
+namespace qpreduce::deform::detail {
 
 
 using Triplets = std::vector<Eigen::Triplet<double>>;
@@ -77,7 +78,7 @@ struct LocalGlobalState {
 
   // Adds the control-layer entries of coordinate (v, a) scaled by `scale` to column `col`.
   void control_row(Index v, int a, double scale, Index col, Triplets* t) const {
-    detail_deformer::add_control_row(m.patch_of_vertex, m.V, control_of_free, nu - 12 * s, v, a, scale, col, t);
+    detail::add_control_row(m.patch_of_vertex, m.V, control_of_free, nu - 12 * s, v, a, scale, col, t);
   }
 };
 
@@ -414,4 +415,4 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
 ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& targets, ReferenceSolution* out,
                             const Vertices& initial, const std::function<bool()>& cancel);
 
-}  // namespace qpreduce::deform::detail_reference
+}  // namespace qpreduce::deform::detail

@@ -5,7 +5,7 @@
 
 #include <fmt/format.h>
 
-namespace qpreduce::deform::detail_reference {
+namespace qpreduce::deform::detail {
 
 ConstrainedValues constrained_values(const LocalGlobalState& st, const HandleTargets& targets,
                                      const Eigen::Matrix3d& frame) {
@@ -15,7 +15,7 @@ ConstrainedValues constrained_values(const LocalGlobalState& st, const HandleTar
   cv.up.resize(static_cast<Index>(st.pinned_rows.size()));
   {
     Eigen::VectorXd u = Eigen::VectorXd::Zero(st.nu);
-    for (const auto& pt : detail_reference::patch_targets(m, st.handles, targets, frame)) {
+    for (const auto& pt : detail::patch_targets(m, st.handles, targets, frame)) {
       const Index base = st.nu - 12 * st.s + 12 * pt.patch;
       for (int a = 0; a < 3; ++a)
         for (int c = 0; c < 3; ++c) u(base + 3 * a + c) = pt.transform(a, c);
@@ -396,7 +396,7 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
   out->V = rounds.X * frame.transpose();  // rows: (F x)ᵀ = xᵀFᵀ
   out->Q = rounds.Q;
   out->rotations = rounds.R;
-  if (!classic) detail_reference::rotations_to_world(frame, &out->rotations);
+  if (!classic) detail::rotations_to_world(frame, &out->rotations);
   summary.energy = loop.energy();  // of the returned (V′, R) or (V′, Q, S)
   summary.handle_residual = handle_residual(st.frame_targets, st.handles, targets, out->V);
   if (summary.status == Status::Success && summary.cancelled) {
@@ -410,4 +410,4 @@ ReferenceSummary run_rounds(const LocalGlobalState& st, const HandleTargets& tar
   return summary;
 }
 
-}  // namespace qpreduce::deform::detail_reference
+}  // namespace qpreduce::deform::detail

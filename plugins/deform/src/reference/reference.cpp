@@ -5,7 +5,7 @@
 #include "deformer/handle_checks.h"
 
 #include <qpreduce/anderson.h>
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include "qpreduce/deform/deformer/handles.h"
 #include "qpreduce/deform/mesh/mesh.h"
@@ -56,13 +56,13 @@ bool ReferenceOptions::is_valid(std::string* why) const {
   return true;
 }
 
-namespace detail_reference {
+namespace detail {
 
 PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions& options) {
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("ReferenceOptions: " + why);
   PreparedModel m;
-  detail_deformer::check_mesh_elements(model, "reference");
+  detail::check_mesh_elements(model, "reference");
   m.tet = model.is_tet();
   m.V = model.V;
   const Index n = m.V.rows();
@@ -80,7 +80,7 @@ PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions&
     m.d = 1 + *std::max_element(m.clusters.begin(), m.clusters.end());
   }
   m.patch_types = model.patch_types;
-  detail_deformer::check_patch_labels(model, "reference");
+  detail::check_patch_labels(model, "reference");
   m.patch_of_vertex = model.patch_of_vertex.empty() ? std::vector<int>(static_cast<size_t>(n), -1)
                                                     : model.patch_of_vertex;
   m.components = connected_components(n, m.tet ? ElementsRef(model.T) : ElementsRef(model.F));
@@ -89,7 +89,7 @@ PreparedModel prepare_model(const DeformableMesh& model, const ReferenceOptions&
 }
 
 void check_handles(const PreparedModel& m, const Handles& handles) {
-  detail_deformer::check_handles(handles, m.V.rows(), m.patch_types);
+  detail::check_handles(handles, m.V.rows(), m.patch_types);
 }
 
 void check_targets(const Handles& handles, const HandleTargets& targets) {
@@ -183,7 +183,7 @@ void to_given_units(const Normalization& frame, double energy_unit, ReferenceSum
   summary->last_step *= frame.scale;
 }
 
-}  // namespace detail_reference
+}  // namespace detail
 
 VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles, const HandleTargets& targets,
                              double tolerance) {
@@ -192,7 +192,7 @@ VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles
     ::qpreduce::check_size("vertex_targets: patch_of_vertex", n,
                                    static_cast<Index>(model.patch_of_vertex.size()));
   }
-  detail_reference::check_targets(handles, targets);
+  detail::check_targets(handles, targets);
   VertexTargets out;
   out.pinned.assign(static_cast<size_t>(n), 0);
   out.position = Vertices::Zero(n, 3);
@@ -239,6 +239,34 @@ VertexTargets vertex_targets(const DeformableMesh& model, const Handles& handles
     hold(v, targets.points.row(static_cast<Index>(h)).transpose(), fmt::format("point handle {}", h));
   }
   return out;
+}
+
+void ReferenceSummary::add_details(Report* out) const {
+  out->add("energy_kind", energy_kind)
+      .add("converged", converged)
+      .add("iterations", iterations)
+      .add("initial_energy", initial_energy)
+      .add("energy", energy)
+      .add("handle_residual", handle_residual)
+      .add("last_step", last_step)
+      .add("fixed_point_residual", fixed_point_residual)
+      .add("estimated_distance", estimated_distance)
+      .add("rejected_steps", rejected_steps)
+      .add("newton_steps", newton_steps)
+      .add("cg_iterations", cg_iterations)
+      .add("newton_fallbacks", newton_fallbacks)
+      .add("cancelled", cancelled)
+      .add("setup_seconds", setup_seconds)
+      .add("solve_seconds", solve_seconds)
+      .add("solver_report", solver_report);
+}
+
+void HandleSetSummary::add_details(Report* out) const {
+  out->add("free_coordinates", free_coordinates)
+      .add("pinned_coordinates", pinned_coordinates)
+      .add("point_rows", point_rows)
+      .add("axis_separable", axis_separable)
+      .add("seconds", seconds);
 }
 
 }  // namespace qpreduce::deform

@@ -8,7 +8,7 @@
 #include <functional>
 #include <vector>
 
-namespace qpreduce::deform::detail_reference {
+namespace qpreduce::deform::detail {
 
 // The checked model: rotation elements, clusters (E′), components.
 struct PreparedModel {
@@ -73,4 +73,4 @@ using FrameSolve = std::function<ReferenceSummary(const DeformableMesh& model, c
 ReferenceSummary solve_in_frame(const DeformableMesh& model, const HandleTargets& targets, const Vertices& initial,
                                 ReferenceSolution* out, const FrameSolve& solve);
 
-}  // namespace qpreduce::deform::detail_reference
+}  // namespace qpreduce::deform::detail

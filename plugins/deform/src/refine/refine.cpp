@@ -1,9 +1,9 @@
 // Refiner: the full-space finish of a reduced pose (refine.h).
-#include "qpreduce/deform/reference/refine.h"
+#include "qpreduce/deform/refine/refine.h"
 
 #include "qpreduce/deform/mesh/geometry.h"
 
-#include <qpreduce/support.h>
+#include <qpreduce/checks.h>
 
 #include <fmt/format.h>
 #include <omp.h>
@@ -148,6 +148,27 @@ RefineSummary Refiner::refine(const Handles& handles, const HandleTargets& targe
   summary.rms_from_input = std::sqrt(d.squaredNorm() / static_cast<double>(d.size())) / st.diagonal;
   summary.max_from_input = d.maxCoeff() / st.diagonal;
   return summary;
+}
+
+void RefineSummary::add_details(Report* out) const {
+  out->add("rounds", rounds)
+      .add("converged", converged)
+      .add("cancelled", cancelled)
+      .add("refactored", refactored)
+      .add("axis_separable", axis_separable)
+      .add("rejected_steps", rejected_steps)
+      .add("newton_steps", newton_steps)
+      .add("cg_iterations", cg_iterations)
+      .add("seconds", seconds)
+      .add("setup_seconds", setup_seconds)
+      .add("initial_energy", initial_energy)
+      .add("energy", energy)
+      .add("arap_energy", arap_energy)
+      .add("fixed_point_residual", fixed_point_residual)
+      .add("estimated_distance", estimated_distance)
+      .add("handle_residual", handle_residual)
+      .add("rms_from_input", rms_from_input)
+      .add("max_from_input", max_from_input);
 }
 
 }  // namespace qpreduce::deform

@@ -88,6 +88,9 @@ struct DistributedSummary : SubspaceSummary {
   double factor_megabytes_max = 0.0;    // INFOG(21): largest MUMPS memory of one rank, MB
   double factor_megabytes_total = 0.0;  // INFOG(22): summed over the ranks, MB
   double reduce_seconds = 0.0;          // the reduced operators and the residual
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // This rank's part of the subspace, and the reduced operators every rank holds.
@@ -129,6 +132,19 @@ DistributedSummary build_subspace_mumps_rows(MPI_Comm comm, const SparseMatrix<d
 // For writers of the single-machine model cache, whose format holds the
 // double basis: root then holds n × p doubles, the other ranks none.
 void gather_subspace(MPI_Comm comm, const DistributedSubspace& part, int root, VariationalSubspace<double>* whole);
+
+// The on-site products of a demand over the ranks' rows of B = [N UD]
+// (each rank passes the same whole inputs; every one is collective):
+//   reduced_constraints  A_r = AᵀB (m × p), summed over the ranks, on every
+//                        rank; A: n × m.
+//   reduced_linear_term  q_r = Bᵀq (p), summed, on every rank; q: n.
+//   gather_solution      X = N·z + UD·y (n) for w = [z; y] (p), each rank its
+//                        rows, gathered on `root` (other ranks' *X untouched).
+// Throws std::invalid_argument on sizes that do not match the subspace.
+Matrix<double> reduced_constraints(MPI_Comm comm, const DistributedSubspace& part, const SparseMatrix<double>& A);
+Vector<double> reduced_linear_term(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& q);
+void gather_solution(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& w, int root,
+                     Vector<double>* X);
 
 // build_subspace_mumps for a caller that holds the whole H on every rank
 // (each rank passes its own rows), then gather_subspace to `root`: there B is

@@ -18,7 +18,7 @@
 #pragma once
 
 #include "qpreduce/common.h"
-#include "qpreduce/support.h"
+#include "qpreduce/util/file_error.h"
 
 #include <stdexcept>
 #include <string>

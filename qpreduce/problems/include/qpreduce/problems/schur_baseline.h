@@ -37,6 +37,9 @@ struct SchurBaselineOptions {
 struct SchurBaselineSummary : Outcome {
   Index factor_nonzeros = 0;
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 class CachedCholeskySchur {

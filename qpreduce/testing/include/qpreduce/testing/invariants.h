@@ -72,10 +72,10 @@ struct ProjectionOptions {
   std::uint64_t seed = 3;
 };
 
-namespace detail_testing {
+namespace detail {
 Eigen::VectorXd random_vector(Index size, double scale, std::mt19937_64& rng);
 CheckResult fail(double worst, std::string message);
-}  // namespace detail_testing
+}  // namespace detail
 
 // P must provide (as qpreduce::deform::ClusterProjection does):
 //   double project(const Eigen::Ref<const Eigen::VectorXd>& g, Eigen::Ref<Eigen::VectorXd> y);
@@ -85,12 +85,12 @@ CheckResult fail(double worst, std::string message);
 // `size` is the length of g and y.
 template <typename P>
 CheckResult check_projection(P& projection, Index size, const ProjectionOptions& options = {}) {
-  using detail_testing::fail;
+  using detail::fail;
   std::mt19937_64 rng(options.seed);
   CheckResult result;
   for (int sample = 0; sample < options.samples; ++sample) {
-    const Eigen::VectorXd g = detail_testing::random_vector(size, options.input_scale, rng);
-    Eigen::VectorXd y = detail_testing::random_vector(size, options.input_scale, rng);
+    const Eigen::VectorXd g = detail::random_vector(size, options.input_scale, rng);
+    Eigen::VectorXd y = detail::random_vector(size, options.input_scale, rng);
     std::string why;
     projection.retract(y);
     if (!projection.valid(y, options.tolerance, &why)) {

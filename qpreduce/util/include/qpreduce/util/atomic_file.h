@@ -27,7 +27,7 @@
 #include <utility>
 #include <vector>
 
-#include "qpreduce/support.h"
+#include "qpreduce/util/file_error.h"
 
 namespace qpreduce {
 

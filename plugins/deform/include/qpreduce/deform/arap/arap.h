@@ -25,7 +25,7 @@
 #pragma once
 
 #include "qpreduce/deform/deformer/deformer.h"
-#include "qpreduce/deform/reference/refine.h"
+#include "qpreduce/deform/refine/refine.h"
 
 #include <memory>
 #include <vector>

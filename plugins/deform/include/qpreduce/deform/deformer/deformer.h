@@ -157,6 +157,9 @@ struct PrecomputeSummary : Outcome {
   SubspaceSummary subspace;
   double clustering_seconds = 0.0, assembly_seconds = 0.0, subspace_seconds = 0.0, reduction_seconds = 0.0,
          total_seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 struct FrameSummary : Outcome {  // Success after a frame
@@ -184,6 +187,9 @@ struct FrameSummary : Outcome {  // Success after a frame
   double solve_seconds = 0.0;      // the alternating rounds
   double reconstruct_seconds = 0.0;
   double total_seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 class Deformer {

@@ -9,7 +9,7 @@
 //     "data/cylinder.sel: expected 4802 entries (one per mesh vertex), got 4800"
 #pragma once
 
-#include "qpreduce/support.h"
+#include "qpreduce/util/file_error.h"
 
 #include <string>
 #include <utility>

@@ -39,7 +39,10 @@ struct ClusterSummary : Outcome {
   int kmeans_iterations = 0;       // max over components
   bool kmeans_converged = true;    // all components
   double kmeans_seconds = 0.0, total_seconds = 0.0;
-  std::string brief_report() const;
+  std::string brief_report() const override;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // d rotational clusters of a triangle or tet mesh (Eq. 8).

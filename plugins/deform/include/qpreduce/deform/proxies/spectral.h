@@ -66,7 +66,10 @@ struct SpectralSummary : Outcome {
   // max over components and pairs of ‖Lφ − λMφ‖ / (‖L‖_∞‖φ‖ + |λ|‖M‖_∞‖φ‖)
   double max_relative_residual = 0.0;
   double factorize_seconds = 0.0, eigen_seconds = 0.0, total_seconds = 0.0;
-  std::string brief_report() const;
+  std::string brief_report() const override;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // The `count` smallest eigenpairs (zeros included) of L φ = λ M φ by

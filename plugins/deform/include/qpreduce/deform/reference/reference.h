@@ -147,6 +147,9 @@ struct ReferenceSummary : Outcome {
   double setup_seconds = 0.0;    // elements, assembly, factorization (local-global: per handle set)
   double solve_seconds = 0.0;    // the iterations
   std::string solver_report;     // Ceres: Solver::Summary::FullReport(); local-global: a line
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // The result: deformed positions V′ (n × 3) and the rotations.
@@ -166,6 +169,9 @@ struct HandleSetSummary : Outcome {
   // K_s (a third of the size) was factored instead of K.
   bool axis_separable = false;
   double seconds = 0.0;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // Sorkine–Alexa local-global ARAP in full space, one cached factorization per

@@ -99,6 +99,9 @@ struct RefineSummary : Outcome {
   // After each round: the refined energy and the seconds since the rounds
   // began.
   std::vector<double> round_energy, round_seconds;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 class Refiner {
