@@ -5,7 +5,7 @@
 #include "qpreduce/deform/deformer/deformer.h"
 
 #include "precompute_internal.h"
-#include "sparse_products.h"
+#include "energy/sparse_products.h"
 #include "state.h"
 
 #include <qpreduce/checks.h>

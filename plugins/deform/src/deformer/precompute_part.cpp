@@ -2,7 +2,7 @@
 // system (precompute_internal.h), Q eliminated or kept.
 #include "precompute_internal.h"
 
-#include "sparse_products.h"
+#include "energy/sparse_products.h"
 
 #include <qpreduce/checks.h>
 

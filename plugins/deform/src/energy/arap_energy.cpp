@@ -1,7 +1,7 @@
 #include <qpreduce/checks.h>
 #include "qpreduce/deform/energy/arap_energy.h"
 
-#include "../deformer/sparse_products.h"
+#include "sparse_products.h"
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>

@@ -1,8 +1,8 @@
 // White-box tests of the precompute's threaded sparse products
-// (plugins/deform/src/deformer/sparse_products.h).
+// (plugins/deform/src/energy/sparse_products.h).
 #include <catch2/catch.hpp>
 
-#include "deformer/sparse_products.h"
+#include "energy/sparse_products.h"
 
 #include <omp.h>
 
