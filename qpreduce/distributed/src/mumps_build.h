@@ -28,8 +28,9 @@ using SpD = SparseMatrix<double>;
 using MatD = Matrix<double>;
 inline constexpr Index kRowBlock = kSubspaceRowBlock;
 
-// Sums a dense matrix over the ranks, in place.
-inline void allreduce_sum(MPI_Comm comm, MatD& M) {
+// Sums a dense matrix or vector of doubles over the ranks, in place.
+template <typename Derived>
+void allreduce_sum(MPI_Comm comm, Eigen::PlainObjectBase<Derived>& M) {
   if (M.size() > 0) MPI_Allreduce(MPI_IN_PLACE, M.data(), static_cast<int>(M.size()), MPI_DOUBLE, MPI_SUM, comm);
 }
 inline double allreduce(MPI_Comm comm, double v, MPI_Op op) {

@@ -175,8 +175,7 @@ Matrix<double> reduced_constraints(MPI_Comm comm, const DistributedSubspace& par
   Matrix<double> Ar(A.cols(), part.d + part.k);
   Ar.leftCols(part.d) = At * part.N_rows;
   Ar.rightCols(part.k) = At * part.UD_rows;
-  if (Ar.size() > 0)
-    MPI_Allreduce(MPI_IN_PLACE, Ar.data(), static_cast<int>(Ar.size()), MPI_DOUBLE, MPI_SUM, comm);
+  detail::allreduce_sum(comm, Ar);
   return Ar;
 }
 
@@ -186,8 +185,7 @@ Vector<double> reduced_linear_term(MPI_Comm comm, const DistributedSubspace& par
   const auto mine = q.segment(part.rows.begin, part.rows.size());
   qr.head(part.d) = part.N_rows.transpose() * mine;
   qr.tail(part.k) = part.UD_rows.transpose() * mine;
-  if (qr.size() > 0)
-    MPI_Allreduce(MPI_IN_PLACE, qr.data(), static_cast<int>(qr.size()), MPI_DOUBLE, MPI_SUM, comm);
+  detail::allreduce_sum(comm, qr);
   return qr;
 }
 
