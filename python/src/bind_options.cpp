@@ -106,6 +106,7 @@ void bind_option_structs(py::module_& m) {
   def_validate<decltype(quotient), QuotientOptions>(quotient);
 }
 
+// Outcome and the engine's summaries (subspace.h, constraints.h).
 void bind_summaries(py::module_& m) {
   py::class_<Outcome>(m, "Outcome", "What every summary starts with: status and message (common.h).")
       .def_readonly("status", &Outcome::status, "Status of the step (starts at Status.NotRun).")
@@ -156,6 +157,10 @@ void bind_summaries(py::module_& m) {
       .ro("seconds", &ConstraintSummary::seconds, "Seconds.")
       .repr();
 
+}
+
+// The analysis summaries (full_solve.h, quotient.h, theorem.h).
+void bind_analysis_summaries(py::module_& m) {
   py::class_<FullSolveSummary, Outcome> full(m, "FullSolveSummary", "Result of solve_full (full_solve.h).");
   Fields(full, "FullSolveSummary")
       .listed("status")
@@ -197,6 +202,7 @@ void bind_options(py::module_& m) {
   bind_enums(m);
   bind_option_structs(m);
   bind_summaries(m);
+  bind_analysis_summaries(m);
 }
 
 }  // namespace qpreduce::python

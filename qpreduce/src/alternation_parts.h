@@ -6,8 +6,9 @@
 // set_proximal_block_size, set); the white-box tests drive them directly.
 #pragma once
 
-#include "qpreduce/alternation.h"
+#include "qpreduce/alternation_settings.h"
 #include "qpreduce/common.h"
+#include "qpreduce/input_projection.h"
 #include "qpreduce/subspace_solver.h"
 
 #include <memory>

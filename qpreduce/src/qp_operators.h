@@ -12,7 +12,7 @@
 #pragma once
 
 #include "qpreduce/common.h"
-#include "qpreduce/subspace_solver.h"
+#include "qpreduce/constraints.h"
 
 namespace qpreduce::detail {
 
