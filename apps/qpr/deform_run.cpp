@@ -11,6 +11,7 @@
 #include <qpreduce/deform/io/file_kind.h>
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/io/tet_io.h>
+#include <qpreduce/deform/pipeline/run_scenario.h>
 #include <qpreduce/util/timer.h>
 
 #include <CLI/CLI.hpp>
@@ -289,44 +290,11 @@ struct FrameSeries {
   std::vector<std::string> stops;                              // what ended them, one per frame
   std::vector<double> fixed_point_residual;                    // ‖ΔS‖/‖S‖ after them, one per frame
   FrameSummary last;                                           // the last frame's summary
-  Vertices out;                                                // the last frame's pose
 };
 
-// The deformer, from settings.cache_path when it holds a matching model, else
-// precomputed (and then saved there when set). Throws when precompute fails.
-PrecomputeSummary precompute_or_load(Deformer* deformer, const Scenario& scenario, const DeformerOptions& options,
-                                     const RunSettings& settings, bool* cache_loaded) {
-  const bool tty = isatty(fileno(stderr)) != 0;
-  const ProgressFn progress = settings.progress && tty ? ProgressFn(progress_bar) : ProgressFn();
-  PrecomputeSummary pre;
-  *cache_loaded = false;
-  if (!settings.cache_path.empty() && std::ifstream(settings.cache_path).good()) {
-    try {
-      pre = deformer->load(settings.cache_path, scenario.model, options);
-      *cache_loaded = true;
-    } catch (const IoError& e) {
-      std::fprintf(stderr, "  cache not used: %s\n", e.what());
-    }
-  }
-  if (!*cache_loaded) {
-    pre = deformer->precompute(scenario.model, options, progress);
-    if (!pre.ok()) throw std::runtime_error("precompute failed: " + pre.message);
-    if (!settings.cache_path.empty()) deformer->save(run_files().stage(settings.cache_path));
-  }
-  return pre;
-}
-
-// Runs every frame of the scenario, timing each and writing the meshes asked for.
-FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
-                       const RunSettings& settings, double diag) {
-  const int frames = static_cast<int>(scenario.frames.size());
+FrameSeries frame_series(const ScenarioRunSummary& run) {
   FrameSeries s;
-  Vertices& out = s.out;
-  for (int f = 0; f < frames; ++f) {
-    const FrameSummary fs = deformer.frame(scenario.frames[f], &out);
-    if (!usable(fs.status)) {  // a failed frame is a failed run: nothing is written (run_files.h)
-      throw std::runtime_error(fmt::format("frame {}: {}: {}", f, to_string(fs.status), fs.message));
-    }
+  for (const FrameSummary& fs : run.frames) {
     s.iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
     s.recon_ms.push_back(1e3 * fs.reconstruct_seconds);
     s.frame_ms.push_back(1e3 * fs.total_seconds);
@@ -334,49 +302,35 @@ FrameSeries run_frames(Deformer& deformer, const Scenario& scenario, const Trian
     s.stops.emplace_back(to_string(fs.stop));
     s.fixed_point_residual.push_back(fs.fixed_point_residual);
     s.last = fs;
-    s.residual.push_back(handle_residual(scenario, scenario.frames[f], out) / diag);
-    const bool write = std::find(settings.write_frames.begin(), settings.write_frames.end(), f) !=
-                           settings.write_frames.end() ||
-                       (f == frames - 1 && std::find(settings.write_frames.begin(), settings.write_frames.end(), -1) !=
-                                               settings.write_frames.end());
-    if (write && !settings.out_path.empty())
-      write_pose(run_files().stage(frame_path(settings.out_path, f, settings.write_frames.size() > 1)), out, surface,
-                 solid);
   }
+  s.residual = run.handle_residual;
   return s;
 }
 
-// The hands stop at the last frame: the reduced rounds run on at its targets
-// until the relative fixed-point residual is kSettleTolerance (at most
-// kSettleRounds rounds, a few ms even at 100k vertices: one reconstruction).
-// From the fixed point the refine has less to do than from the frame's
-// pose (docs/quality.md, "Refine"). A last frame already at kSettleTolerance (the default
-// rounds end there unless the time budget ends them first) is its own
-// settled pose: no rounds. *out: that pose, or the frame's when the rounds
-// fail. The deformer's round settings are `options`' again afterwards.
-constexpr int kSettleRounds = 500;
-constexpr double kSettleTolerance = 1e-6;
+// Whether frame f (of `frames`) is one the settings write.
+bool writes_frame(const RunSettings& settings, int f, int frames) {
+  const std::vector<int>& wf = settings.write_frames;
+  return !settings.out_path.empty() &&
+         (std::find(wf.begin(), wf.end(), f) != wf.end() ||
+          (f == frames - 1 && std::find(wf.begin(), wf.end(), -1) != wf.end()));
+}
 
-nlohmann::json settle_last_frame(Deformer& deformer, const Scenario& scenario, const FrameSeries& s,
-                                 const DeformerOptions& options, Vertices* out) {
-  if (s.last.fixed_point_residual <= kSettleTolerance) {
-    *out = s.out;
-    return {{"rounds", 0},
-            {"fixed_point_residual", s.last.fixed_point_residual},
-            {"seconds", 0.0},
-            {"status", to_string(Status::Success)},
-            {"tolerance", kSettleTolerance}};
-  }
-  deformer.set_rounds(kSettleRounds, kSettleTolerance);
-  const FrameSummary fs = deformer.frame(scenario.frames.back(), out);
-  deformer.set_rounds(options.iterations, options.tolerance, options.time_budget);
-  const bool ok = usable(fs.status) && out->rows() == s.out.rows();
-  if (!ok) *out = s.out;
-  return {{"rounds", fs.iterations},
-          {"fixed_point_residual", fs.fixed_point_residual},
-          {"seconds", fs.total_seconds},
-          {"status", to_string(fs.status)},
-          {"tolerance", kSettleTolerance}};
+// The report's "settle" object.
+nlohmann::json settle_json(const FrameSummary& settle, double tolerance) {
+  return {{"rounds", settle.iterations},
+          {"fixed_point_residual", settle.fixed_point_residual},
+          {"seconds", settle.total_seconds},
+          {"status", to_string(settle.status)},
+          {"tolerance", tolerance}};
+}
+
+// A failed stage as the exception the commands end with (the words the
+// bad-input suite holds them to).
+[[noreturn]] void throw_failed(const ScenarioRunSummary& run) {
+  if (run.stage == ScenarioStage::Handles && usable(run.handles.status))  // exact handles asked for
+    throw std::runtime_error(
+        fmt::format("handles (--strict): {}: {}", to_string(run.handles.status), run.handles.message));
+  throw std::runtime_error(run.message);
 }
 
 // What the deformer was built from and with: sizes, options, model, clusters.
@@ -444,24 +398,6 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
                               : std::string());
 }
 
-// The on-site step (OP) for the scenario's handles, timed into *op_ms.
-// Throws when the set is unusable, or not exact under `strict`; warns when
-// the subspace cannot follow it, saying what makes it exact.
-ConstraintSummary set_scenario_handles(Deformer* deformer, const Scenario& scenario, bool strict, double* op_ms) {
-  const Timer op_timer;
-  const ConstraintSummary cs = deformer->set_handles(scenario.handles, scenario.constraints);
-  *op_ms = 1e3 * op_timer.seconds();
-  if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
-  if (cs.status != Status::Success && strict)
-    throw std::runtime_error(fmt::format("handles (--strict): {}: {}", to_string(cs.status), cs.message));
-  if (cs.status != Status::Success) {
-    std::fprintf(stderr, "  warning: %s%s\n", cs.message.c_str(),
-                 cs.beyond_subspace ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
-                                : "");
-  }
-  return cs;
-}
-
 // The report's precompute keys.
 void report_precompute(const PrecomputeSummary& pre, bool cache_loaded, double peak_mb, nlohmann::json& report) {
   report["precompute_s"] = pre.total_seconds;
@@ -501,67 +437,79 @@ void report_frames(const FrameSeries& s, nlohmann::json& report) {
 nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
                             const RunSettings& settings, RunOutputs* outputs) {
   check_outputs(settings);
+  ScenarioRunOptions run_options;
+  run_options.deformer = settings.options;
+  run_options.cache_path = settings.cache_path;
+  run_options.strict = settings.strict;
+  run_options.settle = settings.settle;
+  run_options.refine = settings.refine;
   DeformerOptions options = settings.options;
   apply_scenario_options(scenario, &options);
 
+  const int frames = static_cast<int>(scenario.frames.size());
+  double peak_mb = 0.0;
+  ScenarioRunHooks hooks;
+  if (settings.progress && isatty(fileno(stderr)) != 0) hooks.progress = progress_bar;
+  hooks.prepared = [&](const Deformer& deformer, bool from_cache) {
+    peak_mb = peak_rss_mb();
+    if (!from_cache && !settings.cache_path.empty()) deformer.save(run_files().stage(settings.cache_path));
+  };
   Deformer deformer;
-  bool cache_loaded = false;
-  const PrecomputeSummary pre = precompute_or_load(&deformer, scenario, options, settings, &cache_loaded);
-  const double peak_mb = peak_rss_mb();
-
-  double op_ms = 0.0;
-  const ConstraintSummary cs = set_scenario_handles(&deformer, scenario, settings.strict, &op_ms);
-
-  const double diag = bounding_box_diagonal(scenario.model.V);
-  const FrameSeries s = run_frames(deformer, scenario, surface, solid, settings, diag);
-  if (cs.status != Status::Success && !s.residual.empty()) {
+  hooks.frame = [&](int f, const Vertices& pose) {
+    if (outputs && f == frames - 1) {  // the deformer's state after the last frame, before any settle
+      outputs->clusters = deformer.clusters();
+      outputs->rotations = deformer.rotations();
+      outputs->global_rotation = deformer.global_rotation();
+    }
+    if (writes_frame(settings, f, frames))
+      write_pose(run_files().stage(frame_path(settings.out_path, f, settings.write_frames.size() > 1)), pose, surface,
+                 solid);
+  };
+  ScenarioPoses poses;
+  const ScenarioRunSummary run = run_scenario(scenario, run_options, &deformer, &poses, hooks);
+  if (!run.cache_message.empty()) std::fprintf(stderr, "  cache not used: %s\n", run.cache_message.c_str());
+  if (run.stage != ScenarioStage::Precompute && run.handles.status != Status::Success && usable(run.handles.status) &&
+      !settings.strict) {
+    std::fprintf(stderr, "  warning: %s%s\n", run.handles.message.c_str(),
+                 run.handles.beyond_subspace
+                     ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
+                     : "");
+  }
+  if (!run.ok()) throw_failed(run);
+  const FrameSeries s = frame_series(run);
+  if (run.handles.status != Status::Success && !s.residual.empty()) {
     std::fprintf(stderr, "  warning: the handles end up to %.2e of the bounding-box diagonal from their targets\n",
                  *std::max_element(s.residual.begin(), s.residual.end()));
   }
-  if (outputs) {  // the deformer's state after the last frame, before any settle
-    outputs->clusters = deformer.clusters();
-    outputs->rotations = deformer.rotations();
-    outputs->global_rotation = deformer.global_rotation();
-    outputs->options = options;
-  }
-  Vertices shown;  // the refined pose, with --refine
-  Vertices settled;  // the last frame's fixed point, with --refine or settle
-  nlohmann::json refined, settle;
-  if (settings.refine || settings.settle) settle = settle_last_frame(deformer, scenario, s, options, &settled);
-  if (settings.refine) {
-    refined = refine_last_frame(scenario, settled, *settings.refine, &shown);
-    const int last = static_cast<int>(scenario.frames.size()) - 1;
-    const std::vector<int>& wf = settings.write_frames;
-    const bool wrote_last =
-        std::find(wf.begin(), wf.end(), last) != wf.end() || std::find(wf.begin(), wf.end(), -1) != wf.end();
-    if (wrote_last && !settings.out_path.empty())  // the refined pose replaces the reduced one
-      write_pose(run_files().stage(frame_path(settings.out_path, last, wf.size() > 1)), shown, surface, solid);
-  }
-  const double energy = arap_energy(scenario.model.V, deformer.elements(), settings.refine ? shown : s.out);
+  if (settings.refine && writes_frame(settings, frames - 1, frames))  // the refined pose replaces the reduced one
+    write_pose(run_files().stage(frame_path(settings.out_path, frames - 1, settings.write_frames.size() > 1)),
+               poses.refined, surface, solid);
   if (outputs) {
-    outputs->last = s.out;
-    outputs->settled = settled;
+    outputs->options = options;
+    outputs->last = poses.last;
+    outputs->settled = poses.settled;
   }
 
+  const PrecomputeSummary& pre = run.precompute;
   nlohmann::json report;
   report["name"] = settings.name;
   report_model(deformer, scenario, options, pre, report);
-  report_precompute(pre, cache_loaded, peak_mb, report);
-  report["op_ms"] = op_ms;
-  report["op_status"] = to_string(cs.status);
+  report_precompute(pre, run.from_cache, peak_mb, report);
+  report["op_ms"] = 1e3 * run.op_seconds;
+  report["op_status"] = to_string(run.handles.status);
   report_frames(s, report);
-  report["arap_energy"] = energy;
-  report["bounding_box_diagonal"] = diag;
-  if (!settle.is_null()) report["settle"] = settle;
-  if (settings.refine) report["refine"] = refined;
+  report["arap_energy"] = run.arap_energy;
+  report["bounding_box_diagonal"] = run.diagonal;
+  if (run.settled) report["settle"] = settle_json(run.settle, run_options.settle_tolerance);
+  if (run.refined) report["refine"] = refine_json(run.refine, *settings.refine);
   if (!settings.preflight.is_null()) report["preflight"] = settings.preflight;
 
-  print_table(settings.name, scenario, pre, settings, cache_loaded, report, options.iterations, s);
-  if (!settle.is_null())
+  print_table(settings.name, scenario, pre, settings, run.from_cache, report, options.iterations, s);
+  if (run.settled)
     fmt::print("  {:<28}{:>12.3f} ms   ({} rounds to the fixed point at the last frame's targets, residual {:.2e})\n",
-               "settle (reduced)", 1e3 * settle["seconds"].get<double>(), settle["rounds"].get<int>(),
-               settle["fixed_point_residual"].get<double>());
-  if (settings.refine) print_refine_line(refined);
+               "settle (reduced)", 1e3 * run.settle.total_seconds, run.settle.iterations,
+               run.settle.fixed_point_residual);
+  if (run.refined) print_refine_line(report["refine"]);
   if (!settings.report_path.empty()) write_json(run_files().stage(settings.report_path), report);
   return report;
 }

@@ -90,7 +90,7 @@ struct RunSettings {
   std::optional<qpreduce::deform::RefineOptions> refine;
   // Set, or with refine: after the last frame the hands stop, and the reduced
   // rounds (microseconds each) run on at its targets to their fixed point
-  // (settle_last_frame) before any refine starts from there; the report's
+  // (qpreduce::deform::run_scenario's settle stage) before any refine starts from there; the report's
   // "settle" says how many rounds and how far. The frames, their timings
   // and their residuals are those of the frames themselves.
   bool settle = false;

@@ -85,15 +85,6 @@ nlohmann::json time_to_gap(const RefineSummary& s, bool from_rest, double best, 
 
 }  // namespace
 
-nlohmann::json refine_last_frame(const Scenario& scenario, const Vertices& reduced, const RefineOptions& options,
-                                 Vertices* refined) {
-  Refiner refiner;
-  refiner.precompute(scenario.model, options);
-  const RefineSummary s = refiner.refine(scenario.handles, scenario.frames.back(), reduced, refined);
-  if (!s.usable()) throw std::runtime_error("refine: " + s.message);
-  return refine_json(s, options);
-}
-
 void print_refine_line(const nlohmann::json& r) {
   const int window = r["anderson_window"].get<int>();
   fmt::print(

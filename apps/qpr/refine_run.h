@@ -32,14 +32,7 @@ void add_refine_options(CLI::App* cmd, RefineArgs* args);
 // a negative tolerance or a window outside [1, 16].
 qpreduce::deform::RefineOptions refine_options(const RefineArgs& args);
 
-// Refines `reduced` (the last frame's pose) under the scenario's handles at
-// its last frame's targets; writes the refined pose to *refined and returns
-// the report's "refine" object: the RefineSummary's report (rounds,
-// seconds, arap_energy, rms_from_input, …; docs/formats.md, "Summaries")
-// and the options used. Throws std::runtime_error when the refine fails.
-nlohmann::json refine_last_frame(const qpreduce::deform::Scenario& scenario, const qpreduce::deform::Vertices& reduced,
-                                 const qpreduce::deform::RefineOptions& options, qpreduce::deform::Vertices* refined);
-// The console table's line for that object.
+// The console table's line for a report's "refine" object (refine_json).
 void print_refine_line(const nlohmann::json& refine);
 
 // Rounds and seconds of full-space classic ARAP from the reduced pose and

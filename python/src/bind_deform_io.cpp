@@ -342,6 +342,7 @@ void bind_deform_io(py::module_& m) {
   bind_references(deform);
   bind_refiner(deform);
   bind_arap(deform);
+  bind_pipeline(deform);
 }
 
 }  // namespace qpreduce::python

@@ -1,6 +1,8 @@
-// Builds against the installed reference target: runs the local-global
-// full-space reference on a built-in shape.
+// Builds against the installed reference and pipeline targets: runs the
+// local-global full-space reference on a built-in shape, then the same
+// handles as a two-frame scenario through run_scenario with a refine.
 #include <qpreduce/deform/mesh/shapes.h>
+#include <qpreduce/deform/pipeline/run_scenario.h>
 #include <qpreduce/deform/reference/reference.h>
 
 #include <cstdio>
@@ -21,5 +23,19 @@ int main() {
   const ReferenceSummary s = solve_local_global(model, handles, targets, ReferenceOptions{}, &solution);
   std::printf("consumer: reference %s, handle residual %.2e, Ceres %s\n", s.message.c_str(), s.handle_residual,
               has_ceres_reference() ? "available" : "not built");
-  return s.ok() && s.handle_residual < 1e-6 ? 0 : 1;
+  Scenario scenario;
+  scenario.model = model;
+  scenario.handles = handles;
+  scenario.frames = {targets, targets};
+  ScenarioRunOptions run;
+  run.deformer.linear_proxies = 4;
+  run.deformer.rotational_proxies = 4;
+  run.refine = RefineOptions{};
+  Deformer deformer;
+  ScenarioPoses poses;
+  const ScenarioRunSummary r = run_scenario(scenario, run, &deformer, &poses);
+  std::printf("consumer: run_scenario %s, %zu frames, refined ARAP energy %.3e (reference %.3e)\n",
+              r.brief_report().c_str(), r.frames.size(), r.arap_energy, s.energy);
+  const bool run_ok = r.ok() && r.refined && r.refine.handle_residual < 1e-6 && r.arap_energy <= 1.0001 * s.energy + 1e-12;
+  return s.ok() && s.handle_residual < 1e-6 && run_ok ? 0 : 1;
 }
