@@ -503,6 +503,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   if (run.settled) report["settle"] = settle_json(run.settle, run_options.settle_tolerance);
   if (run.refined) report["refine"] = refine_json(run.refine, *settings.refine);
   if (!settings.preflight.is_null()) report["preflight"] = settings.preflight;
+  report["run"] = to_json(run.report());  // every stage's summary (docs/formats.md, "Summaries")
 
   print_table(settings.name, scenario, pre, settings, run.from_cache, report, options.iterations, s);
   if (run.settled)
