@@ -195,7 +195,7 @@ py::dict check_dict(const MeshCheckSummary& s) {
     findings.append(py::dict(py::arg("defect") = to_string(f.defect), py::arg("severity") = to_string(f.severity),
                              py::arg("count") = f.count, py::arg("item") = f.item, py::arg("first") = f.first,
                              py::arg("message") = f.message));
-  return py::dict(py::arg("status") = to_string(s.status), py::arg("vertices") = s.vertices,
+  return py::dict(py::arg("status") = to_string(s.verdict), py::arg("vertices") = s.vertices,
                   py::arg("elements") = s.elements, py::arg("corners") = s.corners,
                   py::arg("box_min") = Eigen::Vector3d(s.box_min), py::arg("box_max") = Eigen::Vector3d(s.box_max),
                   py::arg("diagonal") = s.diagonal, py::arg("shortest_edge") = s.shortest_edge,

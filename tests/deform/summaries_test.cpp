@@ -4,6 +4,7 @@
 #include <catch2/catch.hpp>
 
 #include "qpreduce/deform/deformer/deformer.h"
+#include "qpreduce/deform/mesh/mesh_check.h"
 #include "qpreduce/deform/pipeline/run_scenario.h"
 #include "qpreduce/deform/proxies/clusters.h"
 #include "qpreduce/deform/reference/reference.h"
@@ -86,6 +87,7 @@ TEST_CASE("every summary's report has the keys docs/formats.md lists, in order, 
       {"HandleSetSummary", std::make_shared<HandleSetSummary>()},
       {"RefineSummary", std::make_shared<RefineSummary>()},
       {"ScenarioRunSummary", std::make_shared<ScenarioRunSummary>()},
+      {"MeshCheckSummary", std::make_shared<MeshCheckSummary>()},
 #ifdef QPREDUCE_HAVE_DISTRIBUTED
       {"DistributedSummary", std::make_shared<distributed::DistributedSummary>()},
 #endif

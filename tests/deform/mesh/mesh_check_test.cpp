@@ -4,6 +4,8 @@
 // unreferenced vertices). The shared cases skip when ../shared is absent.
 #include <catch2/catch.hpp>
 
+#include <variant>
+
 #include "../io/io_test_util.h"  // shared_data(), REQUIRE_SHARED_DATA
 
 #include "qpreduce/deform/io/handles_io.h"
@@ -102,7 +104,7 @@ TEST_CASE("clean small meshes have no findings", "[mesh_check]") {
   const TriangleMesh sq = square(), closed = tetrahedron_surface();
   for (const TriangleMesh* m : {&sq, &closed}) {
     const MeshCheckSummary s = diagnose_mesh(m->V, m->F);
-    CHECK(s.status == MeshCheckStatus::Clean);
+    CHECK(s.verdict == MeshCheckStatus::Clean);
     CHECK(s.findings.empty());
     CHECK(s.components == 1);
     CHECK_FALSE(s.anchors_checked);
@@ -115,7 +117,7 @@ TEST_CASE("clean small meshes have no findings", "[mesh_check]") {
   Tetrahedra T(2, 4);
   T << 0, 1, 2, 3, 0, 2, 1, 4;
   const MeshCheckSummary t = diagnose_mesh(two_tet_vertices(), T);
-  CHECK(t.status == MeshCheckStatus::Clean);
+  CHECK(t.verdict == MeshCheckStatus::Clean);
   CHECK(t.corners == 4);
 }
 
@@ -125,9 +127,13 @@ TEST_CASE("a sliver triangle is a warning naming it, a zero-area one an error", 
   m.F.conservativeResize(3, 3);
   m.F.row(2) << 0, static_cast<int>(apex), 1;
   MeshCheckSummary s = diagnose_mesh(m.V, m.F);
-  CHECK(s.status == MeshCheckStatus::Warnings);
+  CHECK(s.verdict == MeshCheckStatus::Warnings);
   REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::NearDegenerateElement});
   const MeshFinding& thin = s.findings[0];
+  // The check ran (the Outcome's status); the finding is its message.
+  CHECK(s.ok());
+  CHECK(s.message == thin.message);
+  CHECK(std::get<std::string>(*s.report().find("verdict")) == "warnings");
   CHECK(thin.severity == CheckSeverity::Warning);
   CHECK(thin.count == 1);
   CHECK(thin.first == std::vector<std::vector<Index>>{{2}});
@@ -137,7 +143,7 @@ TEST_CASE("a sliver triangle is a warning naming it, a zero-area one an error", 
   SECTION("collinear corners") {
     m.V(apex, 1) = 0.0;
     s = diagnose_mesh(m.V, m.F);
-    CHECK(s.status == MeshCheckStatus::Errors);
+    CHECK(s.verdict == MeshCheckStatus::Errors);
     REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::DegenerateElement});
     CHECK_THAT(s.findings[0].message, Catch::Contains("triangle 2 (vertices 0, 4, 1) is degenerate: area 0"));
   }
@@ -179,7 +185,7 @@ TEST_CASE("duplicate vertices: exact and within the tolerance, not beyond", "[me
   CHECK(dup->count == 1);
   CHECK(dup->first == std::vector<std::vector<Index>>{{twin}});
   CHECK_THAT(dup->message, Catch::Contains("vertex 4 lies at the position of vertex 2"));
-  CHECK(s.status == MeshCheckStatus::Warnings);
+  CHECK(s.verdict == MeshCheckStatus::Warnings);
 
   m.V(twin, 0) += 0.5e-10 * std::sqrt(2.0);  // half the tolerance
   CHECK(find(diagnose_mesh(m.V, m.F), MeshDefect::DuplicateVertex));
@@ -230,7 +236,7 @@ TEST_CASE("unreferenced vertices: far away an error naming the distance, near a 
   const Index far = add_vertex(&m.V, 1 + 1.7 * std::sqrt(2.0), 0.5, 0);  // 1.7 diagonals right of the box
   const Index near = add_vertex(&m.V, 0.5, 0.5, 0.3);
   const MeshCheckSummary s = diagnose_mesh(m.V, m.F);
-  CHECK(s.status == MeshCheckStatus::Errors);
+  CHECK(s.verdict == MeshCheckStatus::Errors);
   REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::FarUnreferencedVertex, MeshDefect::UnreferencedVertex});
   CHECK(s.findings[0].first == std::vector<std::vector<Index>>{{far}});
   CHECK_THAT(s.findings[0].message,
@@ -253,7 +259,7 @@ TEST_CASE("an edge in three triangles is non-manifold, a bow-tie vertex too", "[
     REQUIRE(defects(s) == std::vector<MeshDefect>{MeshDefect::NonManifoldEdge});
     CHECK(s.findings[0].first == std::vector<std::vector<Index>>{{0, 1}});
     CHECK_THAT(s.findings[0].message, Catch::Contains("edge (0, 1) is shared by 3 triangles"));
-    CHECK(s.status == MeshCheckStatus::Warnings);
+    CHECK(s.verdict == MeshCheckStatus::Warnings);
   }
   SECTION("two triangles meeting at one vertex") {
     TriangleMesh m;
@@ -293,7 +299,7 @@ TEST_CASE("triangles oriented against their neighbours are counted and named, a 
   const MeshFinding* f1 = find(s1, MeshDefect::InconsistentOrientation);
   REQUIRE(f1);
   CHECK(f1->severity == CheckSeverity::Warning);
-  CHECK(s1.status == MeshCheckStatus::Warnings);
+  CHECK(s1.verdict == MeshCheckStatus::Warnings);
   CHECK(f1->count == 1);
   CHECK(f1->first == std::vector<std::vector<Index>>{{7}});
   CHECK_THAT(f1->message, Catch::Contains("triangle 7 (vertices") && Catch::Contains("oriented against") &&
@@ -391,7 +397,7 @@ TEST_CASE("tets: a vertex where pieces of solid share no face is non-manifold", 
     CHECK(s.findings[0].item == "vertex");
     CHECK_THAT(s.findings[0].message, Catch::Contains("vertex 0 joins 2 separate groups of tets"));
     CHECK_THAT(s.findings[0].message, Catch::Contains("the solid is not a manifold there"));
-    CHECK(s.status == MeshCheckStatus::Warnings);
+    CHECK(s.verdict == MeshCheckStatus::Warnings);
     CHECK(s.components == 1);  // sharing a vertex couples the Laplacian
   }
   SECTION("two tets sharing only an edge: both its ends") {
@@ -417,7 +423,7 @@ TEST_CASE("tets: a vertex where pieces of solid share no face is non-manifold", 
   SECTION("a cube in six tets and a box of 3 × 3 × 3 cubes (interior vertices) are clean") {
     for (const TetMesh& m : {shapes::box_tets(1, 1, 1, 1, 1, 1), shapes::box_tets(1, 2, 3, 3, 3, 3)}) {
       const MeshCheckSummary s = diagnose_mesh(m.V, m.T);
-      CHECK(s.status == MeshCheckStatus::Clean);
+      CHECK(s.verdict == MeshCheckStatus::Clean);
       CHECK(s.findings.empty());
     }
   }
@@ -456,7 +462,7 @@ TEST_CASE("empty meshes, no elements, NaN and huge coordinates, bad indices get 
   SECTION("no vertices") {
     const MeshCheckSummary s = diagnose_mesh(Vertices(0, 3), Triangles(0, 3));
     CHECK(defects(s) == std::vector<MeshDefect>{MeshDefect::NoVertices, MeshDefect::NoElements});
-    CHECK(s.status == MeshCheckStatus::Errors);
+    CHECK(s.verdict == MeshCheckStatus::Errors);
   }
   SECTION("no elements") {
     const MeshCheckSummary s = diagnose_mesh(square().V, Triangles(0, 3));
@@ -541,7 +547,7 @@ TEST_CASE("shared meshes: no errors and the README counts of unreferenced vertic
   std::vector<char> anchored(sel.roles.size());
   for (size_t v = 0; v < anchored.size(); ++v) anchored[v] = sel.roles[v] != SelRole::Free;
   const MeshCheckSummary s = diagnose_mesh(cactus.V, cactus.F, anchored);
-  CHECK(s.status == MeshCheckStatus::Clean);
+  CHECK(s.verdict == MeshCheckStatus::Clean);
   CHECK(s.components == 1);
   for (const char* path : {"tets/solid_cactus.ele", "tets/hand.mesh", "tets/octopus-low.mesh"}) {
     INFO(path);

@@ -563,11 +563,34 @@ MeshCheckSummary diagnose_mesh(const VerticesRef& V, const ElementsRef& E, const
     return std::make_pair(a.severity != CheckSeverity::Error, a.defect) <
            std::make_pair(b.severity != CheckSeverity::Error, b.defect);
   });
-  s.status = s.has_errors() ? MeshCheckStatus::Errors
-             : s.has_warnings() ? MeshCheckStatus::Warnings
-                                : MeshCheckStatus::Clean;
+  s.verdict = s.has_errors() ? MeshCheckStatus::Errors
+              : s.has_warnings() ? MeshCheckStatus::Warnings
+                                 : MeshCheckStatus::Clean;
+  s.status = Status::Success;
+  if (!s.findings.empty()) s.message = s.findings.front().message;
   s.seconds = timer.seconds();
   return s;
+}
+
+void MeshCheckSummary::add_details(Report* out) const {
+  const auto list = [](const Eigen::Vector3d& x) { return std::vector<double>{x(0), x(1), x(2)}; };
+  Index errors = 0;
+  for (const MeshFinding& f : findings) errors += f.severity == CheckSeverity::Error ? 1 : 0;
+  out->add("verdict", verdict)
+      .add("vertices", vertices)
+      .add("elements", elements)
+      .add("corners", corners)
+      .add("box_min", list(box_min))
+      .add("box_max", list(box_max))
+      .add("diagonal", diagonal)
+      .add("shortest_edge", shortest_edge)
+      .add("longest_edge", longest_edge)
+      .add("worst_quality", worst_quality)
+      .add("components", components)
+      .add("anchors_checked", anchors_checked)
+      .add("errors", errors)
+      .add("warnings", static_cast<Index>(findings.size()) - errors)
+      .add("seconds", seconds);
 }
 
 }  // namespace qpreduce::deform

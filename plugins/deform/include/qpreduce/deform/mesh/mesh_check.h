@@ -50,6 +50,8 @@
 
 #include "qpreduce/deform/mesh/geometry.h"
 
+#include <qpreduce/common.h>
+
 #include <Eigen/Core>
 
 #include <string>
@@ -139,8 +141,10 @@ struct MeshCheckOptions {
 enum class MeshCheckStatus { NotRun, Clean, Warnings, Errors };
 const char* to_string(MeshCheckStatus status);  // "not run", "clean", "warnings", "errors"
 
-struct MeshCheckSummary {
-  MeshCheckStatus status = MeshCheckStatus::NotRun;
+// Outcome::status is Success once the diagnostics ran, with the first
+// error's (else warning's) message; what they found is `verdict`.
+struct MeshCheckSummary : Outcome {
+  MeshCheckStatus verdict = MeshCheckStatus::NotRun;
   Index vertices = 0, elements = 0;
   int corners = 0;  // 3 (triangles) or 4 (tets)
   // Scale, over the referenced vertices with finite coordinates (zero when
@@ -159,6 +163,9 @@ struct MeshCheckSummary {
   bool has_warnings() const;
   // The first finding of this severity, or nullptr.
   const MeshFinding* first(CheckSeverity severity) const;
+
+ protected:
+  void add_details(Report* out) const override;
 };
 
 // The diagnostics above. Throws std::invalid_argument when V is not n × 3,
