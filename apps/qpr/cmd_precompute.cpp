@@ -180,7 +180,10 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
                  current_rss_megabytes());
   };
   const auto pre = a.backend == "mumps" ? deformer.precompute_part(ls.scenario.model, ls.options, trace, {mpi.rank, mpi.size},
-                                                                   mumps_builder(a.block, mumps, &dist), sum_over_ranks)
+                                                                   mumps_builder(a.block, mumps, &dist),
+                                                                   [](qpreduce::Matrix<double>* M) {
+                                                                     qpreduce::distributed::sum_over_ranks(MPI_COMM_WORLD, M);
+                                                                   })
                                         : deformer.precompute(ls.scenario.model, ls.options, trace);
   if (a.backend == "mumps" && !dist.ok()) {  // the same status on every rank
     if (mpi.rank == 0) std::fprintf(stderr, "qpr precompute: %s\n", dist.brief_report().c_str());
@@ -200,9 +203,8 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   }
   const double seconds = total.seconds();
   // Every rank's peak memory, printed by rank 0.
-  const double mine[2] = {peak_rss_megabytes(), static_cast<double>(pre.assembled_elements)};
-  std::vector<double> peaks(2 * static_cast<size_t>(mpi.size));
-  MPI_Gather(mine, 2, MPI_DOUBLE, peaks.data(), 2, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  const std::vector<double> peaks = qpreduce::distributed::gather_values(
+      MPI_COMM_WORLD, {peak_rss_megabytes(), static_cast<double>(pre.assembled_elements)}, 0);
   if (mpi.rank != 0) return 0;
   std::printf("%s: precomputed with %s on %d rank(s) in %.2f s (subspace %.2f s), cache written\n", ls.name.c_str(),
               a.backend.c_str(), mpi.size, seconds, pre.subspace_seconds);
@@ -276,9 +278,7 @@ int run_gmrf(const GmrfArgs& a, const MpiSession& mpi) {
     detail = fmt::format("factorization {:.2f} s, solves {:.2f} s", summary.factorize_seconds, summary.solve_seconds);
   }
   const double seconds = total.seconds();
-  const double mine = peak_rss_megabytes();
-  std::vector<double> peaks(static_cast<size_t>(mpi.size));
-  MPI_Gather(&mine, 1, MPI_DOUBLE, peaks.data(), 1, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  const std::vector<double> peaks = qpreduce::distributed::gather_values(MPI_COMM_WORLD, {peak_rss_megabytes()}, 0);
   if (mpi.rank != 0) return summary.ok() ? 0 : 3;
   std::printf(
       "gmrf %ld × %ld (n = %lld, d = %lld, k = %lld) with %s on %d rank(s): %.2f s (build %.2f s)\n  %s\n  %s\n",

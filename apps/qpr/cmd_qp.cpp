@@ -426,7 +426,7 @@ int run_qp(const QpOptions& opt) {
       qpreduce::Matrix<double> norms(s.part->d + s.part->k, 1);
       norms.topRows(s.part->d) = s.part->N_rows.colwise().squaredNorm().transpose();
       norms.bottomRows(s.part->k) = s.part->UD_rows.colwise().squaredNorm().transpose();
-      sum_over_ranks(&norms);
+      qpreduce::distributed::sum_over_ranks(MPI_COMM_WORLD, &norms);
       s.solver.restore_without_basis(p.n(), s.part->d, norms.col(0).cwiseSqrt(), s.part->Hr, s.part->BtD, s.sopt);
     }
     if (s.rank != 0 && !pre.ok()) return 3;

@@ -29,14 +29,6 @@ struct MpiSession {
   int rank = 0, size = 1;
 };
 
-// In place: M's entries summed over the ranks of MPI_COMM_WORLD, on every
-// rank (the same shape everywhere).
-inline void sum_over_ranks(qpreduce::Matrix<double>* M) {
-  if (M->size() > 0) {
-    MPI_Allreduce(MPI_IN_PLACE, M->data(), static_cast<int>(M->size()), MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
-  }
-}
-
 // "" when every rank was given the same options and input files as rank 0
 // (rank_agreement.h), else the message naming what differs; the same on
 // every rank (a collective: every rank calls it).

@@ -124,6 +124,28 @@ TEST_CASE("MUMPS subspace matches the single-process build on each QP family", "
   check_against_single_process(f.H, f.C, f.D, families::recommended_options(f));
 }
 
+TEST_CASE("sum_over_ranks and gather_values: every rank's part, summed or in rank order", "[distributed]") {
+  int size = 1, rank = 0;
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MatD M = MatD::Constant(2, 3, rank + 1.0);
+  distributed::sum_over_ranks(MPI_COMM_WORLD, &M);
+  CHECK(M == MatD::Constant(2, 3, 0.5 * size * (size + 1)));  // 1 + 2 + … + size, on every rank
+  MatD empty;
+  distributed::sum_over_ranks(MPI_COMM_WORLD, &empty);
+  CHECK(empty.size() == 0);
+  const std::vector<double> all = distributed::gather_values(MPI_COMM_WORLD, {10.0 * rank, 10.0 * rank + 1}, 0);
+  if (rank == 0) {
+    REQUIRE(all.size() == 2 * static_cast<size_t>(size));
+    for (int r = 0; r < size; ++r) {
+      CHECK(all[2 * static_cast<size_t>(r)] == 10.0 * r);
+      CHECK(all[2 * static_cast<size_t>(r) + 1] == 10.0 * r + 1);
+    }
+  } else {
+    CHECK(all.empty());
+  }
+}
+
 TEST_CASE("MUMPS subspace with the factor out of core matches the single-process build", "[distributed]") {
   // One directory per rank count (both ctest entries may run at once);
   // MUMPS deletes its files when the build ends.

@@ -207,6 +207,18 @@ void gather_solution(MPI_Comm comm, const DistributedSubspace& part, const Vecto
               counts.data(), offsets.data(), MPI_DOUBLE, root, comm);
 }
 
+void sum_over_ranks(MPI_Comm comm, Matrix<double>* M) { detail::allreduce_sum(comm, *M); }
+
+std::vector<double> gather_values(MPI_Comm comm, const std::vector<double>& mine, int root) {
+  int rank = 0, ranks = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &ranks);
+  std::vector<double> all(rank == root ? mine.size() * static_cast<size_t>(ranks) : 0);
+  MPI_Gather(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, all.data(), static_cast<int>(mine.size()),
+             MPI_DOUBLE, root, comm);
+  return all;
+}
+
 void DistributedSummary::add_details(Report* out) const {
   SubspaceSummary::add_details(out);
   out->add("ranks", ranks)

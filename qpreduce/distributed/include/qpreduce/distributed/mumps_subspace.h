@@ -41,6 +41,7 @@
 #include <mpi.h>
 
 #include <string>
+#include <vector>
 
 namespace qpreduce::distributed {
 
@@ -145,6 +146,15 @@ Matrix<double> reduced_constraints(MPI_Comm comm, const DistributedSubspace& par
 Vector<double> reduced_linear_term(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& q);
 void gather_solution(MPI_Comm comm, const DistributedSubspace& part, const Vector<double>& w, int root,
                      Vector<double>* X);
+
+// Small collectives for the callers of the above (every one collective):
+//   sum_over_ranks  M's entries summed over the ranks of `comm`, in place, on
+//                   every rank (the same shape everywhere; empty: nothing).
+//   gather_values   every rank's `mine` (the same length on every rank),
+//                   rank after rank, on `root` (size × mine.size()); empty
+//                   elsewhere.
+void sum_over_ranks(MPI_Comm comm, Matrix<double>* M);
+std::vector<double> gather_values(MPI_Comm comm, const std::vector<double>& mine, int root);
 
 // build_subspace_mumps for a caller that holds the whole H on every rank
 // (each rank passes its own rows), then gather_subspace to `root`: there B is
