@@ -153,10 +153,10 @@ int run_compare(const CompareArgs& a) {
   // The reduced run (every frame, as `qpr deform`), keeping the last pose.
   RunSettings settings;
   settings.name = ls.name;
-  settings.options = ls.options;
+  settings.run.deformer = ls.options;
   settings.out_path = path("reduced");
   settings.preflight = ls.preflight;
-  settings.settle = a.convergence;  // the convergence study starts from the settled pose
+  settings.run.settle = a.convergence;  // the convergence study starts from the settled pose
   RunOutputs reduced;
   const nlohmann::json rep = run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr,
                                           settings, &reduced);

@@ -23,16 +23,16 @@ int run_deform(const DeformArgs& a) {
   LoadedScenario ls = load_scenario(a, a.strict);
   RunSettings settings;
   settings.name = ls.name;
-  settings.options = ls.options;
+  settings.run.deformer = ls.options;
   settings.out_path = a.out;
   if (a.out.find("{frame}") != std::string::npos) {  // every frame, as --out's help says
     settings.write_frames.clear();
     for (int f = 0; f < static_cast<int>(ls.scenario.frames.size()); ++f) settings.write_frames.push_back(f);
   }
   settings.report_path = a.report;
-  settings.cache_path = a.cache;
-  if (a.refine.tolerance) settings.refine = refine_options(a.refine);
-  settings.strict = a.strict;
+  settings.run.cache_path = a.cache;
+  if (a.refine.tolerance) settings.run.refine = refine_options(a.refine);
+  settings.run.strict = a.strict;
   settings.preflight = ls.preflight;
   run_scenario(ls.scenario, ls.tet ? nullptr : &ls.surface, ls.tet ? &ls.solid : nullptr, settings);
   return 0;

@@ -66,9 +66,9 @@ int run_demo(const DemoArgs& a) {
   run_files().create_directories(a.out_dir);
   RunSettings settings;
   settings.name = "demo (built-in capped cylinder, bend 90° + twist 90°)";
-  if (a.iterations) settings.options.iterations = *a.iterations;
-  settings.options.rotational_proxies = a.rotational;
-  settings.options.linear_proxies = a.linear;
+  if (a.iterations) settings.run.deformer.iterations = *a.iterations;
+  settings.run.deformer.rotational_proxies = a.rotational;
+  settings.run.deformer.linear_proxies = a.linear;
   settings.out_path = a.out_dir + "/cylinder_{frame}.off";
   settings.write_frames.clear();
   for (int f = 0; f < a.frames; f += std::max(1, a.frames / 4)) settings.write_frames.push_back(f);

@@ -377,7 +377,7 @@ void print_table(const std::string& name, const Scenario& scenario, const Precom
              pre.rotational_proxies, pre.patches);
   if (cache_loaded) {
     fmt::print("  {:<28}{:>12.3f} s   (loaded from {}, peak RSS {:.0f} MB)\n", "precompute", pre.total_seconds,
-               settings.cache_path, peak_mb);
+               settings.run.cache_path, peak_mb);
   } else {
     fmt::print("  {:<28}{:>12.3f} s   (peak RSS {:.0f} MB, backend {})\n", "precompute", pre.total_seconds, peak_mb,
                to_string(pre.subspace.backend_used));
@@ -437,13 +437,8 @@ void report_frames(const FrameSeries& s, nlohmann::json& report) {
 nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surface, const TetMesh* solid,
                             const RunSettings& settings, RunOutputs* outputs) {
   check_outputs(settings);
-  ScenarioRunOptions run_options;
-  run_options.deformer = settings.options;
-  run_options.cache_path = settings.cache_path;
-  run_options.strict = settings.strict;
-  run_options.settle = settings.settle;
-  run_options.refine = settings.refine;
-  DeformerOptions options = settings.options;
+  const ScenarioRunOptions& run_options = settings.run;
+  DeformerOptions options = run_options.deformer;  // as the run uses them
   apply_scenario_options(scenario, &options);
 
   const int frames = static_cast<int>(scenario.frames.size());
@@ -452,7 +447,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   if (settings.progress && isatty(fileno(stderr)) != 0) hooks.progress = progress_bar;
   hooks.prepared = [&](const Deformer& deformer, bool from_cache) {
     peak_mb = peak_rss_mb();
-    if (!from_cache && !settings.cache_path.empty()) deformer.save(run_files().stage(settings.cache_path));
+    if (!from_cache && !run_options.cache_path.empty()) deformer.save(run_files().stage(run_options.cache_path));
   };
   Deformer deformer;
   hooks.frame = [&](int f, const Vertices& pose) {
@@ -468,8 +463,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   ScenarioPoses poses;
   const ScenarioRunSummary run = run_scenario(scenario, run_options, &deformer, &poses, hooks);
   if (!run.cache_message.empty()) std::fprintf(stderr, "  cache not used: %s\n", run.cache_message.c_str());
-  if (run.stage != ScenarioStage::Precompute && run.handles.status != Status::Success && usable(run.handles.status) &&
-      !settings.strict) {
+  if (run.handles.status != Status::Success && usable(run.handles.status) && !run_options.strict) {
     std::fprintf(stderr, "  warning: %s%s\n", run.handles.message.c_str(),
                  run.handles.beyond_subspace
                      ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
@@ -481,7 +475,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
     std::fprintf(stderr, "  warning: the handles end up to %.2e of the bounding-box diagonal from their targets\n",
                  *std::max_element(s.residual.begin(), s.residual.end()));
   }
-  if (settings.refine && writes_frame(settings, frames - 1, frames))  // the refined pose replaces the reduced one
+  if (run.refined && writes_frame(settings, frames - 1, frames))  // the refined pose replaces the reduced one
     write_pose(run_files().stage(frame_path(settings.out_path, frames - 1, settings.write_frames.size() > 1)),
                poses.refined, surface, solid);
   if (outputs) {
@@ -501,7 +495,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   report["arap_energy"] = run.arap_energy;
   report["bounding_box_diagonal"] = run.diagonal;
   if (run.settled) report["settle"] = settle_json(run.settle, run_options.settle_tolerance);
-  if (run.refined) report["refine"] = refine_json(run.refine, *settings.refine);
+  if (run.refined) report["refine"] = refine_json(run.refine, *run_options.refine);
   if (!settings.preflight.is_null()) report["preflight"] = settings.preflight;
   report["run"] = to_json(run.report());  // every stage's summary (docs/formats.md, "Summaries")
 

@@ -6,7 +6,7 @@
 
 #include <qpreduce/util/atomic_file.h>
 #include <qpreduce/deform/io/scenario.h>
-#include <qpreduce/deform/refine/refine.h>
+#include <qpreduce/deform/pipeline/run_scenario.h>
 
 #include <nlohmann/json.hpp>
 
@@ -74,26 +74,17 @@ struct RunOutputs {
 };
 
 struct RunSettings {
-  qpreduce::deform::DeformerOptions options;
+  // What runs (qpreduce::deform::run_scenario): the deformer's options, the
+  // cache (loaded when it holds a matching model, else written after the
+  // precompute), strict handles, settle and refine (with refine, the mesh
+  // written and arap_energy are the refined pose's).
+  qpreduce::deform::ScenarioRunOptions run;
   // Meshes written: every frame in `write_frames` (0-based; −1 = the last).
   std::vector<int> write_frames{-1};
   std::string out_path;     // the last frame's mesh (or a pattern with {frame})
   std::string report_path;  // JSON report, optional
-  // Precomputed model (Deformer::save/load): loaded when the file exists and
-  // was made from the same inputs, else precomputed and written there.
-  std::string cache_path;
   bool progress = true;     // progress bar on stderr during precompute
-  bool strict = false;      // a fallback (handles held in the least-squares sense) is an error, not a note
   std::string name;         // what is deformed, for the table
-  // Set: refine the last frame's pose in full space (refine_run.h); the
-  // mesh written and arap_energy are then the refined pose's.
-  std::optional<qpreduce::deform::RefineOptions> refine;
-  // Set, or with refine: after the last frame the hands stop, and the reduced
-  // rounds (microseconds each) run on at its targets to their fixed point
-  // (qpreduce::deform::run_scenario's settle stage) before any refine starts from there; the report's
-  // "settle" says how many rounds and how far. The frames, their timings
-  // and their residuals are those of the frames themselves.
-  bool settle = false;
   nlohmann::json preflight;  // set: the report's "preflight" (LoadedScenario::preflight)
 };
 
@@ -102,7 +93,7 @@ struct RunSettings {
 // throws qpreduce::FileError naming the output otherwise.
 inline void check_outputs(const RunSettings& settings) {
   for (const auto& [path, what] :
-       {std::pair{&settings.out_path, "mesh"}, {&settings.report_path, "report"}, {&settings.cache_path, "cache"}})
+       {std::pair{&settings.out_path, "mesh"}, {&settings.report_path, "report"}, {&settings.run.cache_path, "cache"}})
     if (!path->empty()) qpreduce::check_destination(*path, what);
 }
 
