@@ -7,7 +7,7 @@
 //        [--set-every K] [--seed S] [--warmup-sets W] [--energy-bound F]
 //        [--energy-every E] [--rss-limit-kib L] [--json PATH] [--verbose 1]
 //        [--hostile 1] [--anderson W] [--rounds R] [--cold-start-rounds C] [--trace-set N]
-//        [--first-set N]
+//        [--first-set N] [--random-rounds J]
 //
 // One precompute (DeformerOptions defaults: 33 linear proxies, 27 clusters,
 // 8 accelerated rounds per frame), then N frames (default 10⁵); every K
@@ -38,6 +38,11 @@
 // vertex of a patch of 10–150 as its own handle) which the subspace cannot
 // meet: set_handles solves them as soft constraints and says so
 // (DeformerOptions::soften_unreachable_handles; docs/robustness.md, "Soak").
+// --random-rounds J caps each frame at a number of rounds drawn from 1…J
+// (seeded) in place of the time budget (the tolerance stays): frames stopped
+// before their fixed point, as a loaded machine's budget stops them, but the
+// same on every machine (a set whose budget-stopped rounds went wrong under load
+// then fails everywhere).
 // Resident memory (/proc/self/statm) is sampled after the warm-up (the first
 // W handle sets, default 10, which begin with the largest set of each kind)
 // and at the end: growth above L KiB (default 1024) fails. Storage for the
@@ -90,6 +95,7 @@ struct Args {
   int anderson = -1;     // DeformerOptions::anderson_window (−1: the default)
   int cold_start = -1;   // DeformerOptions::cold_start_rounds (−1: the default)
   int rounds = -1;       // DeformerOptions::iterations (−1: the default)
+  int random_rounds = 0;  // > 0: each frame capped at a seeded random 1…J rounds
   long trace_set = -1;   // print every frame of this handle set (E′, classic energy, residual)
   long first_set = 0;    // draw the handle sets before this one but do not run their frames
 };
@@ -109,7 +115,7 @@ constexpr long kInvalidEvery = 10;
                "soak: %s\nusage: soak [--model cactus|bumpy_plane|builtin|PATH.off] [--frames N] [--set-every K]\n"
                "            [--seed S] [--warmup-sets W] [--energy-bound F] [--energy-every E]\n"
                "            [--rss-limit-kib L] [--json PATH] [--verbose 1] [--hostile 1] [--anderson W] [--rounds R]\n"
-               "            [--cold-start-rounds C]\n"
+               "            [--cold-start-rounds C] [--random-rounds J]\n"
                "            [--trace-set N] [--first-set N]\n",
                problem.c_str());
   std::exit(2);
@@ -136,6 +142,7 @@ Args parse(int argc, char** argv) {
       else if (key == "--anderson") a.anderson = std::stoi(value);
       else if (key == "--cold-start-rounds") a.cold_start = std::stoi(value);
       else if (key == "--rounds") a.rounds = std::stoi(value);
+      else if (key == "--random-rounds") a.random_rounds = std::stoi(value);
       else if (key == "--trace-set") a.trace_set = std::stol(value);
       else if (key == "--first-set") a.first_set = std::stol(value);
       else usage("unknown option " + key);
@@ -143,8 +150,8 @@ Args parse(int argc, char** argv) {
       usage(key + ": not a number: " + value);
     }
   }
-  if (a.frames < 1 || a.set_every < 1 || a.energy_every < 1 || a.warmup_sets < 0 || a.first_set < 0)
-    usage("--frames, --set-every and --energy-every must be ≥ 1, --warmup-sets ≥ 0");
+  if (a.frames < 1 || a.set_every < 1 || a.energy_every < 1 || a.warmup_sets < 0 || a.first_set < 0 || a.random_rounds < 0)
+    usage("--frames, --set-every and --energy-every must be ≥ 1, --warmup-sets and --random-rounds ≥ 0");
   if (!(a.energy_bound > 0) || !(a.rss_limit_kib >= 0)) usage("--energy-bound must be > 0, --rss-limit-kib ≥ 0");
   return a;
 }
@@ -522,12 +529,16 @@ int run(const Args& a) {
   Motion motion;
   ConstraintSummary cs;
   const long warm_frames = std::min(a.frames, (a.first_set + a.warmup_sets) * a.set_every);
+  // --random-rounds: a stream of its own (seed + 7), so that the sets are those of the run without it.
+  std::mt19937 round_caps(static_cast<std::uint32_t>(a.seed) + 7u);
   const Timer wall;
   skip_first_sets(a, &maker);
   for (long f = a.first_set * a.set_every; f < a.frames; ++f) {
     if (f % a.set_every == 0) new_handle_set(deformer, maker, a, f, &tally, &motion, &cs);  // a new handle set
     targets_at(motion, maker.centroid(), &targets);
     ++motion.t;
+    if (a.random_rounds > 0)
+      deformer.set_rounds(std::uniform_int_distribution<int>(1, a.random_rounds)(round_caps), options.tolerance, 0.0);
     const FrameSummary fs = deformer.frame(targets, &out);
     tally.frame_seconds[static_cast<size_t>(f)] = fs.total_seconds;
     ++tally.frames;

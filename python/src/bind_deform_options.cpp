@@ -110,6 +110,9 @@ void bind_deformer_summaries(py::module_& m) {
       .ro("second_order", &FrameSummary::second_order, "This frame took Newton steps instead of rounds.")
       .ro("cold_start", &FrameSummary::cold_start,
           "The first frame after set_handles: it ran to cold_start_tolerance (DeformerOptions.cold_start_rounds).")
+      .ro("rotation_kept", &FrameSummary::rotation_kept,
+          "The rounds in the refitted global rotation ended above the warm start's E′ in the last one, so they "
+          "ran again there (iterations counts both).")
       .ro("solve_seconds", &FrameSummary::solve_seconds, "")
       .ro("reconstruct_seconds", &FrameSummary::reconstruct_seconds, "")
       .ro("total_seconds", &FrameSummary::total_seconds, "")

@@ -216,6 +216,18 @@ AlternationResults Alternation<Scalar>::solve(InputProjection<Scalar>& projectio
 }
 
 template <typename Scalar>
+double Alternation<Scalar>::energy(InputProjection<Scalar>& projection, const Eigen::Ref<const Vector<Scalar>>& b,
+                                   const Eigen::Ref<const Vector<Scalar>>& y, double* slack) {
+  Impl& I = *impl_;
+  if (!ready()) throw std::invalid_argument("Alternation::energy: no constraint set (call setup first)");
+  check_size("Alternation::energy: b (m)", m(), b.size());
+  check_size("Alternation::energy: y (k)", k(), y.size());
+  if (slack) *slack = 0.0;
+  if (!I.energy) return std::numeric_limits<double>::quiet_NaN();
+  return I.fused.energy(I.phase1, projection, b, y, slack);
+}
+
+template <typename Scalar>
 void Alternation<Scalar>::phase_one(const Eigen::Ref<const Vector<Scalar>>& b,
                                     const Eigen::Ref<const Vector<Scalar>>& y, Eigen::Ref<Vector<Scalar>> z) const {
   const Impl& I = *impl_;

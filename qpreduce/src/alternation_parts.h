@@ -210,6 +210,17 @@ class FusedAlternation {
                          const Eigen::Ref<const Vector<Scalar>>& b, const AlternationSettings& options,
                          Eigen::Ref<Vector<Scalar>> z, Eigen::Ref<Vector<Scalar>> y);
 
+  // E(y) of (*) (docs/engine.md, "The energy of the alternation") at this
+  // b (m) and y (k), in double: the energy `run`'s safeguard and second-order
+  // steps judge by. NaN when phase1 has no energy terms or the projection no
+  // quadratic_term. *slack (optional): reduced_energy's for float rounds.
+  // Overwrites the workspace's product (the next `run` starts afresh).
+  // Throws std::invalid_argument before a `set` and on sizes other than
+  // phase1's.
+  double energy(const FixedCoordinateSolver<Scalar>& phase1, InputProjection<Scalar>& projection,
+                const Eigen::Ref<const Vector<Scalar>>& b, const Eigen::Ref<const Vector<Scalar>>& y,
+                double* slack = nullptr);
+
   bool ready() const;
   bool factored() const;   // the rounds use the factored form
   // The rounds step on E(y) for constraints on y ("Constraints on y"), and

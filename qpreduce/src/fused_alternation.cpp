@@ -9,6 +9,7 @@
 #include "fused_rounds.h"
 #include "fused_steps.h"
 #include "phase_one.h"
+#include "round_product.h"
 #include "round_stop.h"
 #include "simd_kernels.h"
 
@@ -19,6 +20,7 @@
 #include <omp.h>
 
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -246,6 +248,32 @@ AlternationResults FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   phase1.solve(b, y, z);
   summary.status = Status::Success;
   return summary;
+}
+
+template <typename Scalar>
+double FusedAlternation<Scalar>::energy(const FixedCoordinateSolver<Scalar>& phase1,
+                                        InputProjection<Scalar>& projection,
+                                        const Eigen::Ref<const Vector<Scalar>>& b,
+                                        const Eigen::Ref<const Vector<Scalar>>& y, double* slack) {
+  const FusedModel& M = *model_;
+  FusedWorkspace& W = *workspace_;
+  if (!M.ready) throw std::invalid_argument("FusedAlternation::energy: not set (call set first)");
+  check_size("FusedAlternation::energy: b (m)", M.Fb.cols(), b.size());
+  check_size("FusedAlternation::energy: y (k)", M.k(), y.size());
+  if (!phase1.has_energy_terms() || !std::isfinite(projection.quadratic_term(y))) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  projection.set_proximal_weights(M.proximal);
+  const detail::PhaseOneEnergy& E = *phase1.energy_terms();
+  const bool corrected = M.energy != nullptr;
+  detail::size_energy_workspace(M.k(), phase1.m(), W);
+  detail::gemv(M.Fb, b.data(), W.gb.data(), false);
+  detail::constraint_term(E, b, corrected, W);
+  detail::double_product(M, W, y.data(), 0, M.q(), W.scratch.data());
+  double bound = 0.0;
+  const double e = detail::reduced_energy(E, W, projection, b, y, true, corrected ? &M.proximal_entries : nullptr, &bound);
+  if (slack) *slack = bound;
+  return e;
 }
 
 template class FusedAlternation<double>;

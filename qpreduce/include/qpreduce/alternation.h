@@ -106,6 +106,18 @@ class Alternation {
                            const AlternationSettings& settings, Eigen::Ref<Vector<Scalar>> z,
                            Eigen::Ref<Vector<Scalar>> y);
 
+  // The energy E(y) the accelerated rounds and the second-order steps judge
+  // by (docs/engine.md, "The energy of the alternation", (*)) at this b (m)
+  // and y (k), in double: one product with F_y. NaN when the setup formed
+  // no energy terms (energy_terms() false) or the projection has no
+  // quadratic_term. *slack (optional): the round-off bound a comparison of
+  // energies from `solve` with this one should allow (10⁻⁹ of its terms'
+  // magnitudes, that of float rounds). No heap allocation after the first
+  // solve or energy of a setup. Throws std::invalid_argument before a setup
+  // and on other sizes.
+  double energy(InputProjection<Scalar>& projection, const Eigen::Ref<const Vector<Scalar>>& b,
+                const Eigen::Ref<const Vector<Scalar>>& y, double* slack = nullptr);
+
   // Phase 1 alone: z = M_b·b + (M_Y + M_b·T)·y for this y (no rounds).
   // Precondition: ready(). No heap allocation.
   void phase_one(const Eigen::Ref<const Vector<Scalar>>& b, const Eigen::Ref<const Vector<Scalar>>& y,

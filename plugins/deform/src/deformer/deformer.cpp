@@ -186,6 +186,7 @@ void FrameSummary::add_details(Report* out) const {
       .add("rejected_steps", rejected_steps)
       .add("second_order", second_order)
       .add("cold_start", cold_start)
+      .add("rotation_kept", rotation_kept)
       .add("stop", stop)
       .add("solve_seconds", solve_seconds)
       .add("reconstruct_seconds", reconstruct_seconds)

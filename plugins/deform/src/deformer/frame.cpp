@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <fmt/format.h>
 
@@ -99,6 +100,43 @@ void rotate_clusters(Index d, const Eigen::Matrix3d& R, const Eigen::VectorXd& f
   }
 }
 
+// b and S_local in the frame of r₀ (targets and cluster rotations turned by
+// r₀ᵀ) into work->b, work->s_local.
+void into_frame(const Model& model, const OnSite& onsite, const HandleTargets& targets, const Eigen::Matrix3d& r0,
+                const Eigen::VectorXd& S, Workspace* work) {
+  const Eigen::Matrix3d r0t = r0.transpose();
+  if (onsite.target_projection.size() == 0) {
+    fill_targets(model, targets, r0t, &work->b);
+  } else {  // a dependent set: its targets projected onto its independent rows
+    fill_targets(model, targets, r0t, &work->b_targets);
+    work->b.noalias() = onsite.target_projection * work->b_targets;
+  }
+  rotate_clusters(model.d, r0t, S, &work->s_local);
+}
+
+// Into the frame of the refitted r₀ (`fitted`; pose.r0, work.b,
+// work.s_local), keeping b and S_local in the last frame's r₀ and the warm
+// start's E′ there (returned, with its round-off slack; NaN when the rounds
+// are not `judged` by an energy, without energy terms, or when r₀ does not
+// change).
+double refit_frame(const Model& model, const HandleTargets& targets, const Eigen::Matrix3d& fitted, bool judged,
+                   OnSite* onsite, Pose* pose, Workspace* work, double* slack) {
+  if (fitted == pose->r0 || !judged) {
+    pose->r0 = fitted;
+    into_frame(model, *onsite, targets, pose->r0, pose->S, work);
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  into_frame(model, *onsite, targets, pose->r0, pose->S, work);
+  const double kept = onsite->alternation.energy(*model.projection, work->b, work->s_local, slack);
+  if (!std::isnan(kept)) {
+    work->b_kept = work->b;  // allocates on the first frame only
+    work->s_kept = work->s_local;
+  }
+  pose->r0 = fitted;
+  into_frame(model, *onsite, targets, pose->r0, pose->S, work);
+  return kept;
+}
+
 // The first frame after set_handles runs to DeformerOptions::
 // cold_start_tolerance, within cold_start_rounds rounds (second-order steps
 // count kRoundsPerSecondOrderStep each), without a time budget.
@@ -129,24 +167,42 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   // Solve in the frame rotated by r₀ᵀ.
   work.x_before = pose.x;  // same size every frame: no allocation
   work.r0_before = pose.r0;
-  pose.r0 = global_rotation_of(model, pose.S, st.settings.global_rotation);
-  const Eigen::Matrix3d r0t = pose.r0.transpose();
-  if (onsite.target_projection.size() == 0) {
-    fill_targets(model, targets, r0t, &work.b);
-  } else {  // a dependent set: its targets projected onto its independent rows
-    fill_targets(model, targets, r0t, &work.b_targets);
-    work.b.noalias() = onsite.target_projection * work.b_targets;
-  }
-  rotate_clusters(model.d, r0t, pose.S, &work.s_local);
-  Timer t;
   AlternationSettings opts = st.settings.alternating;
+  const bool second_order = onsite.alternation.second_order(*model.projection, opts);
   if (!onsite.warm && st.settings.cold_start_rounds > 0) {
-    cold_start(st.settings, onsite.alternation.second_order(*model.projection, opts), &opts);
+    cold_start(st.settings, second_order, &opts);
     summary.cold_start = true;
   }
   st.onsite.warm = true;
   if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
-  const AlternationResults as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
+  // Plain rounds judge no energy (FrameSummary::model_energy NaN): their
+  // refit is taken as it comes.
+  const bool judged = second_order || opts.anderson_window > 0;
+  double slack = 0.0;
+  const double kept = refit_frame(model, targets, global_rotation_of(model, pose.S, st.settings.global_rotation),
+                                  judged, &st.onsite, &pose, &work, &slack);
+  Timer t;  // the rounds (FrameSummary::solve_seconds): the refit's product is in total_seconds
+  AlternationResults as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
+  // The subspace is not rotation-equivariant (that is why r₀ is refitted), so
+  // the rotations S are another pose in the refitted frame. Refitted from
+  // the S of rounds stopped short of their fixed point, r₀ can turn so far in
+  // one frame that the pose's E′ rises by orders of magnitude
+  // (docs/robustness.md, "Soak"): when this frame's rounds end above the
+  // warm start's E′ in the last r₀, they run again there, in what is left of
+  // the budget and the round cap (at least one round).
+  if (!std::isnan(kept) && !(as.energy <= kept + slack)) {
+    pose.r0 = work.r0_before;
+    pose.x = work.x_before;
+    work.b = work.b_kept;
+    work.s_local = work.s_kept;
+    const int before = as.iterations, rejected = as.rejected;
+    if (opts.time_budget > 0.0) opts.time_budget = std::max(opts.time_budget - t.seconds(), 1e-12);
+    opts.iterations = std::max(1, opts.iterations - before);
+    as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
+    as.iterations += before;
+    as.rejected += rejected;
+    summary.rotation_kept = true;
+  }
   summary.iterations = as.iterations;
   summary.stop = as.stop;
   summary.last_change = as.last_change;

@@ -196,6 +196,8 @@ struct Workspace {
   Eigen::VectorXd b;          // Phase 1's right-hand side: b_targets, or P·b_targets (OnSite::target_projection)
   Eigen::VectorXd b_targets;  // handle targets in the frame of r₀ (OnSite::rows)
   Eigen::VectorXd s_local;  // 9d: S in the frame of r₀
+  // b and s_local in the last frame's r₀, while frame() weighs a refitted r₀.
+  Eigen::VectorXd b_kept, s_kept;
   // The last good pose's x and r₀, put back when a frame's rounds fail
   // (NaN): the pose stays the last good one and the next frame starts there.
   Eigen::VectorXd x_before;

@@ -181,6 +181,11 @@ struct FrameSummary : Outcome {  // Success after a frame
   // The first frame after set_handles (DeformerOptions::cold_start_rounds):
   // it ran to cold_start_tolerance instead of `iterations` rounds.
   bool cold_start = false;
+  // In the refitted global rotation the rounds ended above the warm start's
+  // E′ in the last one, so they ran again there in what was left of the
+  // budget and the cap (at least one round): the frame kept the last r₀
+  // (`iterations` and `rejected_steps` count both runs).
+  bool rotation_kept = false;
   // What ended the rounds: the cap (`iterations`), the tolerance, or the
   // time budget (DeformerOptions::time_budget).
   RoundStop stop = RoundStop::RoundLimit;
