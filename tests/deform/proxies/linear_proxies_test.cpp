@@ -4,6 +4,9 @@
 
 #include "proxies_test_util.h"
 
+#include "qpreduce/deform/deformer/handles.h"
+#include "qpreduce/deform/mesh/shapes.h"
+
 #include <set>
 #include <stdexcept>
 
@@ -97,4 +100,22 @@ TEST_CASE("proxies_cover_components detects uncovered and jointly pinned compone
   CHECK(proxies_cover_components(linear_proxies_from_groups({{0, 50}, {1}}, s.V.rows()), comps, &why));
   CHECK_THROWS_WITH(linear_proxies_from_groups({{0, 0}}, s.V.rows()), Catch::Contains("twice"));
   CHECK_THROWS_WITH(linear_proxies_from_groups({{}}, s.V.rows()), Catch::Contains("empty"));
+}
+
+TEST_CASE("farthest-point samples do not depend on the mesh's units or position", "[linear][fps]") {
+  // A symmetric mesh has many vertices at equal distance from the samples:
+  // which one is taken must not be decided by the last bits of the
+  // coordinates (the deformer samples the units-free rest pose, whose bits
+  // differ between a mesh and the same mesh scaled or moved).
+  const TriangleMesh m = shapes::capped_cylinder(1.0, 4.0, 16, 12);
+  const Normalization unit = normalization_of(m.V);
+  const Vertices base = (m.V.rowwise() - unit.centre.transpose()) / unit.scale;
+  const LinearProxies reference = linear_proxies_fps(base, m.F, 33);
+  for (const double scale : {1e-20, 1e-3, 7.0, 1e6, 1e25}) {
+    CAPTURE(scale);
+    const Vertices V = (scale * m.V).rowwise() + Eigen::RowVector3d(0.3, -2.0, 5.0) * scale;
+    const Normalization frame = normalization_of(V);
+    const Vertices local = (V.rowwise() - frame.centre.transpose()) / frame.scale;
+    CHECK(linear_proxies_fps(local, m.F, 33).groups == reference.groups);
+  }
 }

@@ -85,8 +85,20 @@ void relax_from(const EdgeGraph& g, Index source, std::vector<double>& dist) {
   }
 }
 
+// Distances within this relative amount of the largest are a tie: the
+// round-off of sums along different paths (about 1e-15 relative), not a
+// difference of the mesh.
+constexpr double kTieTolerance = 1e-10;
+
+// The lowest index whose value ties with the largest (kTieTolerance): on a
+// mesh with symmetries many vertices are equally far, and the last bits of
+// the coordinates (which scaling or moving the mesh changes) must not choose
+// among them.
 Index argmax(const std::vector<double>& values) {
-  return static_cast<Index>(std::max_element(values.begin(), values.end()) - values.begin());
+  const double top = *std::max_element(values.begin(), values.end());
+  const double bar = std::isfinite(top) ? top - kTieTolerance * std::abs(top) : top;
+  return static_cast<Index>(
+      std::find_if(values.begin(), values.end(), [bar](double v) { return v >= bar; }) - values.begin());
 }
 
 }  // namespace
