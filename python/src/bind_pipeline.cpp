@@ -7,7 +7,6 @@
 
 #include <qpreduce/deform/pipeline/run_scenario.h>
 
-#include <pybind11/functional.h>
 #include <pybind11/stl.h>
 
 namespace qpreduce::python {

@@ -598,9 +598,9 @@ TEST_CASE("deformer: float rounds reach the fixed points of double rounds", "[de
 }
 
 TEST_CASE("deformer: a refitted global rotation never raises E′ above the last one's", "[deformer][rounds]") {
-  // r₀ is refitted from the cluster rotations at every frame, and the
-  // subspace is not rotation-equivariant, so the same rotations in a new r₀
-  // are another pose. Frames stopped short of their fixed point (one round
+  // r₀ is refitted from the cluster rotations at every frame, and E′ depends
+  // on it (the corrections q_k of Eq. 9 are linear about its frame), so the
+  // same rotations in a new r₀ are another pose. Frames stopped short of their fixed point (one round
   // or one step each, as a spent time budget stops them) on a stiff set of
   // 26 point handles turned far from rest and pulled apart (wobble): with the
   // targets held, E′ may only fall from frame to frame. Each frame's rounds

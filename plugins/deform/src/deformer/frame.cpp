@@ -183,8 +183,9 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
                                   judged, &st.onsite, &pose, &work, &slack);
   Timer t;  // the rounds (FrameSummary::solve_seconds): the refit's product is in total_seconds
   AlternationResults as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
-  // The subspace is not rotation-equivariant (that is why r₀ is refitted), so
-  // the rotations S are another pose in the refitted frame. Refitted from
+  // E′ and its subspace depend on r₀ (the corrections q_k = q0·I + [ω]× of
+  // Eq. 9 are linear about its frame: that is why r₀ is refitted), so the
+  // rotations S are another pose in the refitted frame. Refitted from
   // the S of rounds stopped short of their fixed point, r₀ can turn so far in
   // one frame that the pose's E′ rises by orders of magnitude
   // (docs/robustness.md, "Soak"): when this frame's rounds end above the
