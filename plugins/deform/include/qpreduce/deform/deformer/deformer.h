@@ -116,7 +116,10 @@ struct DeformerOptions {
   // exactly; so do sets that tie a free Rigid patch. false: the exact
   // (least-squares) form always.
   bool soften_unreachable_handles = true;
-  // Factor out a global rotation each frame (appendix "Global rotation adaptation").
+  // Factor out a global rotation each frame (appendix "Global rotation
+  // adaptation"), refitted from the cluster rotations; with accelerated
+  // rounds or second-order steps a refit whose rounds end above the warm
+  // start's E′ in the last one is not kept (FrameSummary::rotation_kept).
   bool global_rotation = true;
   // Phase 2 inputs from a float product relative to a double reference in
   // each round (AlternationSettings::float_products): the fixed points of
