@@ -355,16 +355,26 @@ HandleSetSummary LocalGlobalArap::set_handles(const Handles& handles) {
   const Index mg = 3 * static_cast<Index>(st.general_handles.size());
   SparseMatrix<double> K = split_columns(st, tg, pinned_index, nf);
   if (mg > 0) augment(st, &K);
-  const SparseMatrix<double> Ks = axis_block(st, K);
+  SparseMatrix<double> Ks = axis_block(st, K);
+  st.free_vertex.clear();
+  st.Ks = SparseMatrix<double>();
   if (Ks.rows() > 0) {
     K = SparseMatrix<double>();  // free it before the factorization
     st.factor = std::make_unique<AxisSeparableFactorization>(separable_factorization(st.options.backend), Ks.rows());
     st.factor->compute(Ks);
+    // The Newton steps' products (Rounds::hessian_vector) on the free
+    // vertices directly: K_ff = K_s ⊗ I₃ and the vertex of each free unit.
+    st.free_vertex.assign(static_cast<size_t>(Ks.rows()), -1);
+    for (Index v = 0; v < st.n; ++v) {
+      const Index c = st.control_of_free[v];
+      if (c >= 0 && st.free_index[c] >= 0) st.free_vertex[static_cast<size_t>(st.free_index[c] / 3)] = v;
+    }
+    st.Ks = std::move(Ks);
   } else {
     st.factor = make_factorization(st.options.backend);
     st.factor->compute(K);
   }
-  summary.axis_separable = Ks.rows() > 0;
+  summary.axis_separable = st.Ks.rows() > 0;
   summary.free_coordinates = nf;
   summary.pinned_coordinates = np;
   summary.point_rows = mg;

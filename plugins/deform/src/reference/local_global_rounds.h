@@ -71,6 +71,10 @@ struct LocalGlobalState {
   SparseMatrix<double> Af, Ap;     // general rows (weighted handles): m_g × free, m_g × pinned
   std::vector<size_t> general_handles;  // point handle of each group of 3 general rows
   std::unique_ptr<SparseFactorization> factor;  // K + ρAfᵀAf
+  // When the global step separates (axis_block): K = K_s ⊗ I₃ over the
+  // free rows, 3i + a the coordinate a of free vertex free_vertex[i].
+  SparseMatrix<double> Ks;
+  std::vector<Index> free_vertex;
   Matrix<double> G;                             // (K + ρAfᵀAf)⁻¹Afᵀ
   Eigen::LDLT<Eigen::MatrixXd> schur;           // Af·G
   double rho = 0.0;
@@ -220,10 +224,18 @@ class Rounds {
   // H·v = H_u·v − Pᵀ·q(dR), dR_k = R_k[ω_k]×, ω_k = M_k⁻¹·axial(R_kᵀdG_k − dG_kᵀR_k),
   // dG_k = Σ c·(v_i − v_j)eᵀ, at the pose of the last local step.
   void hessian_vector(const Eigen::VectorXd& vf, Eigen::VectorXd* out) {
-    Eigen::VectorXd vu = Eigen::VectorXd::Zero(st_.nu);
-    for (Index row = 0; row < st_.nu; ++row)
-      if (st_.free_index[row] >= 0) vu(row) = vf(st_.free_index[row]);
-    dx_ = st_.P * vu;
+    const bool separable = st_.Ks.rows() > 0;  // the free rows are whole free vertices
+    Eigen::VectorXd vu;
+    if (separable) {
+      dx_.setZero();
+      for (size_t i = 0; i < st_.free_vertex.size(); ++i)
+        dx_.segment<3>(3 * st_.free_vertex[i]) = vf.segment<3>(3 * static_cast<Index>(i));
+    } else {
+      vu = Eigen::VectorXd::Zero(st_.nu);
+      for (Index row = 0; row < st_.nu; ++row)
+        if (st_.free_index[row] >= 0) vu(row) = vf(st_.free_index[row]);
+      dx_ = st_.P * vu;
+    }
     // dG_k = Σ_v dx_v·a_kvᵀ over the element's vertices (LocalGlobalState's pairs).
 #pragma omp parallel for schedule(static) num_threads(threads_) if (threads_ > 1 && r_ >= 2048)
     for (Index k = 0; k < r_; ++k) {
@@ -239,8 +251,15 @@ class Rounds {
       Eigen::Map<Eigen::Matrix3d>(dR_.data() + 9 * k) = Rk * skew;
     }
     vertex_sums(dR_, &dq_);
-    const Eigen::VectorXd hv = st_.Hu * vu - st_.P.transpose() * dq_;
     out->resize(vf.size());
+    if (separable) {  // K_s ⊗ I₃ · v − dq at the free vertices
+      const Index ns = st_.Ks.rows();
+      Eigen::Map<Eigen::Matrix<double, 3, Eigen::Dynamic>> o(out->data(), 3, ns);
+      o.noalias() = Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic>>(vf.data(), 3, ns) * st_.Ks;
+      for (Index i = 0; i < ns; ++i) o.col(i) -= dq_.segment<3>(3 * st_.free_vertex[static_cast<size_t>(i)]);
+      return;
+    }
+    const Eigen::VectorXd hv = st_.Hu * vu - st_.P.transpose() * dq_;
     for (Index row = 0; row < st_.nu; ++row)
       if (st_.free_index[row] >= 0) (*out)(st_.free_index[row]) = hv(row);
   }

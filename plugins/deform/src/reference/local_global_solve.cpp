@@ -62,8 +62,9 @@ bool truncated_cg(Rounds& rounds, const LocalGlobalState& st, double* radius, in
   Eigen::VectorXd g;
   rounds.gradient(&g);
   const Index nf = g.size();
+  Matrix<double> b(nf, 1);
   const auto precondition = [&](const Eigen::VectorXd& r, Eigen::VectorXd* z) {
-    Matrix<double> b = r;
+    b.col(0) = r;
     st.factor->solveInPlace(b, 1);
     *z = b.col(0);
   };
