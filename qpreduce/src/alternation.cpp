@@ -285,6 +285,11 @@ bool Alternation<Scalar>::second_order(const InputProjection<Scalar>& projection
   return impl_->fused.second_order(projection, settings);
 }
 template <typename Scalar>
+bool Alternation<Scalar>::reports_energy(const InputProjection<Scalar>& projection,
+                                         const AlternationSettings& settings) const {
+  return impl_->fused.path(projection, settings) != FusedAlternation<Scalar>::Path::Plain;
+}
+template <typename Scalar>
 const Matrix<Scalar>& Alternation<Scalar>::Mb() const {
   return impl_->phase1.Mb();
 }

@@ -231,6 +231,11 @@ class FusedAlternation {
   // options: stiff constraints on y, a projection whose rotation_blocks() is
   // true, and AlternationSettings::second_order.
   bool second_order(const InputProjection<Scalar>& projection, const AlternationSettings& options) const;
+  // The rounds `run` takes for this projection and these options: second
+  // order, Anderson-accelerated, or plain (parallel or serial). The first
+  // two evaluate E(y) and report it; plain rounds do not.
+  enum class Path { SecondOrder, Accelerated, Plain };
+  Path path(const InputProjection<Scalar>& projection, const AlternationSettings& options) const;
   const Vector<double>& proximal_weights() const;
   // The projection's InputProjection::proximal_block_size(), which the
   // weights D are formed for (0, the default: one scalar weight). Resets

@@ -93,6 +93,13 @@ bool FusedAlternation<Scalar>::second_order(const InputProjection<Scalar>& proje
 }
 
 template <typename Scalar>
+typename FusedAlternation<Scalar>::Path FusedAlternation<Scalar>::path(const InputProjection<Scalar>& projection,
+                                                                        const AlternationSettings& options) const {
+  if (second_order(projection, options)) return Path::SecondOrder;
+  return options.anderson_window > 0 ? Path::Accelerated : Path::Plain;
+}
+
+template <typename Scalar>
 const Vector<double>& FusedAlternation<Scalar>::proximal_weights() const {
   return model_->proximal;
 }
@@ -235,15 +242,19 @@ AlternationResults FusedAlternation<Scalar>::run(const FixedCoordinateSolver<Sca
   const bool parallel = threads > 1 && block > 0 && !omp_in_parallel() && q == k && q % block == 0 &&
                         q * k >= options.parallel_min_entries && q / block >= 2;
   AlternationResults summary;
-  if (second_order(projection, options)) {
-    prepare_second_order(phase1, k, W);
-    summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
-  } else if (options.anderson_window > 0) {
-    prepare_acceleration(phase1, projection, options, y, W);
-    summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
-  } else {
-    summary = parallel ? run_parallel(M, W, projection, options, stop, std::min<Index>(threads, q / block), block, y)
-                       : run_serial(M, W, projection, options, stop, y);
+  switch (path(projection, options)) {
+    case Path::SecondOrder:
+      prepare_second_order(phase1, k, W);
+      summary = run_second_order(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
+      break;
+    case Path::Accelerated:
+      prepare_acceleration(phase1, projection, options, y, W);
+      summary = run_accelerated(M, W, projection, *phase1.energy_terms(), b, options, stop, y);
+      break;
+    case Path::Plain:
+      summary = parallel ? run_parallel(M, W, projection, options, stop, std::min<Index>(threads, q / block), block, y)
+                         : run_serial(M, W, projection, options, stop, y);
+      break;
   }
   phase1.solve(b, y, z);
   summary.status = Status::Success;

@@ -140,6 +140,10 @@ class Alternation {
   // Whether `solve` takes second-order steps for this projection and these
   // settings: stiff constraints on y, rotation blocks, settings.second_order.
   bool second_order(const InputProjection<Scalar>& projection, const AlternationSettings& settings) const;
+  // Whether `solve` with this projection and these settings evaluates E(y)
+  // (second-order steps or Anderson rounds: AlternationResults' energy is
+  // finite); plain rounds do not (NaN).
+  bool reports_energy(const InputProjection<Scalar>& projection, const AlternationSettings& settings) const;
   // Phase 1's operators (d × m; d × k formed on each call).
   const Matrix<Scalar>& Mb() const;
   Matrix<Scalar> MY() const;

@@ -177,7 +177,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   if (!onsite.plain_reason.empty()) opts.anderson_window = 0;  // set_handles said why
   // Plain rounds judge no energy (FrameSummary::model_energy NaN): their
   // refit is taken as it comes.
-  const bool judged = second_order || opts.anderson_window > 0;
+  const bool judged = onsite.alternation.reports_energy(*model.projection, opts);
   double slack = 0.0;
   const double kept = refit_frame(model, targets, global_rotation_of(model, pose.S, st.settings.global_rotation),
                                   judged, &st.onsite, &pose, &work, &slack);
