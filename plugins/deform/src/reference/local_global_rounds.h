@@ -190,7 +190,7 @@ class Rounds {
   void keep_curvature() {
     keep_curvature_ = true;
     curvature_.resize(9 * r_);
-    dx_.resize(3 * n_);
+    dx_.setZero(3 * n_);  // separable: hessian_vector writes the free vertices' rows only
     dR_.resize(9 * r_);
     dq_.resize(3 * n_);
   }
@@ -226,8 +226,7 @@ class Rounds {
   void hessian_vector(const Eigen::VectorXd& vf, Eigen::VectorXd* out) {
     const bool separable = st_.Ks.rows() > 0;  // the free rows are whole free vertices
     Eigen::VectorXd vu;
-    if (separable) {
-      dx_.setZero();
+    if (separable) {  // the other rows stay zero (keep_curvature)
       for (size_t i = 0; i < st_.free_vertex.size(); ++i)
         dx_.segment<3>(3 * st_.free_vertex[i]) = vf.segment<3>(3 * static_cast<Index>(i));
     } else {
