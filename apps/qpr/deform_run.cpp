@@ -324,15 +324,6 @@ nlohmann::json settle_json(const FrameSummary& settle, double tolerance) {
           {"tolerance", tolerance}};
 }
 
-// A failed stage as the exception the commands end with (the words the
-// bad-input suite holds them to).
-[[noreturn]] void throw_failed(const ScenarioRunSummary& run) {
-  if (run.stage == ScenarioStage::Handles && usable(run.handles.status))  // exact handles asked for
-    throw std::runtime_error(
-        fmt::format("handles (--strict): {}: {}", to_string(run.handles.status), run.handles.message));
-  throw std::runtime_error(run.message);
-}
-
 // What the deformer was built from and with: sizes, options, model, clusters.
 void report_model(const Deformer& deformer, const Scenario& scenario, const DeformerOptions& options,
                   const PrecomputeSummary& pre, nlohmann::json& report) {
@@ -438,9 +429,6 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
                             const RunSettings& settings, RunOutputs* outputs) {
   check_outputs(settings);
   const ScenarioRunOptions& run_options = settings.run;
-  DeformerOptions options = run_options.deformer;  // as the run uses them
-  apply_scenario_options(scenario, &options);
-
   const int frames = static_cast<int>(scenario.frames.size());
   double peak_mb = 0.0;
   ScenarioRunHooks hooks;
@@ -462,6 +450,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
   };
   ScenarioPoses poses;
   const ScenarioRunSummary run = run_scenario(scenario, run_options, &deformer, &poses, hooks);
+  const DeformerOptions& options = run.options;  // with the scenario's overrides
   if (!run.cache_message.empty()) std::fprintf(stderr, "  cache not used: %s\n", run.cache_message.c_str());
   if (run.handles.status != Status::Success && usable(run.handles.status) && !run_options.strict) {
     std::fprintf(stderr, "  warning: %s%s\n", run.handles.message.c_str(),
@@ -469,7 +458,7 @@ nlohmann::json run_scenario(const Scenario& scenario, const TriangleMesh* surfac
                      ? " (name the point-handle vertices at precompute to meet them exactly: --exact-handles)"
                      : "");
   }
-  if (!run.ok()) throw_failed(run);
+  if (!run.ok()) throw std::runtime_error(run.message);
   const FrameSeries s = frame_series(run);
   if (run.handles.status != Status::Success && !s.residual.empty()) {
     std::fprintf(stderr, "  warning: the handles end up to %.2e of the bounding-box diagonal from their targets\n",

@@ -49,6 +49,8 @@ void bind_run_options(py::module_& m) {
       .listed("status")
       .listed("message")
       .ro("stage", &ScenarioRunSummary::stage, "ScenarioStage.Done, or the stage that failed.")
+      .ro("options", &ScenarioRunSummary::options,
+          "DeformerOptions as the run used them: options.deformer with the scenario's overrides.")
       .ro("precompute", &ScenarioRunSummary::precompute, "PrecomputeSummary of the precompute or the load.")
       .ro("from_cache", &ScenarioRunSummary::from_cache, "The model was loaded from cache_path.")
       .ro("cache_message", &ScenarioRunSummary::cache_message, "Why a cache given was not used ('' otherwise).")

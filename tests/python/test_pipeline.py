@@ -24,6 +24,7 @@ def test_run_scenario_gives_the_frames_of_a_deformer_driven_by_hand():
     poses, summary = deform.run_scenario(sc, options)
     assert summary.ok() and summary.stage == deform.ScenarioStage.Done
     assert len(summary.frames) == 3 and len(summary.handle_residual) == 3
+    assert summary.options.rotational_proxies == options.deformer.rotational_proxies  # no scene override
     assert poses["settled"] is None and poses["refined"] is None
     deformer, _ = make_deformer(frames=3)
     for targets in sc.frames:

@@ -83,6 +83,28 @@ TEST_CASE("run_scenario runs the frames a caller running the Deformer by hand ge
   CHECK(s.arap_energy == Approx(arap_energy(sc.model.V, deformer.elements(), poses.last)).epsilon(1e-12));
   CHECK(s.handles.status == Status::Success);
   CHECK(s.op_seconds > 0.0);
+  CHECK(s.options.iterations == o.deformer.iterations);  // no override in this scenario
+}
+
+TEST_CASE("run_scenario reports the options it ran with: the scenario's overrides on top of the caller's") {
+  Scenario sc = bend_scenario();
+  sc.iterations = 3;
+  sc.gamma = 0.25;
+  const ScenarioRunOptions o = run_options();
+  Deformer deformer;
+  ScenarioPoses poses;
+  const ScenarioRunSummary s = run_scenario(sc, o, &deformer, &poses);
+  REQUIRE(s.ok());
+  CHECK(s.options.iterations == 3);
+  CHECK(s.options.energy.gamma == 0.25);
+  CHECK(s.options.energy.alpha == o.deformer.energy.alpha);
+  // A deformer driven by hand with those options gets the same frames.
+  Deformer by_hand;
+  REQUIRE(by_hand.precompute(sc.model, s.options).ok());
+  REQUIRE(usable(by_hand.set_handles(sc.handles, sc.constraints).status));
+  Vertices V;
+  for (const HandleTargets& t : sc.frames) REQUIRE(usable(by_hand.frame(t, &V).status));
+  CHECK(reference_test::max_distance(V, poses.last) <= 1e-12 * s.diagonal);
 }
 
 TEST_CASE("run_scenario settles the last frame, refines from there and restores the round settings") {

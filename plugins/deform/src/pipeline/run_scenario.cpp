@@ -55,7 +55,8 @@ bool set_handles(const Scenario& scenario, bool strict, Deformer* deformer, Scen
   }
   if (s->handles.status != Status::Success && strict) {
     s->status = s->handles.status;
-    s->message = fmt::format("handles (strict): {}: {}", to_string(s->handles.status), s->handles.message);
+    s->message = fmt::format("handles: {}: {}; exact handles were asked for (strict)", to_string(s->handles.status),
+                             s->handles.message);
     return false;
   }
   return true;
@@ -138,6 +139,7 @@ ScenarioRunSummary run_scenario(const Scenario& scenario, const ScenarioRunOptio
   ScenarioPoses local;
   ScenarioPoses& out = poses ? *poses : local;
   ScenarioRunSummary s;
+  s.options = deformer_options;
   s.diagonal = bounding_box_diagonal(scenario.model.V);
   s.stage = ScenarioStage::Precompute;
   if (!prepare(scenario, options, deformer_options, hooks, deformer, &s)) return s;

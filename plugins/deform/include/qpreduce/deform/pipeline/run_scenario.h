@@ -70,6 +70,9 @@ const char* to_string(ScenarioStage stage);
 
 struct ScenarioRunSummary : Outcome {  // Success when every stage ran
   ScenarioStage stage = ScenarioStage::Precompute;  // Done, or the stage that failed
+  // The deformer's options as the run used them: ScenarioRunOptions::deformer
+  // with the scenario's overrides (apply_scenario_options).
+  DeformerOptions options;
   PrecomputeSummary precompute;        // of the precompute, or of the load
   bool from_cache = false;             // loaded from ScenarioRunOptions::cache_path
   std::string cache_message;           // why a cache was not used ("" when it was, or none was given)
