@@ -149,6 +149,42 @@ void cold_start(const detail::Settings& settings, bool second_order, Alternation
   opts->time_budget = 0.0;
 }
 
+// E′ and its subspace depend on r₀ (the corrections q_k = q0·I + [ω]× of
+// Eq. 9 are linear about its frame: that is why r₀ is refitted), so the
+// rotations S are another pose in the refitted frame. Refitted from the S
+// of rounds stopped short of their fixed point, r₀ can turn so far in one
+// frame that the pose's E′ rises by orders of magnitude (docs/robustness.md,
+// "Soak"): when this frame's rounds (`first`, after `spent` seconds) end
+// above the warm start's E′ in the last r₀, they run again there, in what
+// is left of the budget and the round cap (at least one round). Returns
+// their results, with the first run's rounds and rejections counted in.
+AlternationResults rerun_in_last_rotation(const Model& model, AlternationSettings opts, double spent,
+                                          const AlternationResults& first, OnSite* onsite, Pose* pose,
+                                          Workspace* work) {
+  pose->r0 = work->r0_before;
+  pose->x = work->x_before;
+  work->b = work->b_kept;
+  work->s_local = work->s_kept;
+  if (opts.time_budget > 0.0) opts.time_budget = std::max(opts.time_budget - spent, 1e-12);
+  opts.iterations = std::max(1, opts.iterations - first.iterations);
+  AlternationResults as = onsite->alternation.solve(*model.projection, work->b, opts, pose->x, work->s_local);
+  as.iterations += first.iterations;
+  as.rejected += first.rejected;
+  return as;
+}
+
+// The rounds' part of a frame's summary (S_local after them: the residual's scale).
+void record_rounds(const AlternationResults& as, const Eigen::VectorXd& s_local, double energy_unit,
+                   FrameSummary* summary) {
+  summary->iterations = as.iterations;
+  summary->stop = as.stop;
+  summary->last_change = as.last_change;
+  summary->fixed_point_residual = as.last_change / std::max(s_local.norm(), 1e-300);
+  summary->model_energy = as.energy * energy_unit;
+  summary->rejected_steps = as.rejected;
+  summary->second_order = as.second_order;
+}
+
 }  // namespace
 
 FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
@@ -183,34 +219,11 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
                                   judged, &st.onsite, &pose, &work, &slack);
   Timer t;  // the rounds (FrameSummary::solve_seconds): the refit's product is in total_seconds
   AlternationResults as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
-  // E′ and its subspace depend on r₀ (the corrections q_k = q0·I + [ω]× of
-  // Eq. 9 are linear about its frame: that is why r₀ is refitted), so the
-  // rotations S are another pose in the refitted frame. Refitted from
-  // the S of rounds stopped short of their fixed point, r₀ can turn so far in
-  // one frame that the pose's E′ rises by orders of magnitude
-  // (docs/robustness.md, "Soak"): when this frame's rounds end above the
-  // warm start's E′ in the last r₀, they run again there, in what is left of
-  // the budget and the round cap (at least one round).
   if (!std::isnan(kept) && !(as.energy <= kept + slack)) {
-    pose.r0 = work.r0_before;
-    pose.x = work.x_before;
-    work.b = work.b_kept;
-    work.s_local = work.s_kept;
-    const int before = as.iterations, rejected = as.rejected;
-    if (opts.time_budget > 0.0) opts.time_budget = std::max(opts.time_budget - t.seconds(), 1e-12);
-    opts.iterations = std::max(1, opts.iterations - before);
-    as = st.onsite.alternation.solve(*model.projection, work.b, opts, pose.x, work.s_local);
-    as.iterations += before;
-    as.rejected += rejected;
+    as = rerun_in_last_rotation(model, opts, t.seconds(), as, &st.onsite, &pose, &work);
     summary.rotation_kept = true;
   }
-  summary.iterations = as.iterations;
-  summary.stop = as.stop;
-  summary.last_change = as.last_change;
-  summary.fixed_point_residual = as.last_change / std::max(work.s_local.norm(), 1e-300);
-  summary.model_energy = as.energy * model.energy_unit;
-  summary.rejected_steps = as.rejected;
-  summary.second_order = as.second_order;
+  record_rounds(as, work.s_local, model.energy_unit, &summary);
   if (!onsite.plain_reason.empty() && st.settings.alternating.anderson_window > 0) {
     summary.message = "plain rounds: " + onsite.plain_reason + " (no acceleration)";
   }
