@@ -81,58 +81,6 @@ qpreduce::deform::Deformer::PartBuilder mumps_builder(int block, const qpreduce:
   };
 }
 
-// The float basis travels to rank 0 in chunks of this many rows (p floats
-// each), made from each rank's double rows as they go (Deformer::basis_block):
-// no rank holds the float basis, rank 0 one chunk of it at a time.
-constexpr qpreduce::Index kChunkRows = 4096;
-
-// Rank r > 0: its rows of the reconstruction basis to rank 0, a header
-// (first row, rows) and then the rows chunk by chunk.
-void send_basis_rows(const qpreduce::deform::Deformer& deformer) {
-  const auto rows = deformer.basis_rows();
-  const long long header[2] = {static_cast<long long>(rows.first), static_cast<long long>(rows.count)};
-  MPI_Send(header, 2, MPI_LONG_LONG, 0, 0, MPI_COMM_WORLD);
-  qpreduce::deform::Deformer::BasisRows chunk;
-  for (qpreduce::Index i = 0; i < rows.count; i += kChunkRows) {
-    deformer.basis_block(rows.first + i, std::min(kChunkRows, rows.count - i), &chunk);
-    MPI_Send(chunk.data(), static_cast<int>(chunk.size()), MPI_FLOAT, 0, 1, MPI_COMM_WORLD);
-  }
-}
-
-// Rank 0: the blocks for Deformer::save (p columns), its own rows first,
-// then rank 1's, …, each in chunks as they arrive.
-qpreduce::deform::Deformer::BasisBlocks receive_basis_rows(const qpreduce::deform::Deformer& deformer, int ranks,
-                                                           qpreduce::Index p) {
-  struct Source {
-    int rank = 0;
-    qpreduce::Index first = 0, count = 0, done = 0;
-  };
-  auto at = std::make_shared<Source>();
-  const auto own = deformer.basis_rows();
-  at->first = own.first;
-  at->count = own.count;
-  return [&deformer, ranks, p, at](qpreduce::Index* first, qpreduce::deform::Deformer::BasisRows* block) {
-    while (at->done == at->count) {  // the next rank's header
-      if (++at->rank >= ranks) return false;
-      long long header[2] = {0, 0};
-      MPI_Recv(header, 2, MPI_LONG_LONG, at->rank, 0, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-      at->first = header[0];
-      at->count = header[1];
-      at->done = 0;
-    }
-    const qpreduce::Index c = std::min(kChunkRows, at->count - at->done);
-    if (at->rank == 0) {
-      deformer.basis_block(at->first + at->done, c, block);
-    } else {
-      block->resize(c, p);
-      MPI_Recv(block->data(), static_cast<int>(c * p), MPI_FLOAT, at->rank, 1, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    }
-    *first = at->first + at->done;
-    at->done += c;
-    return true;
-  };
-}
-
 // glibc serves large blocks from its heap once a freed mmap'd block has
 // raised its (dynamic) mmap threshold, and a heap fragmented by the
 // assembly's temporaries keeps them resident under the subspace build. A
@@ -196,11 +144,15 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
   }
   trace("saving", 1.0);
   // The cache, written by rank 0 with every rank's rows of the float basis.
-  if (mpi.rank == 0) {
-    deformer.save(run_files().stage(a.cache), receive_basis_rows(deformer, mpi.size, pre.reduced_size));
-  } else {
-    send_basis_rows(deformer);
-  }
+  // It travels to rank 0 in chunks made from each rank's double rows as they
+  // go (Deformer::basis_block): no rank holds the float basis whole.
+  const auto rows = deformer.basis_rows();
+  const qpreduce::distributed::NextRows next = qpreduce::distributed::stream_rows_to_root(
+      MPI_COMM_WORLD, 0, {rows.first, rows.first + rows.count}, pre.reduced_size,
+      [&deformer](qpreduce::Index first, qpreduce::Index count, qpreduce::distributed::FloatRows* block) {
+        deformer.basis_block(first, count, block);
+      });
+  if (mpi.rank == 0) deformer.save(run_files().stage(a.cache), next);
   const double seconds = total.seconds();
   // Every rank's peak memory, printed by rank 0.
   const std::vector<double> peaks = qpreduce::distributed::gather_values(

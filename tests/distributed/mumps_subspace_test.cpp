@@ -146,6 +146,51 @@ TEST_CASE("sum_over_ranks and gather_values: every rank's part, summed or in ran
   }
 }
 
+TEST_CASE("stream_rows_to_root: every rank's rows on root, in row order, in chunks", "[distributed]") {
+  int size = 1, rank = 0;
+  MPI_Comm_size(MPI_COMM_WORLD, &size);
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  const Index n = 23, cols = 3;  // chunks of 4 rows: uneven blocks and a short last chunk
+  const auto entry = [](Index row, Index col) { return static_cast<float>(10 * row + col); };
+  const distributed::RowRange mine = distributed::owned_rows(n, MPI_COMM_WORLD);
+  int made = 0;  // chunks this rank made
+  const distributed::MakeRows make = [&](Index first, Index count, distributed::FloatRows* rows) {
+    CHECK(first >= mine.begin);
+    CHECK(first + count <= mine.end);
+    rows->resize(count, cols);
+    for (Index i = 0; i < count; ++i)
+      for (Index c = 0; c < cols; ++c) (*rows)(i, c) = entry(first + i, c);
+    ++made;
+  };
+  for (const int root : {0, size - 1}) {
+    made = 0;
+    const distributed::NextRows next = distributed::stream_rows_to_root(MPI_COMM_WORLD, root, mine, cols, make, 4);
+    if (rank != root) {
+      CHECK_FALSE(next);
+      CHECK(made == (mine.size() + 3) / 4);
+      continue;
+    }
+    REQUIRE(next);
+    Index expected_first = 0;
+    Index first = -1;
+    distributed::FloatRows rows;
+    while (next(&first, &rows)) {
+      CHECK(first == expected_first);  // rank 0's rows first, then the next rank's
+      CHECK(rows.rows() <= 4);
+      REQUIRE(rows.cols() == cols);
+      for (Index i = 0; i < rows.rows(); ++i)
+        for (Index c = 0; c < cols; ++c) CHECK(rows(i, c) == entry(first + i, c));
+      expected_first += rows.rows();
+    }
+    CHECK(expected_first == n);
+    CHECK(made == (mine.size() + 3) / 4);  // root's own rows made in place
+  }
+  CHECK_THROWS_WITH(distributed::stream_rows_to_root(MPI_COMM_WORLD, size, mine, cols, make),
+                    Catch::Contains("root " + std::to_string(size) + " outside"));
+  CHECK_THROWS_WITH(distributed::stream_rows_to_root(MPI_COMM_WORLD, 0, mine, 0, make),
+                    Catch::Contains("cols must be ≥ 1"));
+}
+
 TEST_CASE("MUMPS subspace with the factor out of core matches the single-process build", "[distributed]") {
   // One directory per rank count (both ctest entries may run at once);
   // MUMPS deletes its files when the build ends.

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <vector>
@@ -217,6 +218,59 @@ std::vector<double> gather_values(MPI_Comm comm, const std::vector<double>& mine
   MPI_Gather(mine.data(), static_cast<int>(mine.size()), MPI_DOUBLE, all.data(), static_cast<int>(mine.size()),
              MPI_DOUBLE, root, comm);
   return all;
+}
+
+NextRows stream_rows_to_root(MPI_Comm comm, int root, RowRange mine, Index cols, const MakeRows& make,
+                             Index chunk_rows) {
+  int rank = 0, ranks = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &ranks);
+  if (cols < 1) throw std::invalid_argument(fmt::format("stream_rows_to_root: cols must be ≥ 1, got {}", cols));
+  if (chunk_rows < 1)
+    throw std::invalid_argument(fmt::format("stream_rows_to_root: chunk_rows must be ≥ 1, got {}", chunk_rows));
+  if (root < 0 || root >= ranks)
+    throw std::invalid_argument(fmt::format("stream_rows_to_root: root {} outside the {} ranks", root, ranks));
+  constexpr int kHeaderTag = 0, kRowsTag = 1;
+  if (rank != root) {  // a header (first row, rows), then the rows chunk by chunk
+    const long long header[2] = {static_cast<long long>(mine.begin), static_cast<long long>(mine.size())};
+    MPI_Send(header, 2, MPI_LONG_LONG, root, kHeaderTag, comm);
+    FloatRows chunk;
+    for (Index i = 0; i < mine.size(); i += chunk_rows) {
+      make(mine.begin + i, std::min(chunk_rows, mine.size() - i), &chunk);
+      MPI_Send(chunk.data(), static_cast<int>(chunk.size()), MPI_FLOAT, root, kRowsTag, comm);
+    }
+    return {};
+  }
+  struct Source {  // the rank whose rows come next, its block and how far it is
+    int rank = -1;
+    Index first = 0, count = 0, done = 0;
+  };
+  auto at = std::make_shared<Source>();
+  return [comm, root, ranks, mine, cols, make, chunk_rows, at](Index* first, FloatRows* rows) {
+    while (at->done == at->count) {  // the next rank's block
+      if (++at->rank >= ranks) return false;
+      at->done = 0;
+      if (at->rank == root) {
+        at->first = mine.begin;
+        at->count = mine.size();
+        continue;
+      }
+      long long header[2] = {0, 0};
+      MPI_Recv(header, 2, MPI_LONG_LONG, at->rank, kHeaderTag, comm, MPI_STATUS_IGNORE);
+      at->first = static_cast<Index>(header[0]);
+      at->count = static_cast<Index>(header[1]);
+    }
+    const Index c = std::min(chunk_rows, at->count - at->done);
+    if (at->rank == root) {
+      make(at->first + at->done, c, rows);
+    } else {
+      rows->resize(c, cols);
+      MPI_Recv(rows->data(), static_cast<int>(c * cols), MPI_FLOAT, at->rank, kRowsTag, comm, MPI_STATUS_IGNORE);
+    }
+    *first = at->first + at->done;
+    at->done += c;
+    return true;
+  };
 }
 
 void DistributedSummary::add_details(Report* out) const {

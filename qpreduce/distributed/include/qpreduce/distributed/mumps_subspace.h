@@ -40,6 +40,8 @@
 
 #include <mpi.h>
 
+#include <functional>
+
 #include <string>
 #include <vector>
 
@@ -155,6 +157,24 @@ void gather_solution(MPI_Comm comm, const DistributedSubspace& part, const Vecto
 //                   elsewhere.
 void sum_over_ranks(MPI_Comm comm, Matrix<double>* M);
 std::vector<double> gather_values(MPI_Comm comm, const std::vector<double>& mine, int root);
+
+// A row-distributed float matrix (`cols` columns; each rank owns the rows
+// `mine`, contiguous, the ranks' blocks in rank order) streamed to `root`
+// chunk by chunk (at most chunk_rows rows at a time), so that no rank ever
+// holds it whole: `make(first, count, &rows)` writes rows [first, first +
+// count) of this rank's block (count × cols), as each chunk is needed.
+//   On root: returns `next`; each call writes the next chunk's first row and
+//   rows, rank 0's block first and the last rank's last (root's own made in
+//   place, the others' received), and returns false when all are done. Call
+//   it until it returns false: the other ranks wait in it.
+//   Elsewhere: sends this rank's rows and returns an empty function.
+// Collective. Throws std::invalid_argument on cols < 1, chunk_rows < 1, or a
+// root outside comm.
+using FloatRows = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using MakeRows = std::function<void(Index first, Index count, FloatRows* rows)>;
+using NextRows = std::function<bool(Index* first, FloatRows* rows)>;
+NextRows stream_rows_to_root(MPI_Comm comm, int root, RowRange mine, Index cols, const MakeRows& make,
+                             Index chunk_rows = 4096);
 
 // build_subspace_mumps for a caller that holds the whole H on every rank
 // (each rank passes its own rows), then gather_subspace to `root`: there B is
