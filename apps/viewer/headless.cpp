@@ -5,12 +5,16 @@
 #include "context.h"
 #include "view_support.h"
 
+#include <qpreduce/deform/pipeline/run_scenario.h>
+#include <qpreduce/util/timer.h>
+
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <stdexcept>
 
 #include <unistd.h>
@@ -30,65 +34,74 @@ void stderr_progress(const std::string& stage, double fraction) {
 
 // What the frames of a headless run measured.
 struct HeadlessRun {
-  size_t frames = 0;
-  double op_ms = 0.0;
-  std::vector<double> iter_us, recon_ms, frame_ms;
+  ScenarioRunSummary run;  // qpreduce::deform::run_scenario's
+  ScenarioPoses poses;
+  std::vector<double> iter_us, recon_ms, frame_ms;  // per frame
   double residual = 0.0;  // max handle residual / bbox diagonal
-  double fixed_point_residual = 0.0;  // of the last frame (FrameSummary), after its `iterations` rounds
-  int iterations = 0;
-  qpreduce::RoundStop stop = qpreduce::RoundStop::RoundLimit;  // what ended the last frame's rounds
-  double gpu_cpu = -1.0;  // GPU path: max |GPU read-back − CPU r₀·B·w| / bbox diagonal; −1 on the CPU path
+  double gpu_cpu = -1.0;  // GPU path: max |GPU read-back − CPU pose| / bbox diagonal after the last frame; −1 on the CPU path
 };
 
-// Sets the handles (from the recording, or the scenario's), the handle
-// constraints, and runs every frame.
+// Plays the scenario's frames (or the recording's, --replay) through the
+// library's run_scenario on the session's deformer: precompute, the on-site
+// step, the frames (each reconstructed into the renderer's buffers, on the
+// GPU or uploaded from the CPU pose, timed), then settle and refine with
+// --refine. The session then holds the run's model, handles and last pose.
 HeadlessRun run_frames(Session& session, MeshRenderer& renderer, const ViewerOptions& o) {
-  HeadlessRun run;
   HandleMotion motion;
+  std::function<void(size_t)> pose;
+  size_t frames = 0;
   if (!o.replay.empty()) {
     motion = read_motion(o.replay);
     handles_from_motion(motion, &session);
+    frames = motion.frames.size();
+    pose = [&](size_t f) { apply_motion_frame(motion, f, &session); };
   } else {
     session.handles_from_scenario();
+    frames = session.scenario_frames();
+    pose = [&](size_t f) { session.pose_scenario_frame(f); };
   }
-  session.set_reconstruction(o.reconstruction, &renderer);
-  std::string note;
-  run.op_ms = session.update_constraints(&note);
-  if (!note.empty()) std::fprintf(stderr, "  note: %s\n", note.c_str());
+  const Scenario played = session.played_scenario(session.input().options, frames, pose);
 
-  run.frames = o.replay.empty() ? session.scenario_frames() : motion.frames.size();
-  for (size_t f = 0; f < run.frames; ++f) {
-    if (o.replay.empty()) session.pose_scenario_frame(f); else apply_motion_frame(motion, f, &session);
-    const FrameStats s = session.step(&renderer);
-    run.iter_us.push_back(s.iteration_us);
-    run.recon_ms.push_back(s.reconstruction_ms);
-    run.frame_ms.push_back(s.frame_ms);
-    run.residual = std::max(run.residual, s.handle_residual);
-    run.fixed_point_residual = s.fixed_point_residual;
-    run.iterations = s.iterations;
-    run.stop = s.stop;
+  ScenarioRunOptions options;
+  options.deformer = session.input().options;
+  options.refine = o.refine;
+  ScenarioRunHooks hooks;
+  if (isatty(fileno(stderr))) hooks.progress = stderr_progress;
+  hooks.prepared = [&](const Deformer&, bool) { session.set_reconstruction(o.reconstruction, &renderer); };
+  Deformer& deformer = *session.run_deformer();
+  HeadlessRun out;
+  hooks.frame = [&](int, const Vertices& V) {  // the frame into the renderer's buffers
+    const Timer t;
+    if (session.reconstruction() == Reconstruction::Gpu) {
+      const auto& frame = deformer.normalization();
+      renderer.reconstruct_gpu(deformer.reduced_coordinates(), (frame.scale * deformer.global_rotation()).cast<float>(),
+                               frame.centre.cast<float>());
+    } else {
+      renderer.upload_positions(V);
+    }
+    glFinish();  // honest timing: wait for the GPU
+    out.recon_ms.push_back(1e3 * t.seconds());
+  };
+  out.run = run_scenario(played, options, &deformer, &out.poses, hooks);
+  if (!out.run.ok()) throw std::runtime_error(out.run.message);
+  if (out.run.handles.status != Status::Success) std::fprintf(stderr, "  note: %s\n", out.run.handles.message.c_str());
+  const bool gpu = session.reconstruction() == Reconstruction::Gpu;
+  for (size_t f = 0; f < out.run.frames.size(); ++f) {
+    const FrameSummary& fs = out.run.frames[f];
+    out.iter_us.push_back(1e6 * fs.solve_seconds / std::max(1, fs.iterations));
+    if (!gpu) out.recon_ms[f] += 1e3 * fs.reconstruct_seconds;  // the CPU pose, then its upload
+    out.frame_ms.push_back(1e3 * (fs.total_seconds - fs.reconstruct_seconds) + out.recon_ms[f]);
+    out.residual = std::max(out.residual, out.run.handle_residual[f]);
   }
-  // GPU path: compare the read-back positions with a CPU reconstruction of the same w.
-  if (session.reconstruction() == Reconstruction::Gpu) {
-    Vertices gpu;
-    renderer.read_positions(&gpu);
-    run.gpu_cpu = (gpu - session.cpu_reconstruction()).cwiseAbs().maxCoeff() / session.diagonal();
+  // GPU path: the read-back positions of the last frame against its CPU pose.
+  if (gpu) {
+    Vertices read;
+    renderer.read_positions(&read);
+    out.gpu_cpu = (read - out.poses.last).cwiseAbs().maxCoeff() / session.diagonal();
   }
-  return run;
-}
-
-// Refines the last frame's pose on the session's worker (waiting for it: no
-// user here), draws the refined pose, and returns the stats' "refine" object.
-nlohmann::json refine_shown_pose(Session& session, MeshRenderer& renderer, const RefineOptions& options,
-                                 Vertices* refined) {
-  RefineWorker& worker = session.refine_worker(options);
-  worker.start(session.handle_set(), session.targets(), session.last_pose());
-  worker.wait_idle();
-  const RefineStatus st = worker.status();
-  if (st.state != RefineStatus::State::Done || !worker.poll(refined))
-    throw std::runtime_error(fmt::format("refine {}: {}", to_string(st.state), st.message));
-  session.show_pose(*refined, &renderer);
-  return qpr::refine_json(st.summary, options);  // the keys of `qpr deform --refine`
+  session.adopt_run(out.run.precompute, out.run.options, out.poses.last);
+  if (out.run.refined) session.show_pose(out.poses.refined, &renderer);
+  return out;
 }
 
 // Renders the last pose into the screenshot (and the mesh file when asked).
@@ -115,21 +128,22 @@ void write_last_frame(Session& session, MeshRenderer& renderer, RenderTarget& ta
   }
 }
 
-void print_summary(const Session& session, const GlContext& context, const HeadlessRun& run, const ViewerOptions& o,
+void print_summary(const Session& session, const GlContext& context, const HeadlessRun& h, const ViewerOptions& o,
                    const nlohmann::json& refine) {
-  const PrecomputeSummary& pre = session.summary();
+  const PrecomputeSummary& pre = h.run.precompute;
+  const FrameSummary& last = h.run.frames.back();
   fmt::print("{}: {} vertices, {} linear / {} rotational proxies, {} patches; {} frames\n", session.input().name,
-             pre.vertices, pre.linear_proxies, pre.rotational_proxies, pre.patches, run.frames);
+             pre.vertices, pre.linear_proxies, pre.rotational_proxies, pre.patches, h.run.frames.size());
   fmt::print("  renderer        {}\n", context.description());
   fmt::print("  reconstruction  {}{}\n", to_string(session.reconstruction()),
              session.gpu_unavailable_reason().empty() ? "" : " (GPU unavailable: " + session.gpu_unavailable_reason() + ")");
   fmt::print("  precompute {:.2f} s, OP {:.3f} ms, iteration {:.1f} µs, reconstruction {:.3f} ms, frame {:.3f} ms (medians)\n",
-             pre.total_seconds, run.op_ms, upper_median(run.iter_us), upper_median(run.recon_ms),
-             upper_median(run.frame_ms));
-  fmt::print("  handle residual {:.2e} (max, / bbox diagonal)", run.residual);
-  if (run.gpu_cpu >= 0) fmt::print(", GPU vs CPU max |Δ| {:.2e} (/ bbox diagonal)", run.gpu_cpu);
+             pre.total_seconds, 1e3 * h.run.op_seconds, upper_median(h.iter_us), upper_median(h.recon_ms),
+             upper_median(h.frame_ms));
+  fmt::print("  handle residual {:.2e} (max, / bbox diagonal)", h.residual);
+  if (h.gpu_cpu >= 0) fmt::print(", GPU vs CPU max |Δ| {:.2e} (/ bbox diagonal)", h.gpu_cpu);
   fmt::print("\n  fixed-point residual {:.2e} after {} rounds, ended by the {} (last frame)\n",
-             run.fixed_point_residual, run.iterations, to_string(run.stop));
+             last.fixed_point_residual, last.iterations, to_string(last.stop));
   if (!refine.is_null())
     fmt::print(
         "  refine {} rounds, {:.3f} s: ARAP energy {:.6g} -> {:.6g}, from the reduced pose RMS {:.2e}, max {:.2e} "
@@ -140,29 +154,31 @@ void print_summary(const Session& session, const GlContext& context, const Headl
   fmt::print("  wrote {}\n", o.screenshot);
 }
 
-nlohmann::json stats_json(const Session& session, const GlContext& context, const HeadlessRun& run,
-                          const ViewerOptions& o, const nlohmann::json& refine, double arap_energy) {
-  const PrecomputeSummary& pre = session.summary();
+nlohmann::json stats_json(const Session& session, const GlContext& context, const HeadlessRun& h,
+                          const ViewerOptions& o, const nlohmann::json& refine) {
+  const PrecomputeSummary& pre = h.run.precompute;
+  const FrameSummary& last = h.run.frames.back();
   nlohmann::json j = {{"name", session.input().name},
                       {"renderer", context.description()},
                       {"reconstruction", session.reconstruction() == Reconstruction::Gpu ? "gpu" : "cpu"},
                       {"gpu_unavailable_reason", session.gpu_unavailable_reason()},
                       {"vertices", pre.vertices},
                       {"reduced_size", pre.reduced_size},
-                      {"frames", run.frames},
+                      {"frames", h.run.frames.size()},
                       {"precompute_s", pre.total_seconds},
-                      {"op_ms", run.op_ms},
-                      {"iteration_us", upper_median(run.iter_us)},
-                      {"reconstruction_ms", upper_median(run.recon_ms)},
-                      {"frame_ms", upper_median(run.frame_ms)},
-                      {"handle_residual_max", run.residual},
-                      {"gpu_cpu_max_deviation", run.gpu_cpu},
-                      {"fixed_point_residual", run.fixed_point_residual},
-                      {"iterations", run.iterations},
-                      {"stop", to_string(run.stop)},
-                      {"arap_energy", arap_energy},
+                      {"op_ms", 1e3 * h.run.op_seconds},
+                      {"iteration_us", upper_median(h.iter_us)},
+                      {"reconstruction_ms", upper_median(h.recon_ms)},
+                      {"frame_ms", upper_median(h.frame_ms)},
+                      {"handle_residual_max", h.residual},
+                      {"gpu_cpu_max_deviation", h.gpu_cpu},
+                      {"fixed_point_residual", last.fixed_point_residual},
+                      {"iterations", last.iterations},
+                      {"stop", to_string(last.stop)},
+                      {"arap_energy", h.run.arap_energy},
                       {"screenshot", o.screenshot}};
   if (!refine.is_null()) j["refine"] = refine;
+  j["run"] = to_json(h.run.report());  // every stage's summary (docs/formats.md, "Summaries")
   return j;
 }
 
@@ -173,16 +189,12 @@ int run_headless(Session& session, const ViewerOptions& o, const SaveMeshFn& sav
   MeshRenderer renderer(session.rest(), session.input().faces);
   RenderTarget target;
   target.resize(o.width, o.height, o.samples);
-  session.precompute(session.input().options, isatty(fileno(stderr)) ? ProgressFn(stderr_progress) : ProgressFn());
-  const HeadlessRun run = run_frames(session, renderer, o);
-  Vertices shown;  // the pose drawn: the refined one with --refine
-  const nlohmann::json refine = o.refine ? refine_shown_pose(session, renderer, *o.refine, &shown) : nlohmann::json();
+  const HeadlessRun h = run_frames(session, renderer, o);
+  const nlohmann::json refine = h.run.refined ? qpr::refine_json(h.run.refine, *o.refine) : nlohmann::json();
   write_last_frame(session, renderer, target, o, save_mesh);
-  print_summary(session, context, run, o, refine);
-  if (!o.stats_json.empty()) {
-    if (!o.refine) session.positions(renderer, &shown);
-    write_json(qpr::run_files().stage(o.stats_json), stats_json(session, context, run, o, refine, session.arap_energy(shown)), "stats");
-  }
+  print_summary(session, context, h, o, refine);
+  if (!o.stats_json.empty())
+    write_json(qpr::run_files().stage(o.stats_json), stats_json(session, context, h, o, refine), "stats");
   return 0;
 }
 

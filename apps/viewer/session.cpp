@@ -62,12 +62,16 @@ void ensure_linear_proxies(DeformableMesh* model, Index count, const Handles* ex
 }
 }  // namespace
 
+void Session::sample_linear_proxies(const DeformerOptions& options) {
+  if (!input_.scenario.model.linear.count() || options.linear_proxies != options_.linear_proxies)
+    ensure_linear_proxies(&input_.scenario.model, options.linear_proxies, exact_handles());
+}
+
 void Session::precompute(const DeformerOptions& options, const ProgressFn& progress) {
   if (worker_.joinable()) throw std::logic_error("Session::precompute: a precompute is running");
   std::string why;
   if (!options.is_valid(&why)) throw std::invalid_argument("deformer options: " + why);
-  if (!input_.scenario.model.linear.count() || options.linear_proxies != options_.linear_proxies)
-    ensure_linear_proxies(&input_.scenario.model, options.linear_proxies, exact_handles());
+  sample_linear_proxies(options);
   auto d = std::make_unique<Deformer>();
   const PrecomputeSummary s = d->precompute(input_.scenario.model, options, progress);
   if (!s.ok()) throw std::runtime_error("precompute failed: " + s.message);
@@ -211,7 +215,7 @@ void Session::remove_handle(size_t index) {
   constraints_ready_ = false;
 }
 
-double Session::update_constraints(std::string* note) {
+void Session::form_handle_set() {
   flat_ = Handles{};
   for (const ViewHandle& h : handles_) {
     if (h.patch >= 0) flat_.patches.push_back(h.patch);
@@ -219,15 +223,49 @@ double Session::update_constraints(std::string* note) {
   }
   targets_.points.resize(static_cast<Index>(flat_.points.size()), 3);
   targets_.patch_transforms.resize(flat_.patches.size());
+  residual_scenario_.model = input_.scenario.model;
+  residual_scenario_.handles = flat_;
+}
+
+double Session::update_constraints(std::string* note) {
+  form_handle_set();
   const Timer t;
   const ConstraintSummary cs = deformer_->set_handles(flat_, constraints_);
   const double ms = 1e3 * t.seconds();
   if (!usable(cs.status)) throw std::runtime_error("handles: " + cs.message);
   if (note) *note = cs.status == Status::Success ? std::string() : cs.message;
-  residual_scenario_.model = input_.scenario.model;
-  residual_scenario_.handles = flat_;
   constraints_ready_ = true;
   return ms;
+}
+
+// ---- a whole run ----
+
+Scenario Session::played_scenario(const DeformerOptions& options, size_t frames,
+                                  const std::function<void(size_t)>& pose) {
+  if (handles_.empty()) throw std::invalid_argument("Session::played_scenario: no handle to play");
+  std::string why;
+  if (!options.is_valid(&why)) throw std::invalid_argument("deformer options: " + why);
+  sample_linear_proxies(options);
+  form_handle_set();
+  Scenario played;
+  played.model = input_.scenario.model;
+  played.handles = flat_;
+  played.constraints = constraints_;
+  for (size_t f = 0; f < frames; ++f) {
+    pose(f);
+    fill_targets();
+    played.frames.push_back(targets_);
+  }
+  return played;
+}
+
+void Session::adopt_run(const PrecomputeSummary& precompute, const DeformerOptions& options, const Vertices& last) {
+  check_size("Session::adopt_run: rows", rest().rows(), last.rows());
+  summary_ = precompute;
+  options_ = options;
+  form_handle_set();
+  constraints_ready_ = true;
+  cpu_out_ = last;
 }
 
 void Session::fill_targets() {

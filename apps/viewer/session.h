@@ -22,6 +22,7 @@
 #include <qpreduce/deform/io/scenario.h>
 
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -139,6 +140,22 @@ class Session {
   // pose, over the deformer's rotation elements.
   double arap_energy(const qpreduce::deform::Vertices& V) const;
 
+  // ---- a whole run (the headless mode: qpreduce::deform::run_scenario) ----
+  // The scenario the session's handles play over `frames` frames, frame f
+  // posed by pose(f) (pose_scenario_frame, or a recorded motion): the model
+  // with the linear proxies `options` asks for (sampled as precompute
+  // samples them), the handle set update_constraints forms and one
+  // HandleTargets a frame. Throws std::invalid_argument with no handle.
+  qpreduce::deform::Scenario played_scenario(const qpreduce::deform::DeformerOptions& options, size_t frames,
+                                             const std::function<void(size_t)>& pose);
+  // The session's deformer, for run_scenario to prepare and run (call
+  // set_reconstruction from its `prepared` hook for the GPU path).
+  qpreduce::deform::Deformer* run_deformer() { return deformer_.get(); }
+  // After run_scenario ran played_scenario(…) on run_deformer(): its model,
+  // options and handle set are the session's, `last` (n × 3) its last pose.
+  void adopt_run(const qpreduce::deform::PrecomputeSummary& precompute,
+                 const qpreduce::deform::DeformerOptions& options, const qpreduce::deform::Vertices& last);
+
   // ---- full-space refine (refine_worker.h) ----
   // The session's worker, made on first use with `options` (later calls
   // return the same worker and ignore them).
@@ -173,6 +190,10 @@ class Session {
   std::unique_ptr<RefineWorker> refine_;                  // last: destroyed (joined) first
 
   void fill_targets();
+  // The model's linear proxies for `options` (precompute then uses exactly these).
+  void sample_linear_proxies(const qpreduce::deform::DeformerOptions& options);
+  // flat_, the targets' sizes and residual_scenario_ from the handles.
+  void form_handle_set();
 };
 
 }  // namespace qpr::viewer

@@ -15,6 +15,7 @@
 #include <qpreduce/deform/mesh/geometry.h>
 #include <qpreduce/deform/mesh/shapes.h>
 #include <qpreduce/deform/mesh/tet_boundary.h>
+#include <qpreduce/deform/pipeline/run_scenario.h>
 
 #include "../file_size_limit.h"
 
@@ -210,6 +211,42 @@ TEST_CASE("headless GL: GPU reconstruction matches the CPU one, and a drag chang
     CHECK_THROWS_AS(gpu_session.add_handle({}, "empty"), std::invalid_argument);
     CHECK_THROWS_AS(read_png("no-such-file.png"), std::runtime_error);
   }
+}
+
+TEST_CASE("headless: the session's handles played through run_scenario give the frames Session::step gives") {
+  INFO(gl_context().description());
+  Session stepped(cylinder_input()), played(cylinder_input());
+  stepped.precompute(stepped.input().options);
+  MeshRenderer renderer(stepped.rest(), stepped.input().faces);
+  stepped.set_reconstruction(Reconstruction::Cpu, &renderer);
+  std::vector<FrameStats> stats;
+  scripted_drag(&stepped, &renderer, 4, &stats);
+
+  // The same drag as a scenario: the handles, and frame f's transforms.
+  played.add_handle(ring(0), "base");
+  played.add_handle(ring(kRings - 1), "top");
+  std::vector<Eigen::Matrix4d> top;
+  for (int k = 1; k <= 4; ++k) {
+    const double t = k / 4.0;
+    const Eigen::Affine3d T = Eigen::Translation3d(1.5 * t, 0.0, -0.3 * t) * Eigen::Translation3d(0, 0, 4.0) *
+                              Eigen::AngleAxisd(0.8 * t, Eigen::Vector3d::UnitZ()) * Eigen::Translation3d(0, 0, -4.0);
+    top.push_back(T.matrix());
+  }
+  const Scenario sc = played.played_scenario(played.input().options, top.size(),
+                                             [&](size_t f) { played.handles()[1].transform = top[f]; });
+  REQUIRE(sc.frames.size() == 4);
+  CHECK(sc.handles.points.size() == stepped.handle_set().points.size());
+  ScenarioRunOptions o;
+  o.deformer = played.input().options;
+  ScenarioPoses poses;
+  const ScenarioRunSummary run = run_scenario(sc, o, played.run_deformer(), &poses);
+  REQUIRE(run.ok());
+  played.adopt_run(run.precompute, run.options, poses.last);
+  CHECK(played.summary().reduced_size == stepped.summary().reduced_size);
+  CHECK((played.last_pose() - stepped.last_pose()).cwiseAbs().maxCoeff() <= 1e-12 * stepped.diagonal());
+  CHECK(run.handle_residual.back() == Approx(stats.back().handle_residual).margin(1e-12));
+  CHECK_THROWS_WITH(Session(cylinder_input()).played_scenario(o.deformer, 1, [](size_t) {}),
+                    Catch::Contains("no handle to play"));
 }
 
 TEST_CASE("refine worker: the reduced pose refined off the UI thread, shown once, cancelled mid-round") {
