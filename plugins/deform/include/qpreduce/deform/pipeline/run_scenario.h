@@ -2,8 +2,9 @@
 // (or load a cached model), the on-site step for the scenario's handles,
 // every frame, then, when asked, the reduced rounds run on to their fixed
 // point at the last frame's targets ("settle") and the full-space finish
-// from there (refine.h). `qpr deform`, `qpr demo`, `qpr compare` and
-// Python's deform.run_scenario call it; they parse, print and write files.
+// from there (refine.h). `qpr deform`, `qpr demo`, `qpr compare`, the
+// viewer's headless mode and Python's deform.run_scenario call it; they
+// parse, print and write files.
 //
 // Usage:
 //   ScenarioRunOptions o;
