@@ -1,4 +1,4 @@
-// qpr app support — what a run writes, committed together at its end.
+// qpr run files — what a run writes, committed together at its end.
 //
 // The rule every qpr command follows (docs/robustness.md, "What a failing
 // run writes"): a run that fails writes nothing. Each output is written

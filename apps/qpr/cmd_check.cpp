@@ -2,7 +2,7 @@
 // pre-flight (diagnose_mesh) on its own: every finding, the scale, and an
 // exit code — 0 clean, 1 warnings only, 2 errors (or warnings with --strict,
 // or an input that cannot be read).
-#include "app_support.h"
+#include "reports.h"
 #include "commands.h"
 #include "guard.h"
 #include "preflight.h"

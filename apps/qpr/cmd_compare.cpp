@@ -1,7 +1,7 @@
 // `qpr compare MESH …`: the reduced deformation against full-space references
 // (Ceres and/or local-global ARAP, reference.h) on the last frame of a
 // scenario. No math here: the plugin solves, this file measures and reports.
-#include "app_support.h"
+#include "reports.h"
 #include "commands.h"
 #include "deform_run.h"
 #include "guard.h"

@@ -21,7 +21,7 @@
 //
 // Exit codes: 0 success; 1 a bound was violated; 2 bad input (the message
 // names the file and line); 3 a numerical failure (precompute or a demand).
-#include "app_support.h"
+#include "reports.h"
 #include "commands.h"
 #include "guard.h"
 #include "qp_demands.h"

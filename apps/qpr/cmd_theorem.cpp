@@ -4,7 +4,7 @@
 // reduced answer X* (SubspaceSolver), the true error d_H(X*, X_min), the
 // bound of Eq. 39 and η = bound / error. Trials run in groups that share
 // (family, size, seed) and sweep ε, so H is factored once per group.
-#include "app_support.h"
+#include "reports.h"
 #include "commands.h"
 #include "guard.h"
 #include "validators.h"

@@ -3,7 +3,7 @@
 #include "refine_run.h"
 #include "run_files.h"
 
-#include "app_support.h"
+#include "reports.h"
 #include "preflight.h"
 #include "validators.h"
 

@@ -1,6 +1,6 @@
 #include "preflight.h"
 
-#include "app_support.h"
+#include "reports.h"
 
 #include <fmt/format.h>
 

@@ -1,6 +1,6 @@
 // qpr — `--refine` and `--convergence` (refine_run.h).
 #include "refine_run.h"
-#include "app_support.h"
+#include "reports.h"
 #include "validators.h"
 
 #include <qpreduce/anderson.h>

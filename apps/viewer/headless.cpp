@@ -1,9 +1,10 @@
 #include "modes.h"
 
-#include "app_support.h"
+#include "reports.h"
 #include "run_files.h"
 #include "context.h"
-#include "view_support.h"
+#include "appearance.h"
+#include "motion.h"
 
 #include <qpreduce/deform/pipeline/run_scenario.h>
 #include <qpreduce/util/timer.h>

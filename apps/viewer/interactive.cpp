@@ -2,10 +2,11 @@
 // recording (mouse and keys: picking.cpp; panels: panels.cpp).
 #include "interactive.h"
 #include "modes.h"
-#include "view_support.h"
+#include "appearance.h"
+#include "motion.h"
 #include "run_files.h"
 
-#include "app_support.h"
+#include "reports.h"
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>

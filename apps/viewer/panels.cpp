@@ -2,7 +2,8 @@
 // soft handles), Frame (reconstruction path and timings) and Edit (colours,
 // selection, handles, playback, recording, files).
 #include "interactive.h"
-#include "view_support.h"
+#include "appearance.h"
+#include "motion.h"
 
 #include <fmt/format.h>
 #include <imgui.h>

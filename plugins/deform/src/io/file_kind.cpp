@@ -1,6 +1,6 @@
 #include "qpreduce/deform/io/file_kind.h"
 
-#include "io_detail.h"
+#include "format_common.h"
 
 namespace qpreduce::deform {
 

@@ -2,7 +2,7 @@
 // are described in handles_io.h.
 #include "qpreduce/deform/io/handles_io.h"
 
-#include "io_detail.h"
+#include "format_common.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,5 +1,5 @@
 // Extension dispatch for triangle meshes.
-#include "io_detail.h"
+#include "format_common.h"
 
 namespace qpreduce::deform {
 

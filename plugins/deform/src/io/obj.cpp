@@ -1,5 +1,5 @@
 // OBJ reader and writer; the format is described in mesh_io.h.
-#include "io_detail.h"
+#include "format_common.h"
 
 namespace qpreduce::deform {
 

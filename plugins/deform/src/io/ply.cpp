@@ -1,6 +1,6 @@
 // PLY reader (ASCII, binary little-endian) and writer; the format is
 // described in mesh_io.h.
-#include "io_detail.h"
+#include "format_common.h"
 
 #include <cmath>
 #include <cstdint>

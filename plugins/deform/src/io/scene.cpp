@@ -5,7 +5,7 @@
 #include "qpreduce/deform/io/mesh_io.h"
 #include "qpreduce/deform/io/tet_io.h"
 
-#include "io_detail.h"
+#include "format_common.h"
 
 #include <nlohmann/json.hpp>
 

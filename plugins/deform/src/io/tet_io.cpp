@@ -1,7 +1,7 @@
 // MEDIT and TetGen readers and writers; the formats are described in tet_io.h.
 #include "qpreduce/deform/io/tet_io.h"
 
-#include "io_detail.h"
+#include "format_common.h"
 
 #include <algorithm>
 #include <cctype>

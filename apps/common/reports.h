@@ -1,5 +1,5 @@
-// qpr app support — small helpers shared by the `qpr` subcommands and the
-// viewer: medians of timing samples, JSON values and report files. No math
+// qpr reports — what the `qpr` subcommands and the viewer report with:
+// medians of timing samples, JSON values of summaries, report files. No math
 // of the paper lives here.
 #pragma once
 

@@ -1,4 +1,4 @@
-#include "view_support.h"
+#include "appearance.h"
 
 #include <fmt/format.h>
 
@@ -94,36 +94,6 @@ void set_camera(Camera* camera, const Vertices& V, const ViewerOptions& o, const
   camera->yaw = o.yaw_deg * kPi / 180.0f;
   camera->pitch = o.pitch_deg * kPi / 180.0f;
   camera->zoom(o.zoom);
-}
-
-// Replays motion frame f: the recorded handles must be the session's handles.
-void apply_motion_frame(const HandleMotion& motion, size_t f, Session* session) {
-  auto& handles = session->handles();
-  const auto& frame = motion.frames[std::min(f, motion.frames.size() - 1)];
-  for (size_t h = 0; h < handles.size() && h < frame.size(); ++h) handles[h].transform = frame[h];
-}
-
-// Replaces the session's handles by the recorded ones.
-void handles_from_motion(const HandleMotion& motion, Session* session) {
-  if (motion.vertex_count != session->rest().rows())
-    throw std::runtime_error(fmt::format("the recording is for {} vertices, the mesh has {}", motion.vertex_count,
-                                         session->rest().rows()));
-  if (motion.frames.empty()) throw std::runtime_error("the recording has no frame");
-  session->handles_from_scenario();
-  std::vector<ViewHandle> patches;
-  for (const ViewHandle& h : session->handles())
-    if (h.patch >= 0) patches.push_back(h);
-  session->handles().clear();
-  for (const auto& h : motion.handles) {
-    if (h.patch >= 0) {
-      auto it = std::find_if(patches.begin(), patches.end(), [&](const ViewHandle& p) { return p.patch == h.patch; });
-      if (it == patches.end()) throw std::runtime_error(fmt::format("the recording moves patch {}, which this scene does not prescribe", h.patch));
-      session->handles().push_back(*it);
-    } else {
-      session->add_handle(h.vertices, h.name);
-    }
-  }
-  apply_motion_frame(motion, 0, session);
 }
 
 }  // namespace qpr::viewer

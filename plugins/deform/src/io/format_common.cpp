@@ -1,6 +1,6 @@
 // Whole-file input, the text cursor, strict number parsing, triangulation and
-// buffered output shared by the readers and writers; see io_detail.h.
-#include "io_detail.h"
+// buffered output shared by the readers and writers; see format_common.h.
+#include "format_common.h"
 
 #include "qpreduce/util/atomic_file.h"
 

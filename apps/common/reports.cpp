@@ -1,4 +1,4 @@
-#include "app_support.h"
+#include "reports.h"
 
 #include <qpreduce/util/atomic_file.h>
 

@@ -1,10 +1,8 @@
-// qpr viewer — what the headless and the interactive views share: vertex
-// colours of the categorical modes, handle markers, camera framing, and the
-// replay of a recorded handle motion into a session.
+// qpr viewer — how both modes (headless and the window) draw a session:
+// vertex colours of the categorical modes, handle markers, camera framing.
 #pragma once
 
 #include "camera.h"
-#include "motion.h"
 #include "renderer.h"
 #include "session.h"
 #include "viewer.h"
@@ -25,13 +23,5 @@ std::vector<unsigned> handle_markers(const Session& session);
 // options' up axis, direction and zoom.
 void set_camera(Camera* camera, const qpreduce::deform::Vertices& V, const ViewerOptions& o,
                 const qpreduce::deform::Vertices* deformed = nullptr);
-
-// Poses the session's handles as in recorded frame f (the last one past the
-// end); the recorded handles must be the session's handles.
-void apply_motion_frame(const HandleMotion& motion, size_t f, Session* session);
-
-// Replaces the session's handles by the recorded ones and poses frame 0.
-// Throws std::runtime_error when the recording does not fit the mesh or scene.
-void handles_from_motion(const HandleMotion& motion, Session* session);
 
 }  // namespace qpr::viewer
