@@ -174,7 +174,7 @@ nlohmann::json stats_json(const Session& session, const GlContext& context, cons
                       {"handle_residual_max", h.residual},
                       {"gpu_cpu_max_deviation", h.gpu_cpu},
                       {"fixed_point_residual", last.fixed_point_residual},
-                      {"iterations", last.iterations},
+                      {"rounds", last.iterations},
                       {"stop", to_string(last.stop)},
                       {"arap_energy", h.run.arap_energy},
                       {"screenshot", o.screenshot}};
