@@ -24,15 +24,13 @@ import json
 import math
 import os
 import platform
-import re
 import shlex
 import shutil
 import subprocess
 import sys
 import time
 
-from quality_tables import TARGET_RATIO, TARGET_RMS, TARGET_SPEEDUP, fragments, label, short  # noqa: E402
-from plots import PALETTE, line_plot  # noqa: E402
+from quality_tables import TARGET_RATIO, TARGET_RMS, TARGET_SPEEDUP, figures, fragments, label, short, splice  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -449,55 +447,8 @@ class Study:
 # ---------------------------------------------------------------------------
 # Output: markdown fragments and the figures (matplotlib)
 # ---------------------------------------------------------------------------
-def figures(st, figdir):
-    R = st.results
-    made = []
-    for what, xlabel, logx, fname, title in (
-            ("rot", "rotational proxies d", True, "quality_rotational_proxies.png", "Rotational proxy sweep (Fig. 4)"),
-            ("lin", "linear proxies m (point handles)", True, "quality_linear_proxies.png", "Linear proxy sweep"),
-            ("alpha", "α", True, "quality_alpha.png", "α sweep (Fig. 3)")):
-        if what not in R:
-            continue
-        names = [short(k, n) for (k, n) in R[what]]
-        ratio = {short(k, n): [(p["value"], p["ratio"]) for p in pts] for (k, n), pts in R[what].items()}
-        rms = {short(k, n): [(p["value"], 100 * p["rms"]) for p in pts] for (k, n), pts in R[what].items()}
-        path = os.path.join(figdir, fname)
-        line_plot(path, title, xlabel, [("energy ratio (reduced / reference)", ratio, "auto"),
-                                       ("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=logx,
-                 hlines={0: TARGET_RATIO, 1: 100 * TARGET_RMS})
-        made.append(path)
-    if "conv" in R:
-        names, rms, styles = [], {}, {}
-        for si, ((kind, name, lab), (extra, pts)) in enumerate(R["conv"].items()):
-            its = sorted(set(p["iterations"] for p in pts))
-            for ii, it in enumerate(its):
-                nm = short(kind, name) + "".join(", %s %s" % ({"rotational-proxies": "d", "alpha": "α"}.get(k, k), v)
-                                                 for k, v in extra.items()) + ", %d it." % it
-                names.append(nm)
-                styles[nm] = (PALETTE[si % len(PALETTE)], ii > 0)
-                rms[nm] = [(p["frames"], 100 * p["rms"]) for p in pts if p["iterations"] == it]
-        path = os.path.join(figdir, "quality_frames.png")
-        line_plot(path, "Frames to the pose (warm start)", "frames from rest to the pose",
-                 [("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=True, hlines={0: 100 * TARGET_RMS},
-                 styles=styles)
-        made.append(path)
-    return made
-
-
-def splice(doc, frag):
-    text = open(doc).read()
-    missing = []
-    for name, body in frag.items():
-        pat = re.compile(r"(<!-- quality_study:%s -->\n)(?:.*?\n)?(<!-- /quality_study:%s -->)" % (name, name), re.S)
-        if not pat.search(text):
-            missing.append(name)
-            continue
-        text = pat.sub(lambda m: m.group(1) + body + "\n" + m.group(2), text)
-    open(doc, "w").write(text)
-    return missing
-
-
-def main():
+def arguments():
+    """The command line."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--qpr", default=os.path.join(ROOT, "build", "bin", "qpr"))
     ap.add_argument("--data", default=os.path.join(os.path.dirname(ROOT), "shared", "data"))
@@ -508,7 +459,49 @@ def main():
     ap.add_argument("--doc", default=os.path.join(ROOT, "docs", "quality.md"))
     ap.add_argument("--figures", default=None, help="figure directory (default docs/figures; quick: the work dir)")
     ap.add_argument("--skip", default="", help="comma list of parts to skip: ceres,ladder,modified,rot,lin,alpha,beta,paper,conv,timing")
-    args = ap.parse_args()
+    return ap.parse_args()
+
+
+def run_info(args, cfg, st, t0, loads, wall):
+    """The "run" table's rows: command, date, machine, load, qpr build, settings, runs."""
+    load0, load1 = loads
+    cpu = platform.processor() or ""
+    try:
+        for line in subprocess.run(["lscpu"], stdout=subprocess.PIPE, text=True).stdout.splitlines():
+            if line.startswith("Model name:"):
+                cpu = line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    try:
+        commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], stdout=subprocess.PIPE,
+                                text=True).stdout.strip()
+    except OSError:
+        commit = "?"
+    info = [("command", "`python3 scripts/quality_study.py%s`" % (" --quick" if args.quick else "")),
+            ("date (UTC)", time.strftime("%Y-%m-%d %H:%M", time.gmtime(t0))),
+            ("machine", "%s, %d cores (`nproc`), runs serial under `nice -n %d`" % (cpu, os.cpu_count(), args.nice)),
+            ("load average (1 min) when the runs started", "%.2f – %.2f (median %.2f)" % (
+                min(st.r.loads), max(st.r.loads), sorted(st.r.loads)[len(st.r.loads) // 2])
+             if st.r.loads else "not recorded for the reused runs (%d); %.2f / %.2f now" % (
+                st.r.loads_missing, load0[0], load1[0])),
+            ("qpr", "%s, built %s UTC (sha256 %s…; tree HEAD %s)" % (
+                os.path.relpath(args.qpr, ROOT),
+                time.strftime("%Y-%m-%d %H:%M", time.gmtime(os.path.getmtime(args.qpr))), st.r.qpr_hash, commit)),
+            ("frames from rest to the pose", "%d (`.sel/.def` `--frames`; `.anim` poses interpolated linearly)"
+             % cfg["frames"]),
+            ("local-global caps (rounds)", ", ".join("%s %d" % kv for kv in cfg["lg_rounds"].items())),
+            ("Ceres caps (LM iterations)", ", ".join("%s %d" % kv for kv in cfg["ceres"]) or "—"),
+            ("qpr runs / their wall time", "%d / %.0f s%s" % (
+                st.r.count, st.r.seconds,
+                " (%d reused from an earlier invocation with --resume)" % st.r.kept if st.r.kept else
+                " (%.0f s with the Python side)" % wall))]
+    if st.failures:
+        info.append(("runs qpr refused", "; ".join("`%s`: %s" % f for f in st.failures)))
+    return info
+
+
+def main():
+    args = arguments()
     cfg = QUICK if args.quick else FULL
     args.work = args.work or ("/tmp/qpreduce-quality" + ("-quick" if args.quick else ""))
     os.makedirs(args.work, exist_ok=True)
@@ -542,39 +535,7 @@ def main():
             part()
     wall = time.time() - t0
     load1 = os.getloadavg()
-
-    cpu = platform.processor() or ""
-    try:
-        for line in subprocess.run(["lscpu"], stdout=subprocess.PIPE, text=True).stdout.splitlines():
-            if line.startswith("Model name:"):
-                cpu = line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    try:
-        commit = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], stdout=subprocess.PIPE,
-                                text=True).stdout.strip()
-    except OSError:
-        commit = "?"
-    info = [("command", "`python3 scripts/quality_study.py%s`" % (" --quick" if args.quick else "")),
-            ("date (UTC)", time.strftime("%Y-%m-%d %H:%M", time.gmtime(t0))),
-            ("machine", "%s, %d cores (`nproc`), runs serial under `nice -n %d`" % (cpu, os.cpu_count(), args.nice)),
-            ("load average (1 min) when the runs started", "%.2f – %.2f (median %.2f)" % (
-                min(st.r.loads), max(st.r.loads), sorted(st.r.loads)[len(st.r.loads) // 2])
-             if st.r.loads else "not recorded for the reused runs (%d); %.2f / %.2f now" % (
-                st.r.loads_missing, load0[0], load1[0])),
-            ("qpr", "%s, built %s UTC (sha256 %s…; tree HEAD %s)" % (
-                os.path.relpath(args.qpr, ROOT),
-                time.strftime("%Y-%m-%d %H:%M", time.gmtime(os.path.getmtime(args.qpr))), st.r.qpr_hash, commit)),
-            ("frames from rest to the pose", "%d (`.sel/.def` `--frames`; `.anim` poses interpolated linearly)"
-             % cfg["frames"]),
-            ("local-global caps (rounds)", ", ".join("%s %d" % kv for kv in cfg["lg_rounds"].items())),
-            ("Ceres caps (LM iterations)", ", ".join("%s %d" % kv for kv in cfg["ceres"]) or "—"),
-            ("qpr runs / their wall time", "%d / %.0f s%s" % (
-                st.r.count, st.r.seconds,
-                " (%d reused from an earlier invocation with --resume)" % st.r.kept if st.r.kept else
-                " (%.0f s with the Python side)" % wall))]
-    if st.failures:
-        info.append(("runs qpr refused", "; ".join("`%s`: %s" % f for f in st.failures)))
+    info = run_info(args, cfg, st, t0, (load0, load1), wall)
     frag = fragments(st, info)
     figs = figures(st, figdir)
     fragfile = os.path.join(args.work, "quality_fragments.md")
@@ -590,6 +551,8 @@ def main():
         missing = splice(args.doc, frag)
         print("updated %s%s" % (args.doc, (" (no markers for: %s)" % ", ".join(missing)) if missing else ""))
     print("%d qpr runs, %.0f s" % (st.r.count, wall))
+
+
 
 
 if __name__ == "__main__":

@@ -1,7 +1,11 @@
-"""The Markdown tables of docs/quality.md from a quality study's results
-(scripts/quality_study.py): the acceptance targets and one fragment per
-`<!-- quality_study:NAME -->` marker."""
+"""The Markdown tables and figures of docs/quality.md from a quality study's
+results (scripts/quality_study.py): the acceptance targets, one fragment per
+`<!-- quality_study:NAME -->` marker, spliced into the page, and the sweep
+and convergence plots."""
 import os
+import re
+
+from plots import PALETTE, line_plot  # noqa: E402 (scripts/ is the script's own folder)
 
 # Acceptance targets: RMS deviation (fraction of the bounding-box diagonal),
 # energy ratio (reduced / reference) and speed-up over the full-space solve.
@@ -30,12 +34,8 @@ def table(header, rows):
     return "\n".join(out)
 
 
-def fragments(st, info):
-    R = st.results
-    frag = {}
-    # run info
-    frag["run"] = table(["", ""], [[k, v] for k, v in info])
-    # main table
+def _main_fragments(st, R, frag):
+    """Every scenario against its local-global reference."""
     rows = []
     for row in R["main"]:
         rep = row["rep"]
@@ -54,7 +54,10 @@ def fragments(st, info):
     frag["main"] = table(["scenario", "n", "reduced E", "reference E", "E ratio", "RMS dev.", "max dev.",
                           "handle res. red. / ref.", "reduced frame ms", "reference ms (rounds)", "speedup",
                           "ref. rounds per frame", "RMS vs CGAL/libigl", "ref. vs CGAL/libigl"], rows)
-    # ceres
+
+
+def _ceres_fragments(st, R, frag):
+    """The Ceres reference table."""
     rows = []
     for row in R.get("ceres", []):
         c, lg = row["ceres"], row["lg"]
@@ -65,7 +68,10 @@ def fragments(st, info):
                      "%.0f×" % (c["solve_ms"] / row["rep"]["reduced"]["frame_ms"])])
     frag["ceres"] = table(["scenario", "Ceres LM iterations", "Ceres s", "Ceres E", "local-global E",
                            "RMS reduced vs Ceres", "RMS Ceres vs local-global", "speedup vs Ceres"], rows)
-    # local-global ladder
+
+
+def _ladder_fragments(st, R, frag):
+    """Local-global stopped after k rounds."""
     rows = []
     for row in R.get("ladder", []):
         ref, fin = row["rep"]["references"]["local-global"], row["main"]["references"]["local-global"]
@@ -77,7 +83,10 @@ def fragments(st, info):
     frag["ladder"] = table(["scenario", "local-global rounds", "solve ms", "classic E", "E / E(cap)",
                             "RMS / max dev. from the capped run", "RMS dev. from CGAL",
                             "÷ reduced frame (main table)"], rows)
-    # modified energy
+
+
+def _modified_fragments(st, R, frag):
+    """The modified energy E′ against the classic one."""
     rows = []
     for row in R.get("modified", []):
         rep = row["rep"]
@@ -90,7 +99,10 @@ def fragments(st, info):
     frag["modified"] = table(["scenario", "setting", "E′ rounds", "classic E of E′ minimiser", "classic E reduced",
                               "classic E reference", "RMS E′ min. vs classic", "RMS reduced vs E′ min.",
                               "RMS reduced vs classic"], rows)
-    # sweeps
+
+
+def _sweeps_fragments(st, R, frag):
+    """The proxy-count and α, β sweeps, one table each."""
     for what, col in (("rot", "d"), ("lin", "m"), ("alpha", "α"), ("beta", "β")):
         if what not in R:
             continue
@@ -104,7 +116,10 @@ def fragments(st, info):
                              "%.2f" % rep["frame_ms"], "%.1f" % rep["precompute_s"]])
         frag[what] = table(["scenario", col, "linear / rotational proxies", "E ratio", "RMS dev.", "max dev.",
                             "handle res.", "frame ms", "precompute s"], rows)
-    # the paper demo's proxies
+
+
+def _paper_proxies_fragments(st, R, frag):
+    """The paper demo's own proxies."""
     rows = []
     for p in R.get("paper_ids", []):
         rep = p["rep"]
@@ -116,7 +131,10 @@ def fragments(st, info):
                      "%.2f" % rep["frame_ms"]])
     frag["paper_ids"] = table(["scenario", "linear groups, rotational clusters", "linear / rotational proxies",
                                "E ratio (defaults)", "RMS dev. (defaults)", "max dev.", "frame ms"], rows)
-    # convergence
+
+
+def _convergence_fragments(st, R, frag):
+    """Frames and rounds against the converged pose."""
     rows = []
     for (kind, name, lab), (extra, pts) in R.get("conv", {}).items():
         setting = ", ".join("%s = %s" % (k, v) for k, v in extra.items()) or "defaults"
@@ -125,7 +143,10 @@ def fragments(st, info):
                          pct(p["max"]), "%.2f" % p["rep"]["frame_ms"]])
     frag["conv"] = table(["scenario", "setting", "frames", "iterations / frame", "E ratio", "RMS dev.", "max dev.",
                           "frame ms"], rows)
-    # timing
+
+
+def _timing_fragments(st, R, frag):
+    """Frame and round timings against local-global."""
     rows = []
     for t in R.get("timing", []):
         rep, ref = t["rep"], t["main"]["references"]["local-global"]
@@ -136,7 +157,10 @@ def fragments(st, info):
                      "%.0f×" % (ref["solve_ms"] / rep["frame_ms"])])
     frag["timing"] = table(["scenario", "n", "threads", "reduced frame ms", "iteration µs", "reconstruction ms",
                             "local-global ms / round", "local-global solve ms (rounds)", "speedup"], rows)
-    # targets
+
+
+def _targets_fragments(st, R, frag):
+    """The issue's quality targets, met or not."""
     rows = []
     for row in R["main"]:
         if row["kind"] != "sel":
@@ -157,4 +181,67 @@ def fragments(st, info):
         rows.append(cells)
     frag["targets"] = table(["scenario (defaults, %d frames)" % st.cfg["frames"], "RMS dev. ≤ 2 %", "E ratio ≤ 1.5",
                              "speedup ≥ 100× (Bumpy Plane)"], rows)
+
+
+def fragments(st, info):
+    """Every table of quality.md as Markdown, by key."""
+    R = st.results
+    frag = {"run": table(["", ""], [[k, v] for k, v in info])}
+    _main_fragments(st, R, frag)
+    _ceres_fragments(st, R, frag)
+    _ladder_fragments(st, R, frag)
+    _modified_fragments(st, R, frag)
+    _sweeps_fragments(st, R, frag)
+    _paper_proxies_fragments(st, R, frag)
+    _convergence_fragments(st, R, frag)
+    _timing_fragments(st, R, frag)
+    _targets_fragments(st, R, frag)
     return frag
+
+
+def figures(st, figdir):
+    R = st.results
+    made = []
+    for what, xlabel, logx, fname, title in (
+            ("rot", "rotational proxies d", True, "quality_rotational_proxies.png", "Rotational proxy sweep (Fig. 4)"),
+            ("lin", "linear proxies m (point handles)", True, "quality_linear_proxies.png", "Linear proxy sweep"),
+            ("alpha", "α", True, "quality_alpha.png", "α sweep (Fig. 3)")):
+        if what not in R:
+            continue
+        names = [short(k, n) for (k, n) in R[what]]
+        ratio = {short(k, n): [(p["value"], p["ratio"]) for p in pts] for (k, n), pts in R[what].items()}
+        rms = {short(k, n): [(p["value"], 100 * p["rms"]) for p in pts] for (k, n), pts in R[what].items()}
+        path = os.path.join(figdir, fname)
+        line_plot(path, title, xlabel, [("energy ratio (reduced / reference)", ratio, "auto"),
+                                       ("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=logx,
+                 hlines={0: TARGET_RATIO, 1: 100 * TARGET_RMS})
+        made.append(path)
+    if "conv" in R:
+        names, rms, styles = [], {}, {}
+        for si, ((kind, name, lab), (extra, pts)) in enumerate(R["conv"].items()):
+            its = sorted(set(p["iterations"] for p in pts))
+            for ii, it in enumerate(its):
+                nm = short(kind, name) + "".join(", %s %s" % ({"rotational-proxies": "d", "alpha": "α"}.get(k, k), v)
+                                                 for k, v in extra.items()) + ", %d it." % it
+                names.append(nm)
+                styles[nm] = (PALETTE[si % len(PALETTE)], ii > 0)
+                rms[nm] = [(p["frames"], 100 * p["rms"]) for p in pts if p["iterations"] == it]
+        path = os.path.join(figdir, "quality_frames.png")
+        line_plot(path, "Frames to the pose (warm start)", "frames from rest to the pose",
+                 [("RMS deviation, % of bbox diagonal", rms, "auto")], names, logx=True, hlines={0: 100 * TARGET_RMS},
+                 styles=styles)
+        made.append(path)
+    return made
+
+
+def splice(doc, frag):
+    text = open(doc).read()
+    missing = []
+    for name, body in frag.items():
+        pat = re.compile(r"(<!-- quality_study:%s -->\n)(?:.*?\n)?(<!-- /quality_study:%s -->)" % (name, name), re.S)
+        if not pat.search(text):
+            missing.append(name)
+            continue
+        text = pat.sub(lambda m: m.group(1) + body + "\n" + m.group(2), text)
+    open(doc, "w").write(text)
+    return missing
