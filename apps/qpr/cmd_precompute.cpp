@@ -95,8 +95,9 @@ void return_large_blocks_to_the_system() {
 #endif
 }
 
-int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
-  return_large_blocks_to_the_system();
+// The MUMPS options the arguments ask for; throws std::invalid_argument
+// naming the option that does not fit the backend or the ranks.
+qpreduce::distributed::MumpsOptions mumps_options(const PrecomputeArgs& a, const MpiSession& mpi) {
   if (a.backend != "mumps" && a.backend != "cholmod") {
     throw std::invalid_argument(fmt::format("--backend: expected mumps or cholmod, got \"{}\"", a.backend));
   }
@@ -116,6 +117,12 @@ int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
     throw std::invalid_argument(
         fmt::format("--out-of-core: \"{}\" is not a directory (on rank {})", a.out_of_core, mpi.rank));
   }
+  return mumps;
+}
+
+int run_precompute(const PrecomputeArgs& a, const MpiSession& mpi) {
+  return_large_blocks_to_the_system();
+  const qpreduce::distributed::MumpsOptions mumps = mumps_options(a, mpi);
   if (mpi.rank == 0) qpreduce::check_destination(a.cache, "cache");
   LoadedScenario ls = load_scenario(a);
   qpreduce::deform::Deformer deformer;
