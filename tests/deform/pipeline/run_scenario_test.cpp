@@ -41,6 +41,16 @@ ScenarioRunOptions run_options() {
   return o;
 }
 
+// The last frame's pose of a Deformer driven by hand through the scenario.
+Vertices by_hand_pose(const Scenario& sc, const DeformerOptions& options) {
+  Deformer by_hand;
+  REQUIRE(by_hand.precompute(sc.model, options).ok());
+  REQUIRE(usable(by_hand.set_handles(sc.handles, sc.constraints).status));
+  Vertices V;
+  for (const HandleTargets& t : sc.frames) REQUIRE(usable(by_hand.frame(t, &V).status));
+  return V;
+}
+
 }  // namespace
 
 TEST_CASE("run_scenario runs the frames a caller running the Deformer by hand gets") {
@@ -74,12 +84,7 @@ TEST_CASE("run_scenario runs the frames a caller running the Deformer by hand ge
   CHECK(s.frames[0].cold_start);  // the first frame after set_handles (DeformerOptions::cold_start_rounds)
   for (size_t f = 1; f < s.frames.size(); ++f) CHECK(s.frames[f].iterations == 6);
 
-  Deformer by_hand;
-  REQUIRE(by_hand.precompute(sc.model, o.deformer).ok());
-  REQUIRE(usable(by_hand.set_handles(sc.handles, sc.constraints).status));
-  Vertices V;
-  for (const HandleTargets& t : sc.frames) REQUIRE(usable(by_hand.frame(t, &V).status));
-  CHECK(reference_test::max_distance(V, poses.last) <= 1e-12 * s.diagonal);
+  CHECK(reference_test::max_distance(by_hand_pose(sc, o.deformer), poses.last) <= 1e-12 * s.diagonal);
   CHECK(s.arap_energy == Approx(arap_energy(sc.model.V, deformer.elements(), poses.last)).epsilon(1e-12));
   CHECK(s.handles.status == Status::Success);
   CHECK(s.op_seconds > 0.0);
@@ -99,12 +104,7 @@ TEST_CASE("run_scenario reports the options it ran with: the scenario's override
   CHECK(s.options.energy.gamma == 0.25);
   CHECK(s.options.energy.alpha == o.deformer.energy.alpha);
   // A deformer driven by hand with those options gets the same frames.
-  Deformer by_hand;
-  REQUIRE(by_hand.precompute(sc.model, s.options).ok());
-  REQUIRE(usable(by_hand.set_handles(sc.handles, sc.constraints).status));
-  Vertices V;
-  for (const HandleTargets& t : sc.frames) REQUIRE(usable(by_hand.frame(t, &V).status));
-  CHECK(reference_test::max_distance(V, poses.last) <= 1e-12 * s.diagonal);
+  CHECK(reference_test::max_distance(by_hand_pose(sc, s.options), poses.last) <= 1e-12 * s.diagonal);
 }
 
 TEST_CASE("run_scenario settles the last frame, refines from there and restores the round settings") {
