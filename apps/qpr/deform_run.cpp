@@ -125,6 +125,9 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   cmd->add_flag("--exact-unreachable", a->exact_unreachable,
                 "Keep the exact (least-squares) form of point-handle sets the subspace cannot meet reliably "
                 "(default: soft constraints, with a warning; see docs/robustness.md)");
+  cmd->add_flag("--double-basis", a->double_basis,
+                "Keep the reconstruction basis in double (twice its memory, cache and bytes per frame): poses to "
+                "double round-off instead of float's (docs/robustness.md, \"Units\")");
   cmd->add_option("--alpha", a->alpha, "Penalty α on the linearised rotations (Eq. 10)")
       ->check(number_between(0, kMaxPenalty));
   cmd->add_option("--beta", a->beta, "Normal penalty β (surfaces, Eq. 10)")->check(number_between(0, kMaxPenalty));
@@ -210,6 +213,7 @@ DeformerOptions deformer_options(const ScenarioArgs& a, const std::optional<Mode
   }
   options.second_order = !a.no_second_order;
   options.soften_unreachable_handles = !a.exact_unreachable;
+  options.double_basis = a.double_basis;
   if (a.alpha) options.energy.alpha = *a.alpha;
   if (a.beta) options.energy.beta = *a.beta;
   if (a.gamma) options.energy.gamma = *a.gamma;
@@ -342,6 +346,7 @@ void report_model(const Deformer& deformer, const Scenario& scenario, const Defo
   report["anderson_window"] = options.anderson_window;
   report["second_order"] = options.second_order;
   report["soften_unreachable_handles"] = options.soften_unreachable_handles;
+  report["double_basis"] = options.double_basis;
   report["alpha"] = options.energy.alpha;
   report["beta"] = options.energy.beta;
   report["gamma"] = options.energy.gamma;

@@ -38,6 +38,7 @@ struct ScenarioArgs {
   bool no_second_order = false;        // DeformerOptions::second_order = false
   bool exact_unreachable = false;      // DeformerOptions::soften_unreachable_handles = false
   bool exact_handles = false;          // point-handle vertices as linear proxies (exact_handle_proxies)
+  bool double_basis = false;           // DeformerOptions::double_basis
 };
 
 // Registers the ScenarioArgs options (and the MESH positional) on `cmd`.

@@ -293,7 +293,13 @@ void Session::set_reconstruction(Reconstruction wanted, MeshRenderer* renderer) 
   if (!basis_uploaded_) {
     gpu_reason_.clear();
     basis_uploaded_ = true;
-    if (!renderer->upload_basis(deformer_->reconstruction_basis(), &gpu_reason_)) {
+    // The GPU reconstructs in float whatever the deformer keeps
+    // (DeformerOptions::double_basis: a float copy for the upload).
+    const bool uploaded = deformer_->double_basis()
+                                  ? renderer->upload_basis(deformer_->reconstruction_basis_double().cast<float>(),
+                                                           &gpu_reason_)
+                                  : renderer->upload_basis(deformer_->reconstruction_basis(), &gpu_reason_);
+    if (!uploaded) {
       path_ = Reconstruction::Cpu;
       return;
     }
@@ -360,10 +366,15 @@ RefineWorker& Session::refine_worker(const RefineOptions& options) {
 }
 
 Vertices Session::cpu_reconstruction() const {
-  const auto& B = deformer_->reconstruction_basis();
-  const Eigen::VectorXd w = deformer_->reduced_coordinates().cast<double>();
-  const Eigen::VectorXd flat = B.cast<double>() * w;
-  Vertices V(B.rows() / 3, 3);
+  const bool in_double = deformer_->double_basis();
+  const Index rows = in_double ? deformer_->reconstruction_basis_double().rows()
+                               : deformer_->reconstruction_basis().rows();
+  const Eigen::VectorXd flat =
+          in_double ? Eigen::VectorXd(deformer_->reconstruction_basis_double() *
+                                      deformer_->reduced_coordinates_double())
+                    : Eigen::VectorXd(deformer_->reconstruction_basis().cast<double>() *
+                                      deformer_->reduced_coordinates().cast<double>());
+  Vertices V(rows / 3, 3);
   const auto& frame = deformer_->normalization();
   const Eigen::Matrix3d M = frame.scale * deformer_->global_rotation();
   for (Index v = 0; v < V.rows(); ++v) V.row(v) = (frame.centre + M * flat.segment<3>(3 * v)).transpose();

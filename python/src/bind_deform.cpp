@@ -508,14 +508,26 @@ void bind_deformer_state(py::class_<PyDeformer>& cls) {
           py::arg("p"), "patch_transform(p) -> (3, 4) [t_s | d_s] of patch p after the last frame.")
       .def_property_readonly(
           "reconstruction_basis",
-          [](PyDeformer& s) {
+          [](PyDeformer& s) -> py::object {
             const auto lock = s.lock();
-            py::gil_scoped_release release;  // 3n·p floats
-            return Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>(
-                s.deformer.reconstruction_basis());
+            if (s.deformer.double_basis()) {
+              Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> B;
+              {
+                py::gil_scoped_release release;  // 3n·p doubles
+                B = s.deformer.reconstruction_basis_double();
+              }
+              return py::cast(std::move(B));
+            }
+            Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> B;
+            {
+              py::gil_scoped_release release;  // 3n·p floats
+              B = s.deformer.reconstruction_basis();
+            }
+            return py::cast(std::move(B));
           },
-          "A copy of B = P·[N UD] (3n, p) float32 in the normalised frame: V′ = c + σ·r₀·(B·w) with (c, σ) = "
-          "normalization (for a GPU reconstruction).")
+          "A copy of B = P·[N UD] (3n, p) in the normalised frame, float32 (float64 with "
+          "DeformerOptions.double_basis): V′ = c + σ·r₀·(B·w) with (c, σ) = normalization (for a GPU "
+          "reconstruction).")
       .def_property_readonly(
           "normalization",
           [](PyDeformer& s) {
@@ -527,8 +539,12 @@ void bind_deformer_state(py::class_<PyDeformer>& cls) {
           "bounding-box diagonal, so that no result depends on the mesh's units.")
       .def_property_readonly(
           "reduced_coordinates",
-          [](PyDeformer& s) { return s.lock(), Eigen::VectorXf(s.deformer.reduced_coordinates()); },
-          "w (p) float32 of the last frame.")
+          [](PyDeformer& s) -> py::object {
+            const auto lock = s.lock();
+            if (s.deformer.double_basis()) return py::cast(Eigen::VectorXd(s.deformer.reduced_coordinates_double()));
+            return py::cast(Eigen::VectorXf(s.deformer.reduced_coordinates()));
+          },
+          "w (p) of the last frame, float32 (float64 with DeformerOptions.double_basis).")
       .def(
           "handle_residual",
           [](PyDeformer& s, py::handle deformed) {

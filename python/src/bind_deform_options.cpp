@@ -70,6 +70,9 @@ void bind_deformer_option_fields(py::module_& m) {
       .rw("prepare_onsite", &DeformerOptions::prepare_onsite,
           "Prepare Phase 1's fast path at precompute (a d x d eigendecomposition), so that the first handle set "
           "costs what later ones do; False: at the first set_handles that needs it. Default True.")
+      .rw("double_basis", &DeformerOptions::double_basis,
+          "Keep the reconstruction basis and w in float64 (twice the memory and bytes per frame) for poses with "
+          "double round-off: a rigidly moved scene gives its pose moved to ~1e-15 of the diagonal. Default False.")
       .rw("subspace", &DeformerOptions::subspace, "SubspaceOptions of the engine.")
       .repr()
       .keyword_init<DeformerOptions>();

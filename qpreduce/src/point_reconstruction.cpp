@@ -24,8 +24,8 @@ constexpr Index kInterleavedMaxBytes = Index(32) << 20;
 // How far ahead (bytes) the interleaved order prefetches each row.
 constexpr Index kPrefetchBytes = 4096;
 
-void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, double scale,
-                     const Eigen::Vector3d& offset) {
+template <typename Basis, typename Vector, typename Rotation>
+void check_arguments(const Basis& B, const Vector& w, const Rotation& R, double scale, const Eigen::Vector3d& offset) {
   if (B.rows() % 3 != 0)
     throw std::invalid_argument(
         fmt::format("reconstruct_points: B has {} rows, expected a multiple of 3 (x, y, z per point)", B.rows()));
@@ -38,12 +38,27 @@ void check_arguments(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen
 
 }  // namespace
 
-void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out,
-                        double scale, const Eigen::Vector3d& offset) {
+namespace {
+
+template <typename Basis, typename Vector, typename Rotation>
+void reconstruct_into(const Basis& B, const Vector& w, const Rotation& R, Points3d* X_out, double scale,
+                      const Eigen::Vector3d& offset) {
   if (X_out == nullptr) throw std::invalid_argument("reconstruct_points: X_out is null");
   check_arguments(B, w, R, scale, offset);
   if (X_out->rows() != B.rows() / 3) X_out->resize(B.rows() / 3, 3);
   reconstruct_points(B, w, R, Eigen::Map<Points3d>(X_out->data(), X_out->rows(), 3), scale, offset);
+}
+
+}  // namespace
+
+void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R, Points3d* X_out,
+                        double scale, const Eigen::Vector3d& offset) {
+  reconstruct_into(B, w, R, X_out, scale, offset);
+}
+
+void reconstruct_points(const RowMatrixXd& B, const Eigen::VectorXd& w, const Eigen::Matrix3d& R, Points3d* X_out,
+                        double scale, const Eigen::Vector3d& offset) {
+  reconstruct_into(B, w, R, X_out, scale, offset);
 }
 
 void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Eigen::Matrix3f& R,
@@ -73,6 +88,19 @@ void reconstruct_points(const RowMatrixXf& B, const Eigen::VectorXf& w, const Ei
   }
 #endif
   run([&](const float* rows, float* q) { detail::rows3_dot_eigen(rows, p, wp, q); });
+}
+
+void reconstruct_points(const RowMatrixXd& B, const Eigen::VectorXd& w, const Eigen::Matrix3d& R,
+                        Eigen::Map<Points3d> X_out, double scale, const Eigen::Vector3d& offset) {
+  check_arguments(B, w, R, scale, offset);
+  const Index n = B.rows() / 3, p = B.cols();
+  check_size("reconstruct_points: X_out rows (B's rows / 3)", n, X_out.rows());
+  using Rows3 = Eigen::Map<const Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::RowMajor>>;
+#pragma omp parallel for schedule(static) if (B.size() > kParallelEntries / 2)
+  for (Index v = 0; v < n; ++v) {
+    const Eigen::Vector3d q = Rows3(B.data() + 3 * v * p, 3, p) * w;
+    X_out.row(v) = (scale * (R * q) + offset).transpose();
+  }
 }
 
 }  // namespace qpreduce

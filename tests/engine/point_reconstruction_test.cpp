@@ -124,6 +124,36 @@ TEST_CASE("reconstruct_points gives R·(B_v·w) per point, the same on any numbe
   omp_set_num_threads(saved);
 }
 
+TEST_CASE("reconstruct_points in double gives scale·R·(B_v·w) + offset to double round-off", "[reconstruction]") {
+  std::mt19937 gen(12);
+  const Index n = 3001, p = 45;
+  const RowMatrixXd B = random_rows(3 * n, p, gen).cast<double>();
+  const Eigen::VectorXd w = random_vector(p, gen).cast<double>();
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
+  const Eigen::Vector3d offset(1e3, -2.0, 0.5);
+  Points3d X;
+  reconstruct_points(B, w, R, &X, 1e-4, offset);
+  REQUIRE(X.rows() == n);
+  double worst = 0.0;
+  for (Index v = 0; v < n; ++v) {
+    const Eigen::Vector3d q = B.middleRows(3 * v, 3) * w;
+    const double scale = 1e-4 * (B.middleRows(3 * v, 3).cwiseAbs() * w.cwiseAbs()).maxCoeff() + offset.norm();
+    worst = std::max(worst, (X.row(v).transpose() - (1e-4 * (R * q) + offset)).norm() / scale);
+  }
+  CHECK(worst <= 64 * p * std::numeric_limits<double>::epsilon());
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  Points3d Y;
+  reconstruct_points(B, w, R, &Y, 1e-4, offset);
+  omp_set_num_threads(saved);
+  CHECK(Y == X);
+  CHECK_THROWS_WITH(reconstruct_points(B, Eigen::VectorXd::Ones(3), R, &Y), Catch::Contains("w size"));
+  Eigen::VectorXd bad = w;
+  bad(2) = std::numeric_limits<double>::quiet_NaN();
+  CHECK_THROWS_WITH(reconstruct_points(B, bad, R, &Y), Catch::Contains("w"));
+  CHECK_THROWS_WITH(reconstruct_points(RowMatrixXd::Ones(5, p), w, R, &Y), Catch::Contains("multiple of 3"));
+}
+
 TEST_CASE("reconstruct_points handles empty inputs", "[reconstruction]") {
   Points3d X(5, 3);
   reconstruct_points(RowMatrixXf(0, 4), Eigen::VectorXf::Ones(4), Eigen::Matrix3f::Identity(), &X);

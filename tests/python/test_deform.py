@@ -171,6 +171,24 @@ def test_the_reconstruction_basis_gives_the_frame_through_the_normalization():
     assert np.abs(mine - V).max() <= 10 * w.size * FLOAT_EPS * scale
 
 
+def test_a_double_basis_reconstructs_in_float64_to_double_round_off():
+    deformer, scenario = make_deformer(double_basis=True)
+    assert deformer.options.double_basis
+    for targets in scenario.frames:
+        V = deformer.frame(targets)
+    B, w = deformer.reconstruction_basis, deformer.reduced_coordinates
+    assert B.dtype == np.float64 and w.dtype == np.float64 and B.shape == (3 * deformer.vertex_count, w.size)
+    centre, scale = deformer.normalization
+    mine = centre + scale * (B @ w).reshape(-1, 3) @ deformer.global_rotation.T
+    assert np.abs(mine - V).max() <= 10 * w.size * np.finfo(np.float64).eps * scale
+    # The float basis's session: the same pose up to float round-off, not bit for bit.
+    in_float, _ = make_deformer()
+    for targets in scenario.frames:
+        W = in_float.frame(targets)
+    assert in_float.reconstruction_basis.dtype == np.float32
+    assert 0 < np.abs(W - V).max() <= 1e-5 * scale
+
+
 def test_frames_hold_the_handles_and_report_the_quality_readout():
     deformer, scenario = make_deformer()
     for targets in scenario.frames:

@@ -143,6 +143,43 @@ TEST_CASE("cache: a loaded model gives the frames of the saved one", "[cache]") 
   fs::remove(path);
 }
 
+TEST_CASE("cache: a double-basis model comes back in double, and only for double_basis", "[cache]") {
+  const Case c = bent_cylinder();
+  DeformerOptions o = small_options();
+  o.double_basis = true;
+  Deformer original;
+  REQUIRE(original.precompute(c.model, o).ok());
+  REQUIRE(original.double_basis());
+  CHECK(original.reconstruction_basis().size() == 0);
+  const Index p = original.reconstruction_basis_double().cols();
+  CHECK(original.reconstruction_basis_double().rows() == 3 * c.model.V.rows());
+  const std::string path = temp_path("double.qpr");
+  original.save(path);
+  const Vertices expected = run(original, c);
+  CHECK(original.reduced_coordinates_double().size() == p);
+
+  Deformer loaded;
+  REQUIRE(loaded.load(path, c.model, o).ok());
+  CHECK(loaded.reconstruction_basis_double() == original.reconstruction_basis_double());
+  CHECK(run(loaded, c) == expected);
+
+  // The float basis's session reaches the same pose up to float round-off.
+  Deformer in_float;
+  REQUIRE(in_float.precompute(c.model, small_options()).ok());
+  const Vertices f = run(in_float, c);
+  const double moved = (expected - c.model.V).cwiseAbs().maxCoeff();
+  CHECK((f - expected).cwiseAbs().maxCoeff() <= 1e-5 * moved);
+  CHECK((f - expected).cwiseAbs().maxCoeff() > 0.0);
+
+  require_refused(path, c, small_options(), "option double_basis is 1 in the cache, 0 given");
+  // Float blocks cannot stand for a double basis.
+  CHECK_THROWS_WITH(original.save(temp_path("double_blocks.qpr"),
+                                  [](Index*, Deformer::BasisRows*) { return false; }),
+                    Catch::Contains("keeps its basis in double"));
+  CHECK_FALSE(fs::exists(temp_path("double_blocks.qpr")));
+  fs::remove(path);
+}
+
 TEST_CASE("cache: a file made from other inputs is refused, naming the difference", "[cache][errors]") {
   const Case c = bent_cylinder();
   const DeformerOptions o = small_options();

@@ -162,8 +162,9 @@ struct Result {
 
 std::string said(const qpreduce::Outcome& o) { return std::string(to_string(o.status)) + ": " + o.message; }
 
-DeformerOptions options() {
+DeformerOptions options(bool double_basis = false) {
   DeformerOptions o;
+  o.double_basis = double_basis;
   o.rotational_proxies = 10;
   o.linear_proxies = 12;
   // Rounds to a tolerance with no time budget: the same rounds whatever the
@@ -176,10 +177,10 @@ DeformerOptions options() {
   return o;
 }
 
-Result run(const Scene& scene, bool refine, const Vertices* refine_from = nullptr) {
+Result run(const Scene& scene, bool refine, const Vertices* refine_from = nullptr, bool double_basis = false) {
   Result out;
   Deformer deformer;
-  out.precompute = said(deformer.precompute(scene.model, options()));
+  out.precompute = said(deformer.precompute(scene.model, options(double_basis)));
   if (!deformer.ready()) return out;
   out.constraints = said(deformer.set_handles(scene.handles));
   for (const HandleTargets& f : scene.frames) {
@@ -230,7 +231,8 @@ double distance_back(const Vertices& base, const Vertices& moved, const Similari
 // own way: a few float roundings of the diagonal (2⁻²⁴ ≈ 6·10⁻⁸; measured
 // ≤ 1.9·10⁻⁷). The refine keeps its Anderson history in float and stops at
 // its reference test (steps of 10⁻¹⁰ of the diagonal): its rounds agree to
-// a few 10⁻⁹ (measured up to 3.2·10⁻⁹ on the tets).
+// a few 10⁻⁹ (measured up to 3.2·10⁻⁹ on the tets). With the basis in
+// double (DeformerOptions::double_basis) the moved pose meets 10⁻⁹ too.
 constexpr double kReducedTolerance = 1e-9;
 constexpr double kFloatReconstructionTolerance = 1e-6;
 constexpr double kRefinedTolerance = 1e-8;
@@ -348,6 +350,40 @@ TEST_CASE("units: a rigidly moved scene deforms to the same pose moved", "[defor
       }
       CHECK(distance_back(base.refined, o.refined, g) <= kRefinedTolerance);
     }
+  }
+}
+
+TEST_CASE("units: with the basis in double a rigidly moved scene deforms to its pose moved to 1e-9",
+          "[deformer][units]") {
+  std::mt19937 rng(11);
+  std::normal_distribution<double> normal;
+  for (const bool tet : {false, true}) {
+    Scene base_scene = make_scene(tet, true);
+    Deformer probe;
+    REQUIRE(probe.precompute(base_scene.model, options(true)).ok());
+    REQUIRE(probe.double_basis());
+    CHECK(probe.reconstruction_basis().size() == 0);
+    base_scene.model.clusters = probe.clusters();
+    base_scene.model.linear = linear_proxies_fps(
+        base_scene.model.V, tet ? ElementsRef(base_scene.model.T) : ElementsRef(base_scene.model.F), 12);
+    const Result base = run(base_scene, false, nullptr, true);
+    const Result in_float = run(base_scene, false);
+    INFO((tet ? "tets: " : "triangles: ") << base.precompute << " | " << base.constraints << " | " << base.frame);
+    // The same fixed point as the float basis's, up to its round-off.
+    CHECK(distance_back(in_float.pose, base.pose, Similarity{}) <= kFloatReconstructionTolerance);
+    double worst = 0.0;
+    for (int trial = 0; trial < 3; ++trial) {
+      Similarity g;
+      g.R = Eigen::Quaterniond(normal(rng), normal(rng), normal(rng), normal(rng)).normalized().toRotationMatrix();
+      g.t = 5.0 * Eigen::Vector3d(normal(rng), normal(rng), normal(rng));
+      const Result o = run(transformed(base_scene, g), false, nullptr, true);
+      INFO("trial " << trial << ": " << o.constraints << " | " << o.frame);
+      CHECK(o.constraints == base.constraints);
+      CHECK(o.frame == base.frame);
+      worst = std::max(worst, distance_back(base.pose, o.pose, g));
+    }
+    INFO("largest distance over the diagonal " << worst);
+    CHECK(worst <= kReducedTolerance);
   }
 }
 

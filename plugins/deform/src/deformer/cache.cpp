@@ -1,6 +1,6 @@
 // Deformer::save / Deformer::load — the precomputed model on disk.
 //
-// Layout (little-endian, version 5; docs/formats.md):
+// Layout (little-endian, version 6; docs/formats.md):
 //   header   "QPREDUCEDEFORMER" (16 bytes), u32 version, u32 0x01020304 (byte order)
 //   payload  records in a fixed order (below): integers as i64, labels as i32,
 //            matrices as i64 rows, i64 cols, column-major f64 (or i32) data
@@ -13,7 +13,7 @@
 // M_U). The double basis B is not stored (nothing after precompute reads it):
 // a process of a distributed precompute writes its rows of P·B as they come
 // (Deformer::save with blocks), and no process holds B whole. A block is
-// i64 first row, i64 rows, rows × p row-major f32; the blocks follow each
+// i64 first row, i64 rows, rows × p row-major f32 (f64 with double_basis); the blocks follow each
 // other in row order and tile the 3n rows. load() first checks size and CRC over the whole file,
 // then parses with every count bounded by the bytes left, then compares the
 // stored inputs with the given ones, and only then replaces the session.
@@ -45,8 +45,9 @@ using detail::Model;
 
 constexpr char kMagic[16] = {'Q', 'P', 'R', 'E', 'D', 'U', 'C', 'E', 'D', 'E', 'F', 'O', 'R', 'M', 'E', 'R'};
 // 2: the model's name and parameters, Q kept or not; 3: the rotation step;
-// 4: the float basis in row blocks instead of the double N, UD
-constexpr std::uint32_t kVersion = 5;
+// 4: the float basis in row blocks instead of the double N, UD; 5: in the
+// normalised frame; 6: the double_basis option (its rows in f64)
+constexpr std::uint32_t kVersion = 6;
 constexpr std::uint32_t kByteOrder = 0x01020304u;
 constexpr std::streamoff kHeaderBytes = 16 + 4 + 4;
 constexpr std::streamoff kTrailerBytes = 8 + 4;
@@ -84,8 +85,10 @@ class Writer {
     bytes(reinterpret_cast<const char*>(col_major.data()), sizeof(T) * static_cast<std::size_t>(M.size()));
   }
   // Row-major rows as they are in memory (a block of the float basis).
-  void put_rows(const Deformer::BasisRows& rows) {
-    bytes(reinterpret_cast<const char*>(rows.data()), sizeof(float) * static_cast<std::size_t>(rows.size()));
+  template <typename Rows>
+  void put_rows(const Rows& rows) {
+    using Scalar = typename Rows::Scalar;
+    bytes(reinterpret_cast<const char*>(rows.data()), sizeof(Scalar) * static_cast<std::size_t>(rows.size()));
   }
   template <typename T>
   void put_vector(const std::vector<T>& v) {
@@ -196,8 +199,11 @@ class Reader {
     }
     *M = col_major;
   }
-  // The float basis, rows × cols, from its row blocks (see the layout).
-  void get_row_blocks(const char* what, Index rows, Index cols, Deformer::BasisRows* out) {
+  // The basis, rows × cols, from its row blocks (see the layout): f32, or
+  // f64 for a double_basis deformer.
+  template <typename Rows>
+  void get_row_blocks(const char* what, Index rows, Index cols, Rows* out) {
+    using Scalar = typename Rows::Scalar;
     out->resize(rows, cols);
     for (Index covered = 0; covered < rows;) {
       const auto first = get<std::int64_t>(what);
@@ -206,11 +212,11 @@ class Reader {
         throw IoError(path_, 0, fmt::format("{}: a block of rows [{}, {}) where row {} of {} was due", what, first,
                                             first + count, covered, rows));
       }
-      if (cols > 0 && static_cast<std::uint64_t>(count) > left_ / sizeof(float) / static_cast<std::uint64_t>(cols)) {
+      if (cols > 0 && static_cast<std::uint64_t>(count) > left_ / sizeof(Scalar) / static_cast<std::uint64_t>(cols)) {
         throw IoError(path_, 0, fmt::format("{}: {} × {} entries do not fit in the file", what, count, cols));
       }
       auto block = out->middleRows(covered, count);
-      bytes(reinterpret_cast<char*>(block.data()), sizeof(float) * static_cast<std::size_t>(count * cols), what);
+      bytes(reinterpret_cast<char*>(block.data()), sizeof(Scalar) * static_cast<std::size_t>(count * cols), what);
       if (!block.allFinite()) throw IoError(path_, 0, fmt::format("{}: NaN or infinite entries", what));
       covered += count;
     }
@@ -263,7 +269,8 @@ std::vector<std::pair<std::string, double>> result_options(const DeformationMode
           {"clustering.spectral.eigenvectors", static_cast<double>(o.clustering.spectral.eigenvectors)},
           {"clustering.spectral.shift_scale", o.clustering.spectral.shift_scale},
           {"subspace.reduced_lift_tolerance", o.subspace.reduced_lift_tolerance},
-          {"rotation_fit", o.rotation_fit == ClusterRotationFit::Exact ? 0.0 : 1.0}};
+          {"rotation_fit", o.rotation_fit == ClusterRotationFit::Exact ? 0.0 : 1.0},
+          {"double_basis", o.double_basis ? 1.0 : 0.0}};
   opts.insert(opts.end(), rest.begin(), rest.end());
   return opts;
 }
@@ -368,7 +375,11 @@ void read_results(Reader& r, const std::string& path, const DeformableMesh& mesh
   if (rows != 3 * model.n || cols != p) {
     throw IoError(path, 0, fmt::format("inconsistent sizes: basis {}×{} for n = {}, p = {}", rows, cols, model.n, p));
   }
-  r.get_row_blocks("reconstruction basis", 3 * model.n, p, &model.basis);
+  if (model.double_basis) {
+    r.get_row_blocks("reconstruction basis", 3 * model.n, p, &model.basis_double);
+  } else {
+    r.get_row_blocks("reconstruction basis", 3 * model.n, p, &model.basis);
+  }
   model.basis_first = 0;
   Matrix<double> patch_rows, norms, Hr, BtD;
   r.get_matrix("patch rows", &patch_rows);
@@ -414,32 +425,52 @@ bool may_replace_with_cache(const std::string& path) {
   return std::filesystem::file_size(path, ec) == 0 || is_deformer_cache(path);
 }
 
-void Deformer::save(const std::string& path) const {
-  if (!state_->ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
-  const detail::Model& model = state_->model;
-  if (!model.whole_basis()) {
-    throw std::invalid_argument(fmt::format(
-        "Deformer::save: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (precompute_part); "
-        "save(path, blocks) with every part's rows",
-        model.basis_first, model.basis_first + model.basis_count(), 3 * model.n));
+namespace {
+
+// The blocks `next` gives (Rows: f32 or f64 row-major), checked to tile the
+// 3n × p basis in row order, as records into w.
+template <typename Rows, typename Next>
+void put_basis_blocks(Writer& w, Index rows, Index p, Next next) {
+  Rows block;
+  Index covered = 0, first = 0;
+  while (covered < rows && next(&first, &block)) {
+    if (block.rows() == 0) continue;
+    if (first != covered || block.rows() > rows - covered || block.cols() != p) {
+      throw std::invalid_argument(
+          fmt::format("Deformer::save: a basis block of rows [{}, {}) × {} columns where row {} of {} (× {}) was due",
+                      first, first + block.rows(), block.cols(), covered, rows, p));
+    }
+    if (!block.allFinite()) {
+      throw std::invalid_argument(fmt::format("Deformer::save: the basis block at row {} holds NaN or Inf", first));
+    }
+    w.put<std::int64_t>(first);
+    w.put<std::int64_t>(block.rows());
+    w.put_rows(block);
+    covered += block.rows();
   }
-  // Blocks of 4,096 rows: a copy of one block at a time, not of the basis.
-  constexpr Index kBlockRows = 4096;
-  Index next_row = 0;
-  save(path, [&](Index* first, BasisRows* rows) {
-    if (next_row >= model.basis.rows()) return false;
-    const Index count = std::min(kBlockRows, model.basis.rows() - next_row);
-    *first = next_row;
-    *rows = model.basis.middleRows(next_row, count);
-    next_row += count;
-    return true;
-  });
+  if (covered != rows) {
+    throw std::invalid_argument(fmt::format("Deformer::save: the basis blocks end at row {} of {}", covered, rows));
+  }
 }
 
-void Deformer::save(const std::string& path, const BasisBlocks& next) const {
-  const State& st = *state_;
-  if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
-  if (!next) throw std::invalid_argument("Deformer::save: no basis blocks given");
+// Blocks of 4,096 rows of a whole basis B: a copy of one block at a time.
+template <typename Rows>
+auto whole_basis_blocks(const Rows& B) {
+  return [&B, next_row = Index(0)](Index* first, Rows* rows) mutable {
+    constexpr Index kBlockRows = 4096;
+    if (next_row >= B.rows()) return false;
+    const Index count = std::min(kBlockRows, B.rows() - next_row);
+    *first = next_row;
+    *rows = B.middleRows(next_row, count);
+    next_row += count;
+    return true;
+  };
+}
+
+// The whole cache of session `st` at `path`; put_basis(w, 3n, p) writes the
+// basis records. (State is deduced: Deformer's own type.)
+template <typename State, typename PutBasis>
+void write_cache(const State& st, const std::string& path, const PutBasis& put_basis) {
   if (!may_replace_with_cache(path)) {
     throw std::invalid_argument(fmt::format(
         "Deformer::save: {} exists and is not a qpreduce deformer cache; refusing to replace it "
@@ -469,27 +500,7 @@ void Deformer::save(const std::string& path, const BasisBlocks& next) const {
     w.put<std::int64_t>(model.m);
     w.put<std::int64_t>(rows);
     w.put<std::int64_t>(p);
-    BasisRows block;
-    Index covered = 0, first = 0;
-    while (covered < rows && next(&first, &block)) {
-      if (block.rows() == 0) continue;
-      if (first != covered || block.rows() > rows - covered || block.cols() != p) {
-        throw std::invalid_argument(
-            fmt::format("Deformer::save: a basis block of rows [{}, {}) × {} columns where row {} of {} (× {}) was due",
-                        first, first + block.rows(), block.cols(), covered, rows, p));
-      }
-      if (!block.allFinite()) {
-        throw std::invalid_argument(fmt::format("Deformer::save: the basis block at row {} holds NaN or Inf", first));
-      }
-      w.put<std::int64_t>(first);
-      w.put<std::int64_t>(block.rows());
-      w.put_rows(block);
-      covered += block.rows();
-    }
-    if (covered != rows) {
-      throw std::invalid_argument(
-          fmt::format("Deformer::save: the basis blocks end at row {} of {}", covered, rows));
-    }
+    put_basis(w, rows, p);
     Matrix<double> norms = model.solver.basis_norms();
     w.put_matrix(Matrix<double>(model.patch_rows));
     w.put_matrix(norms);
@@ -501,6 +512,38 @@ void Deformer::save(const std::string& path, const BasisBlocks& next) const {
   } catch (const FileError& e) {
     throw IoError(path, 0, e.problem());
   }
+}
+
+}  // namespace
+
+void Deformer::save(const std::string& path) const {
+  if (!state_->ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  const detail::Model& model = state_->model;
+  if (!model.whole_basis()) {
+    throw std::invalid_argument(fmt::format(
+        "Deformer::save: this deformer holds rows [{}, {}) of the {}-row reconstruction basis (precompute_part); "
+        "save(path, blocks) with every part's rows",
+        model.basis_first, model.basis_first + model.basis_count(), 3 * model.n));
+  }
+  if (model.double_basis) {
+    write_cache(*state_, path, [&](Writer& w, Index rows, Index p) {
+      put_basis_blocks<detail::RowMatrixD>(w, rows, p, whole_basis_blocks(model.basis_double));
+    });
+    return;
+  }
+  save(path, whole_basis_blocks(model.basis));
+}
+
+void Deformer::save(const std::string& path, const BasisBlocks& next) const {
+  const State& st = *state_;
+  if (!st.ready) throw std::invalid_argument("Deformer::save: call precompute (or load) first");
+  if (!next) throw std::invalid_argument("Deformer::save: no basis blocks given");
+  if (st.model.double_basis) {
+    throw std::invalid_argument(
+        "Deformer::save: this deformer keeps its basis in double (DeformerOptions::double_basis); float blocks "
+        "cannot stand for it: save(path) writes it");
+  }
+  write_cache(st, path, [&](Writer& w, Index rows, Index p) { put_basis_blocks<BasisRows>(w, rows, p, next); });
 }
 
 PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& mesh,
@@ -515,6 +558,7 @@ PrecomputeSummary Deformer::load(const std::string& path, const DeformableMesh& 
   const DeformableMesh local = normalised(mesh, model.frame);
   model.set_topology(local);
   st->inputs = {mesh.F, mesh.T, mesh.clusters, mesh.linear.groups, options};
+  model.double_basis = options.double_basis;
   read_inputs(r, path, local, options, model);
   read_results(r, path, local, options, model);
   st->finish(options);

@@ -126,11 +126,19 @@ void Deformer::basis_block(Index first, Index count, BasisRows* rows) const {
   }
   if (model.part_held) {
     model.basis_rows_from(model.part_first_row, model.part_N, model.part_UD, first, count, rows);
+  } else if (model.double_basis) {
+    *rows = model.basis_double.middleRows(first - mine.first, count).cast<float>();
   } else {
     *rows = model.basis.middleRows(first - mine.first, count);
   }
 }
 const Eigen::VectorXf& Deformer::reduced_coordinates() const { return state_->pose.wf; }
+bool Deformer::double_basis() const { return state_ && state_->model.double_basis; }
+const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& Deformer::reconstruction_basis_double()
+    const {
+  return state_->model.basis_double;
+}
+const Eigen::VectorXd& Deformer::reduced_coordinates_double() const { return state_->pose.wd; }
 
 SelDefScenario apply_sel_def(const std::vector<int>& sel, const Eigen::Matrix4d& def, DeformableMesh* model) {
   const Index n = model->V.rows();

@@ -185,6 +185,17 @@ void record_rounds(const AlternationResults& as, const Eigen::VectorXd& s_local,
   summary->second_order = as.second_order;
 }
 
+// V′ = c + σ·r₀·(B·w) of the last frame, from the float basis or the
+// double one (DeformerOptions::double_basis).
+template <typename Out>
+void reconstruct(const detail::Model& model, const detail::Pose& pose, Out out) {
+  if (model.double_basis) {
+    reconstruct_points(model.basis_double, pose.wd, pose.r0, out, model.frame.scale, model.frame.centre);
+  } else {
+    reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out, model.frame.scale, model.frame.centre);
+  }
+}
+
 }  // namespace
 
 FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
@@ -248,11 +259,12 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Vertices* out) {
   t.reset();
   pose.wf.head(model.nx) = pose.x.cast<float>();
   pose.wf.tail(9 * model.d) = work.s_local.cast<float>();
+  if (model.double_basis) pose.wd << pose.x, work.s_local;
   if (out == nullptr) {  // the caller reconstructs (reconstruction_basis, reduced_coordinates)
     summary.total_seconds = total.seconds();
     return summary;
   }
-  reconstruct_points(model.basis, pose.wf, pose.r0.cast<float>(), out, model.frame.scale, model.frame.centre);
+  reconstruct(model, pose, out);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds = total.seconds();
   return summary;
@@ -263,8 +275,7 @@ FrameSummary Deformer::frame(const HandleTargets& targets, Eigen::Map<Vertices> 
   FrameSummary summary = frame(targets, nullptr);
   const Timer t;
   const Model& model = state_->model;
-  reconstruct_points(model.basis, state_->pose.wf, state_->pose.r0.cast<float>(), out, model.frame.scale,
-                     model.frame.centre);
+  reconstruct(model, state_->pose, out);
   summary.reconstruct_seconds = t.seconds();
   summary.total_seconds += summary.reconstruct_seconds;
   return summary;

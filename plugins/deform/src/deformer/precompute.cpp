@@ -457,6 +457,11 @@ PrecomputeSummary Deformer::precompute_part(const DeformableMesh& mesh, const De
     throw std::invalid_argument(fmt::format("Deformer::precompute_part: process {} of {} is not in [0, {})",
                                             partition.process, partition.processes, partition.processes));
   }
+  if (options.double_basis && partition.processes > 1) {
+    throw std::invalid_argument(
+        "Deformer::precompute_part: DeformerOptions::double_basis needs the whole basis on one process (a part's "
+        "rows travel and are saved in float); precompute on one process, or use the float basis");
+  }
   return run_precompute(mesh, options, progress, partition, build, sum);
 }
 
@@ -471,6 +476,7 @@ PrecomputeSummary Deformer::run_precompute(const DeformableMesh& mesh, const Def
   const Timer total;
   auto st = std::make_unique<State>();
   Model& model = st->model;
+  model.double_basis = options.double_basis;
   PrecomputeSummary summary;
   Assembled as;
   const Normalization frame = normalization_of(mesh.V);

@@ -201,8 +201,9 @@ std::pair<Index, Index> Model::vertex_rows_of(Index first_row, Index rows) const
   return first < 0 ? std::pair<Index, Index>{0, 0} : std::pair<Index, Index>{first, last - first + 1};
 }
 
+template <typename Rows>
 void Model::basis_rows_from(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows,
-                            Index first, Index count, RowMatrixF* out) const {
+                            Index first, Index count, Rows* out) const {
   const Index rows = N_rows.rows(), p = nx + 9 * d;
   check_size("Model::basis_rows_from: UD rows", rows, UD_rows.rows());
   check_size("Model::basis_rows_from: patch rows", 12 * s, patch_rows.rows());
@@ -243,15 +244,22 @@ void Model::basis_rows_from(Index first_row, const Matrix<double>& N_rows, const
       block.col(c) = j + c < nx ? N_rows.col(j + c).segment(lo, hi - lo) : UD_rows.col(j + c - nx).segment(lo, hi - lo);
     product = PB * block;
     if (s > 0) product += PP * patch_rows.middleCols(j, w);
-    out->middleCols(j, w) = product.cast<float>();
+    out->middleCols(j, w) = product.cast<typename Rows::Scalar>();
   }
 }
+
+template void Model::basis_rows_from<RowMatrixF>(Index, const Matrix<double>&, const Matrix<double>&, Index, Index,
+                                                 RowMatrixF*) const;
 
 void Model::make_basis(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows) {
   check_size("Model::make_basis: UD rows", N_rows.rows(), UD_rows.rows());
   const auto [first, count] = vertex_rows_of(first_row, N_rows.rows());
   basis_first = first;
-  basis_rows_from(first_row, N_rows, UD_rows, first, count, &basis);
+  if (double_basis) {
+    basis_rows_from(first_row, N_rows, UD_rows, first, count, &basis_double);
+  } else {
+    basis_rows_from(first_row, N_rows, UD_rows, first, count, &basis);
+  }
 }
 
 void Model::take_patch_rows() {
@@ -290,6 +298,7 @@ void Deformer::State::finish(const DeformerOptions& options) {
   pose.S.resize(9 * d);
   pose.x = Eigen::VectorXd::Zero(nx);
   pose.wf.resize(nx + 9 * d);
+  if (model.double_basis) pose.wd.resize(nx + 9 * d);
   work.s_local.resize(9 * d);
   settings.alternating.iterations = options.iterations;
   settings.alternating.tolerance = options.tolerance;

@@ -90,6 +90,10 @@ struct Model {
   std::unique_ptr<ClusterProjection> projection;  // the energy model's Phase 2
   Matrix<double> MN, MU;  // 9d × nx, 9d × 9d: Phase 2 input G = M_N·X + M_U·S
   RowMatrixF basis;       // 3n × (nx + 9d): rows of P·[N UD], float
+  // DeformerOptions::double_basis: the same rows in double here, `basis`
+  // empty.
+  bool double_basis = false;
+  RowMatrixD basis_double;
   Index basis_first = 0;  // this process's rows [basis_first, + basis_count()): all 3n, except after precompute_part
   // After precompute_part with more than one process: its control rows
   // [part_first_row, + part_N.rows()) of N and UD in double, from which
@@ -99,7 +103,8 @@ struct Model {
   bool part_held = false;
   Matrix<double> part_N, part_UD;  // rows × nx, rows × 9d
   Index part_first_row = 0, part_vertex_rows = 0;
-  Index basis_count() const { return part_held ? part_vertex_rows : basis.rows(); }
+  Index held_rows() const { return double_basis ? basis_double.rows() : basis.rows(); }
+  Index basis_count() const { return part_held ? part_vertex_rows : held_rows(); }
   // For the on-site step's A_r = AᵀB from contiguous rows: the control rows
   // of the patch unknowns, [N UD](patch_base + i, :) (12s × (nx + 9d)), and
   // the vertex of each free control triple (control row 3i + a is basis row
@@ -143,11 +148,17 @@ struct Model {
   // Rows [first, first + count) of P·[N UD] in float into *out (count × p),
   // from control rows [first_row, first_row + N_rows.rows()) of N, UD (which
   // must hold every control row these vertex rows use) and patch_rows.
+  template <typename Rows>  // RowMatrixF, or RowMatrixD for double_basis
   void basis_rows_from(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows, Index first,
-                       Index count, RowMatrixF* out) const;
+                       Index count, Rows* out) const;
+  // Row i of the whole reconstruction basis (whole_basis()) in double.
+  Eigen::RowVectorXd basis_row(Index i) const {
+    if (double_basis) return basis_double.row(i);
+    return basis.row(i).cast<double>();
+  }
   // patch_rows from the solver's double basis (which it then still holds).
   void take_patch_rows();
-  bool whole_basis() const { return basis_first == 0 && basis.rows() == 3 * n; }
+  bool whole_basis() const { return basis_first == 0 && held_rows() == 3 * n; }
   // The energy model's projection and free_vertices, once the solver, MN,
   // MU and patch_rows are set.
   void finish_reduction();
@@ -189,6 +200,7 @@ struct Pose {
   Eigen::VectorXd x;  // nx
   Eigen::Matrix3d r0 = Eigen::Matrix3d::Identity();
   Eigen::VectorXf wf;  // [X; S_local] in float (reduced_coordinates)
+  Eigen::VectorXd wd;  // the same in double, with Model::double_basis
 };
 
 // Per-frame scratch (sized once by finish).

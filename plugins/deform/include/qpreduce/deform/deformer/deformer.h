@@ -139,6 +139,15 @@ struct DeformerOptions {
   // a linear proxy that is one vertex never do (Phase 1 eliminates them).
   // ArapSolver sets false: its one handle set is of that kind.
   bool prepare_onsite = true;
+  // Keep the reconstruction basis P·[N UD] and the reduced coordinates in
+  // double instead of float: twice the basis's memory, cache and bytes read
+  // per frame, for poses that carry double round-off (a rigidly moved or
+  // renumbered scene gives its pose moved to about 10⁻¹⁵ of the diagonal,
+  // not a few float roundings, 10⁻⁷: docs/robustness.md, "Units").
+  // reconstruction_basis_double() and reduced_coordinates_double() then hold
+  // them; reconstruction_basis() is empty. Not with precompute_part on more
+  // than one process (its rows travel in float).
+  bool double_basis = false;
   SubspaceOptions subspace;
 
   bool is_valid(std::string* why) const;
@@ -378,11 +387,17 @@ class Deformer {
   // in the normalised frame (normalization()).
   // Empty before precompute, and after precompute_part with more than one
   // process (its rows basis_rows() come from basis_block).
+  // Empty with DeformerOptions::double_basis (below).
   const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis() const;
   // w = [X; S_local] (p entries, float) of the last frame: the linear proxies
   // (normalised, normalization()) and the cluster rotations in the frame of r₀ (S_local = r₀ᵀ·S per
   // cluster, each 3 × 3 column-major). Valid after the first frame().
   const Eigen::VectorXf& reduced_coordinates() const;
+  // With DeformerOptions::double_basis: the same basis and w in double (the
+  // frames reconstruct from these); empty otherwise.
+  bool double_basis() const;
+  const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>& reconstruction_basis_double() const;
+  const Eigen::VectorXd& reduced_coordinates_double() const;
 
  private:
   struct State;
