@@ -36,10 +36,6 @@ void check_arguments(const Basis& B, const Vector& w, const Rotation& R, double 
   check_finite("reconstruct_points: offset", offset);
 }
 
-}  // namespace
-
-namespace {
-
 template <typename Basis, typename Vector, typename Rotation>
 void reconstruct_into(const Basis& B, const Vector& w, const Rotation& R, Points3d* X_out, double scale,
                       const Eigen::Vector3d& offset) {

@@ -78,7 +78,7 @@ RowMatrixD reduced_constraints(const Model& model, const ConstraintLayout& layou
     const Index r = e.row();
     if (r < model.patch_base) {
       const Index v = model.free_vertices[static_cast<size_t>(r / 3)];
-      Ar.row(e.col()) += e.value() * model.basis_row(3 * v + r % 3);
+      model.add_basis_row(3 * v + r % 3, e.value(), Ar.row(e.col()));
     } else {
       Ar.row(e.col()) += e.value() * model.patch_rows.row(r - model.patch_base);
     }

@@ -145,16 +145,21 @@ struct Model {
   // The vertex rows [first, first + count) that control rows
   // [first_row, first_row + rows) give (see make_basis).
   std::pair<Index, Index> vertex_rows_of(Index first_row, Index rows) const;
-  // Rows [first, first + count) of P·[N UD] in float into *out (count × p),
+  // Rows [first, first + count) of P·[N UD] into *out (count × p, its scalar),
   // from control rows [first_row, first_row + N_rows.rows()) of N, UD (which
   // must hold every control row these vertex rows use) and patch_rows.
   template <typename Rows>  // RowMatrixF, or RowMatrixD for double_basis
   void basis_rows_from(Index first_row, const Matrix<double>& N_rows, const Matrix<double>& UD_rows, Index first,
                        Index count, Rows* out) const;
-  // Row i of the whole reconstruction basis (whole_basis()) in double.
-  Eigen::RowVectorXd basis_row(Index i) const {
-    if (double_basis) return basis_double.row(i);
-    return basis.row(i).cast<double>();
+  // *out += scale · row i of the whole reconstruction basis (whole_basis()),
+  // in double, with no temporary (the on-site step's A_r rows).
+  template <typename Row>
+  void add_basis_row(Index i, double scale, Row&& out) const {
+    if (double_basis) {
+      out += scale * basis_double.row(i);
+    } else {
+      out += scale * basis.row(i).cast<double>();
+    }
   }
   // patch_rows from the solver's double basis (which it then still holds).
   void take_patch_rows();
