@@ -133,7 +133,7 @@ void register_check(CLI::App& app) {
       ->check(CLI::ExistingFile);
   add_path_option(cmd, PathRole::Input, "--anim", a->anim, "Recorded handle poses (.anim): the handles' vertices anchor the components")
       ->check(CLI::ExistingFile);
-  add_path_option(cmd, PathRole::Input, "--scene", a->scene, "JSON scene: its mesh, and its handles and fixed patches as anchors")
+  add_path_option(cmd, PathRole::Scene, "--scene", a->scene, "JSON scene: its mesh, and its handles and fixed patches as anchors")
       ->check(CLI::ExistingFile);
   add_path_option(cmd, PathRole::Output, "--report", a->report, "JSON report");
   cmd->add_flag("--strict", a->strict, "Warnings are errors (exit 2)");

@@ -76,7 +76,7 @@ void add_scenario_options(CLI::App* cmd, ScenarioArgs* a) {
   auto* sel = add_path_option(cmd, PathRole::Input, "--sel", a->sel, "Botsch–Sorkine selection (0 fixed, 1 free, 2 handle)")->check(CLI::ExistingFile);
   add_path_option(cmd, PathRole::Input, "--def", a->def, "Botsch–Sorkine 4×4 handle transform")->check(CLI::ExistingFile)->needs(sel);
   add_path_option(cmd, PathRole::Input, "--anim", a->anim, "Recorded handle poses (.anim)")->check(CLI::ExistingFile);
-  add_path_option(cmd, PathRole::Input, "--scene", a->scene, "JSON scene (mesh, handles, patches, proxies, parameters)")->check(CLI::ExistingFile);
+  add_path_option(cmd, PathRole::Scene, "--scene", a->scene, "JSON scene (mesh, handles, patches, proxies, parameters)")->check(CLI::ExistingFile);
   cmd->add_option("--frames", a->frames, "With --sel/--def: frames from rest to the .def pose")
       ->check(whole_number_between(1, 100000));
   auto* lp =

@@ -1,6 +1,7 @@
 #include "path_roles.h"
 
 #include <qpreduce/deform/deformer/cache_file.h>
+#include <qpreduce/deform/io/scene.h>
 
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
@@ -53,11 +54,33 @@ bool same_file(const Identity& a, const Identity& b) {
   return a.canonical == b.canonical;
 }
 
-bool writes(PathRole role) { return role != PathRole::Input; }
+bool writes(PathRole role) { return role != PathRole::Input && role != PathRole::Scene; }
+
+// The extension of a TetGen file, lower case, or "".
+std::string tetgen_extension(const std::string& path) {
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".node" || ext == ".ele" || ext == ".face" ? ext : std::string();
+}
+
+// `given` and, for a TetGen path of an input or an output, its siblings.
+void add_with_tetgen_set(const RolePath& given, std::vector<RolePath>* out) {
+  out->push_back(given);
+  const std::string ext = tetgen_extension(given.path);
+  if (ext.empty() || (given.role != PathRole::Input && given.role != PathRole::Output)) return;
+  const std::string prefix = given.path.substr(0, given.path.size() - ext.size());
+  for (const char* sibling : {".node", ".ele", ".face"}) {
+    if (ext == sibling) continue;
+    std::error_code ec;  // an input's absent sibling is not read
+    if (given.role == PathRole::Input && !fs::exists(prefix + sibling, ec)) continue;
+    out->push_back({fmt::format("{} (its {})", given.option, sibling), prefix + sibling, given.role});
+  }
+}
 
 const char* role_word(PathRole role) {
   switch (role) {
     case PathRole::Input: return "input";
+    case PathRole::Scene: return "scene";
     case PathRole::Output: return "output";
     case PathRole::OutputDirectory: return "output folder";
     case PathRole::Cache: return "cache";
@@ -77,7 +100,24 @@ CLI::Option* path_role(CLI::App* command, CLI::Option* option, PathRole role) {
   return option;
 }
 
-void check_path_roles(const std::vector<RolePath>& paths) {
+std::vector<RolePath> files_of(const RolePath& given) {
+  std::vector<RolePath> out;
+  if (given.role != PathRole::Scene || given.path.empty()) {
+    add_with_tetgen_set(given, &out);
+    return out;
+  }
+  out.push_back(given);
+  for (const qpreduce::deform::SceneFile& f : qpreduce::deform::scene_files(given.path))
+    add_with_tetgen_set({fmt::format("{}'s {}", given.option, f.where), f.path, PathRole::Input}, &out);
+  return out;
+}
+
+void check_path_roles(const std::vector<RolePath>& given) {
+  std::vector<RolePath> paths;
+  for (const RolePath& p : given) {
+    const std::vector<RolePath> files = files_of(p);
+    paths.insert(paths.end(), files.begin(), files.end());
+  }
   std::vector<std::optional<Identity>> ids;
   ids.reserve(paths.size());
   for (const RolePath& p : paths) {

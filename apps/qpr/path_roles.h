@@ -1,8 +1,10 @@
 // qpr app support — no output may be an input.
 //
 // Each command names the options that hold paths and what it does with them:
-// reads (Input), writes (Output), writes a directory's files (OutputDirectory),
-// or reads when it can and writes otherwise (Cache). Before any work,
+// reads (Input), reads with the files it names (Scene: a JSON scene), writes
+// (Output), writes a directory's files (OutputDirectory), or reads when it
+// can and writes otherwise (Cache). A TetGen path (.node, .ele, .face) stands
+// for its whole set. Before any work,
 // check_path_roles resolves them (symbolic and hard links: the same device
 // and inode) and refuses, naming both options, an output that is an input or
 // another output, and a cache that names an existing file which is not a
@@ -16,7 +18,7 @@
 
 namespace qpr {
 
-enum class PathRole { Input, Output, OutputDirectory, Cache };
+enum class PathRole { Input, Scene, Output, OutputDirectory, Cache };
 
 // One path a command reads or writes: the option that gave it ("--out",
 // "MESH"), the path, and the role.
@@ -26,12 +28,20 @@ struct RolePath {
   PathRole role = PathRole::Input;
 };
 
+// The files `given` stands for, each named for messages: itself; for a
+// TetGen path its .node, .ele and .face ("--out (its .ele)"); for a Scene
+// also every file the scene names, as Inputs ("--scene's /mesh";
+// qpreduce::deform::scene_files), with their TetGen sets. Throws
+// qpreduce::deform::IoError when a scene cannot be read or is not JSON.
+std::vector<RolePath> files_of(const RolePath& given);
+
 // Registers `option` (a path option of the subcommand `command`) with `role`,
 // for check_path_roles(command). Returns option.
 CLI::Option* path_role(CLI::App* command, CLI::Option* option, PathRole role);
 
 // Throws std::invalid_argument naming both options when an output (or cache)
-// is the same file as an input or as another output; a directory output
+// is the same file as an input (or a file a scene names) or as another
+// output (files_of); a directory output
 // clashes with a file input or output of the same path. Paths that are
 // empty, or name an existing non-regular file (/dev/null, a FIFO), are not
 // compared. A Cache path naming an existing non-empty file that does not

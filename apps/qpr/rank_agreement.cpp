@@ -7,6 +7,7 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <exception>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -75,11 +76,20 @@ std::vector<std::pair<std::string, std::uint64_t>> option_fingerprints(const CLI
     }
     Fnv f;
     const auto role = roles.find(shown);
-    if (role != roles.end() && role->second != PathRole::Input) {
+    if (role != roles.end() && role->second != PathRole::Input && role->second != PathRole::Scene) {
       // An output: rank 0 writes it, the others' paths do not matter.
     } else if (role != roles.end()) {
       shown = "the contents of " + shown;
-      for (const std::string& value : option->results()) add_contents(&f, value);
+      // Every file the path stands for: a TetGen set, the files a scene names.
+      for (const std::string& value : option->results()) {
+        std::vector<RolePath> files;
+        try {
+          files = files_of({shown, value, role->second});
+        } catch (const std::exception&) {
+          files = {{shown, value, role->second}};  // not JSON: its contents say so, on every rank alike
+        }
+        for (const RolePath& file : files) add_contents(&f, file.path);
+      }
     } else {
       f.add(std::to_string(option->count()));
       for (const std::string& value : option->results()) f.add(value);

@@ -653,6 +653,22 @@ for name, args, words, links, hardlinks, intact in [
 ]:
     CASES.append(dict(group="writers", name=name, args=args, code=RUN, words=words, files={}, max_seconds=10,
                       stdout_words=[], links=links, hardlinks=hardlinks, intact=intact))
+# The files a scene names and the rest of a TetGen set are inputs too.
+TETGEN_NODE = "5 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n5 0 0 -1\n"
+TETGEN_ELE = "2 4 0\n1 1 2 3 4\n2 1 3 2 5\n"
+DEF_SCENE = scene(', "handles": [{"vertices": [3], "def": "tube.def"}]')
+for name, args, words, files, intact in [
+    ("deform --out the mesh --scene names", ["deform", "--scene", "{W}/s.json", "--out", "{W}/tube.off"],
+     ["--scene's /mesh and --out " + SAME, "another path for --out"], {"s.json": DEF_SCENE}, ["tube.off", "s.json"]),
+    ("deform --report the .def --scene names", ["deform", "--scene", "{W}/s.json", "--report", "{W}/tube.def"],
+     ["--scene's /handles/0/def and --report " + SAME], {"s.json": DEF_SCENE}, ["tube.def"]),
+    ("check --report the mesh --scene names", ["check", "--scene", "{W}/s.json", "--report", "{W}/tube.off"],
+     ["--scene's /mesh and --report " + SAME], {"s.json": DEF_SCENE}, ["tube.off"]),
+    ("check --report the .ele of a TetGen MESH", check("--report", "{W}/t.ele", mesh="{W}/t.node"),
+     ["MESH (its .ele) and --report " + SAME], {"t.node": TETGEN_NODE, "t.ele": TETGEN_ELE}, ["t.ele"]),
+]:
+    CASES.append(dict(group="writers", name=name, args=args, code=RUN, words=words, files=files, max_seconds=10,
+                      stdout_words=[], intact=intact))
 # The standard output is a writer too: a command whose tables cannot be
 # written fails.
 CASES.append(dict(group="writers", name="check with the standard output on /dev/full", args=check(), code=RUN,

@@ -44,6 +44,13 @@ def main():
              # A tiny QP (H = I, C = e1) and two demand folders that differ in b.
              "H.mtx": "%%MatrixMarket matrix coordinate real symmetric\n4 4 4\n1 1 1\n2 2 1\n3 3 1\n4 4 1\n",
              "C.mtx": "%%MatrixMarket matrix coordinate real general\n4 1 1\n1 1 1\n"}
+    # One scene text in three folders: the files it names (by relative path)
+    # are the same on node1 and another mesh in node2.
+    scene = ('{"mesh": "tube.off", "patches": [{"type": "fixed", "sel": {"file": "tube.sel", "role": "fixed"}}], '
+             '"handles": [{"sel": {"file": "tube.sel", "role": 2}, "def": "tube.def"}]}')
+    for folder, mesh in (("", off), ("node1/", off), ("node2/", taller)):
+        files.update({folder + "s.json": scene, folder + "tube.off": mesh, folder + "tube.sel": sel,
+                      folder + "tube.def": "0 -1 0 0\n1 0 0 0\n0 0 1 0.5\n0 0 0 1\n"})
     for folder, b in (("dem", "1"), ("dem2", "2")):
         files[folder + "/A_d0.mtx"] = "%%MatrixMarket matrix coordinate real general\n4 1 1\n2 1 1\n"
         files[folder + "/b_d0.mtx"] = "%%MatrixMarket matrix array real general\n1 1\n" + b + "\n"
@@ -57,6 +64,10 @@ def main():
     def pre(mesh, *extra, clusters="4"):
         return [qpr, "precompute", W(mesh), *small, "--rotational-proxies", clusters, "--cache", W("c.qpr"), *extra]
 
+    def pre_scene(path):
+        return [qpr, "precompute", "--scene", W(path), "--linear-proxies", "6", "--rotational-proxies", "4",
+                "--backend", "mumps", "--cache", W("c.qpr")]
+
     cases = [
         # (name, rank 0's command, rank 1's command, expected words; None: must succeed)
         ("another proxy count", pre("tube.off"), pre("tube.off", clusters="5"),
@@ -64,6 +75,9 @@ def main():
         ("another --alpha", pre("tube.off"), pre("tube.off", "--alpha", "0.5"), ["--alpha differs on rank 1"]),
         ("another mesh", pre("tube.off"), pre("taller.off"), ["the contents of MESH differ on rank 1"]),
         ("the same mesh at another path", pre("tube.off"), pre("node1/tube.off"), None),
+        ("a scene naming another mesh", pre_scene("s.json"), pre_scene("node2/s.json"),
+         ["the contents of --scene differ on rank 1"]),
+        ("the same scene and files at another path", pre_scene("s.json"), pre_scene("node1/s.json"), None),
         ("another grid side", [qpr, "precompute-gmrf", "--side", "20", "--candidates", "10"],
          [qpr, "precompute-gmrf", "--side", "21", "--candidates", "10"], ["--side differs on rank 1"]),
         ("qp: another demand folder", [qpr, "qp", "--H", W("H.mtx"), "--C", W("C.mtx"), "--demands", W("dem"),

@@ -9,7 +9,9 @@
 #include "qpreduce/deform/io/tet_io.h"
 #include "qpreduce/deform/mesh/shapes.h"
 
+#include <algorithm>
 #include <limits>
+#include <utility>
 
 using namespace qpreduce::deform;
 using Catch::Contains;
@@ -89,6 +91,31 @@ TEST_CASE("JSON scene: every field, resolved and checked against the mesh", "[io
   CHECK(sc.handles[4].name == "demo[0]");
   CHECK(sc.handles[4].vertices == std::vector<int>{4});
   CHECK(sc.handles[4].targets_at(0, V) == Eigen::RowVector3d(9, 9, 9));
+
+  // The files it names, as read and as found from the JSON alone (the
+  // check that no output is an input runs before the scene is read).
+  const auto sorted = [](std::vector<SceneFile> files) {
+    std::vector<std::pair<std::string, std::string>> out;
+    for (const SceneFile& f : files) out.emplace_back(f.where, f.path);
+    std::sort(out.begin(), out.end());
+    return out;
+  };
+  const auto read = sorted(sc.files);
+  CHECK(read.size() == 9);  // the mesh, three proxy files, two patch files, three handle files
+  CHECK(read == sorted(scene_files(s.dir.path("scene.json"))));
+  CHECK(std::find(read.begin(), read.end(), std::make_pair(std::string("/handles/0/def"), s.dir.path("octa.def"))) !=
+        read.end());
+}
+
+TEST_CASE("JSON scene: scene_files refuses what is not JSON, and lists what a broken scene names", "[io][scene][errors]") {
+  const SceneDir s;
+  CHECK_THROWS_WITH(scene_files(s.scene("{\"mesh\": ")), Contains("scene.json") && Contains("syntax"));
+  CHECK_THROWS_WITH(scene_files(s.dir.path("none.json")), Contains("none.json"));
+  // Not a scene read_scene accepts (an unknown key), but the paths are named.
+  const std::vector<SceneFile> files = scene_files(s.scene(R"({"mesh": "octa.off", "handels": [], "handles": [7]})"));
+  REQUIRE(files.size() == 1);
+  CHECK(files[0].where == "/mesh");
+  CHECK(files[0].path == s.dir.path("octa.off"));
 }
 
 TEST_CASE("JSON scene errors name the scene and the JSON pointer", "[io][scene][errors]") {

@@ -50,18 +50,55 @@ class SceneParser {
   explicit SceneParser(const std::string& path)
       : path_(path), dir_(std::filesystem::path(path).parent_path()) {}
 
-  Scene parse() {
+  // The scene file's JSON, or IoError.
+  json root() const {
     const std::string text = detail::read_file(path_);
-    json root;
     try {
       check_unique_json_keys(text, path_);
-      root = json::parse(text);
+      return json::parse(text);
     } catch (const json::parse_error& e) {
       detail::fail(path_, 0, fmt::format("JSON syntax error: {}", e.what()));
     } catch (const json::exception& e) {
       // out_of_range 406: a number too large for a double (1e400).
       detail::fail(path_, 0, fmt::format("JSON value out of range: {}", e.what()));
     }
+  }
+
+  // A path as the scene names it, resolved against the scene's folder.
+  std::string resolved(const std::string& given) const {
+    const std::filesystem::path p(given);
+    return (p.is_absolute() ? p : dir_ / p).lexically_normal().string();
+  }
+
+  // The strings the schema reads as paths (/mesh, a proxy's file, a patch's
+  // or handle's sel/file, id/file, def and anim), from the JSON alone.
+  std::vector<SceneFile> named_files() const {
+    std::vector<SceneFile> out;
+    const json r = root();
+    if (!r.is_object()) return out;
+    if (r.contains("mesh") && r["mesh"].is_string()) out.push_back({"/mesh", resolved(r["mesh"])});
+    if (r.contains("proxies") && r["proxies"].is_object())
+      for (const auto& item : r["proxies"].items())
+        if (item.value().is_string()) out.push_back({"/proxies/" + item.key(), resolved(item.value())});
+    for (const char* list : {"patches", "handles"}) {
+      if (!r.contains(list) || !r[list].is_array()) continue;
+      for (std::size_t i = 0; i < r[list].size(); ++i) {
+        const json& entry = r[list][i];
+        if (!entry.is_object()) continue;
+        const std::string at = fmt::format("/{}/{}", list, i);
+        for (const char* key : {"def", "anim"})
+          if (entry.contains(key) && entry[key].is_string()) out.push_back({at + "/" + key, resolved(entry[key])});
+        for (const char* key : {"sel", "id"})
+          if (entry.contains(key) && entry[key].is_object() && entry[key].contains("file") &&
+              entry[key]["file"].is_string())
+            out.push_back({at + "/" + key + "/file", resolved(entry[key]["file"])});
+      }
+    }
+    return out;
+  }
+
+  Scene parse() {
+    const json root = this->root();
     if (!root.is_object()) fail("", "the scene must be a JSON object");
     check_keys(root, "", {"description", "mesh", "energy", "solver", "proxies", "patches", "handles"});
     Scene s;
@@ -81,6 +118,7 @@ class SceneParser {
       for (std::size_t i = 0; i < handles.size(); ++i) parse_handle(handles[i], fmt::format("/handles/{}", i), s);
     }
     check_frames(s);
+    s.files = std::move(files_);
     return s;
   }
 
@@ -120,10 +158,11 @@ class SceneParser {
     if (v < 0 || v >= n_) fail(where, fmt::format("vertex {} out of range (the mesh has {} vertices)", v, n_));
     return static_cast<int>(v);
   }
-  std::string file(const json& j, const std::string& where) const {
+  std::string file(const json& j, const std::string& where) {
     if (!j.is_string() || j.get<std::string>().empty()) fail(where, "expected a file path");
-    const std::filesystem::path p(j.get<std::string>());
-    return (p.is_absolute() ? p : dir_ / p).lexically_normal().string();
+    std::string path = resolved(j.get<std::string>());
+    files_.push_back({where, path});
+    return path;
   }
   std::vector<double> numbers(const json& j, const std::string& where, std::size_t count) const {
     if (!j.is_array() || j.size() != count)
@@ -404,10 +443,13 @@ class SceneParser {
   std::map<std::string, Selection> sels_;
   std::map<std::string, VertexIds> ids_;
   std::vector<std::string> handle_where_;  // JSON pointer of each entry of Scene::handles
+  std::vector<SceneFile> files_;           // every path file() resolved, in order
 };
 
 }  // namespace
 
 Scene read_scene(const std::string& path) { return SceneParser(path).parse(); }
+
+std::vector<SceneFile> scene_files(const std::string& path) { return SceneParser(path).named_files(); }
 
 }  // namespace qpreduce::deform

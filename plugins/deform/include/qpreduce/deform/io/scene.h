@@ -62,6 +62,13 @@ struct ProxySpec {
 
 enum class ConstraintMode { Hard, Soft };
 
+// One file a scene names: where it is named (a JSON pointer: "/mesh",
+// "/handles/0/sel/file") and its path, resolved against the scene's folder.
+struct SceneFile {
+  std::string where;
+  std::string path;
+};
+
 struct Scene {
   std::string source;     // the scene file
   std::string mesh_path;  // resolved path of the mesh
@@ -86,11 +93,20 @@ struct Scene {
   std::vector<SceneHandle> handles;
   // The largest frames() over the handles (0 without handles).
   Index frames = 0;
+  // Every file the scene names, in the order read (a file named twice is
+  // listed twice; a TetGen mesh by the path given, not its siblings).
+  std::vector<SceneFile> files;
 
   const Vertices& rest_positions() const { return is_tet ? solid.V : surface.V; }
   Index vertex_count() const { return rest_positions().rows(); }
 };
 
 Scene read_scene(const std::string& path);
+
+// The files read_scene(path) would read, found in the JSON alone: nothing
+// else is opened or checked. For the check that no output of a command is
+// one of its inputs before any work. Throws IoError, as read_scene does, when
+// the scene file cannot be read or is not JSON.
+std::vector<SceneFile> scene_files(const std::string& path);
 
 }  // namespace qpreduce::deform
