@@ -164,6 +164,11 @@ NewtonStep newton_step(Rounds& rounds, const LocalGlobalState& st, double energy
 namespace {
 
 constexpr int kHoldRounds = 16;
+// The safeguard keeps an extrapolation whose energy is within this of the
+// accepted one, relative: energies that close are equal to their round-off
+// (a sum over the elements), and which of them came out lower is noise that
+// would pick the step by the last bits of the input (its units, its place).
+constexpr double kEnergyRoundOff = 1e-13;
 
 // One run of run_rounds: the pose and rotations (Rounds), the fixed-point
 // iterate z = [vec V′; Q] (reference.h), its image G(z) and an
@@ -347,7 +352,7 @@ class RoundLoop {
       next = rounds_.local_step();
       if (anderson_.accept(
               std::isfinite(next) && rounds_.X.allFinite() ? next : std::numeric_limits<double>::quiet_NaN(),
-              energy_)) {
+              energy_, kEnergyRoundOff * std::abs(energy_))) {
         z_.swap(za_);
       } else {  // the safeguard: the plain round, which never raises the energy
         unpack(gz_);

@@ -199,8 +199,9 @@ struct HandleSetSummary : Outcome {
 // (the safeguard costs nothing extra when the step is accepted). Each
 // accelerated z_{k+1} is an affine combination of global-step outputs, so
 // it meets the (affine) handle constraints and stays in the control layer.
-// Safeguard (Peng et al. 2018): if E(z_{k+1}) > E(z_k) or it is not finite,
-// take the plain G(z_k) instead (monotone) and restart the history.
+// Safeguard (Peng et al. 2018): if E(z_{k+1}) > E(z_k)·(1 + 10⁻¹³) (more
+// than round-off above) or it is not finite, take the plain G(z_k) instead
+// (monotone to round-off) and restart the history.
 class LocalGlobalArap {
  public:
   LocalGlobalArap();
