@@ -365,20 +365,4 @@ RefineWorker& Session::refine_worker(const RefineOptions& options) {
   return *refine_;
 }
 
-Vertices Session::cpu_reconstruction() const {
-  const bool in_double = deformer_->double_basis();
-  const Index rows = in_double ? deformer_->reconstruction_basis_double().rows()
-                               : deformer_->reconstruction_basis().rows();
-  const Eigen::VectorXd flat =
-          in_double ? Eigen::VectorXd(deformer_->reconstruction_basis_double() *
-                                      deformer_->reduced_coordinates_double())
-                    : Eigen::VectorXd(deformer_->reconstruction_basis().cast<double>() *
-                                      deformer_->reduced_coordinates().cast<double>());
-  Vertices V(rows / 3, 3);
-  const auto& frame = deformer_->normalization();
-  const Eigen::Matrix3d M = frame.scale * deformer_->global_rotation();
-  for (Index v = 0; v < V.rows(); ++v) V.row(v) = (frame.centre + M * flat.segment<3>(3 * v)).transpose();
-  return V;
-}
-
 }  // namespace qpr::viewer

@@ -125,9 +125,6 @@ class Session {
   FrameStats step(MeshRenderer* renderer);
   // The last frame's positions (read back from the renderer for the GPU path).
   void positions(const MeshRenderer& renderer, qpreduce::deform::Vertices* V) const;
-  // CPU reconstruction r₀·(B·w) of the last frame from the Deformer's
-  // accessors (double accumulation), to check the GPU path against.
-  qpreduce::deform::Vertices cpu_reconstruction() const;
   // The handle set and targets of the last frame, and its pose (n × 3, read
   // back on the GPU path): what a refine starts from.
   const qpreduce::deform::Handles& handle_set() const { return flat_; }
