@@ -41,8 +41,8 @@ CLI::Option* path_role(CLI::App* command, CLI::Option* option, PathRole role);
 
 // Throws std::invalid_argument naming both options when an output (or cache)
 // is the same file as an input (or a file a scene names) or as another
-// output (files_of); a directory output
-// clashes with a file input or output of the same path. Paths that are
+// output (files_of); a directory output clashes with a file input or output
+// of the same path. Paths that are
 // empty, or name an existing non-regular file (/dev/null, a FIFO), are not
 // compared. A Cache path naming an existing non-empty file that does not
 // start with a qpreduce cache's header is refused ("is not a qpreduce cache").

@@ -23,7 +23,8 @@ namespace qpr {
 // One fingerprint per option of `command` (in its definition order, the same
 // on every rank): the values given, and for an input path (path_roles.h) the
 // contents of the file (with its TetGen set, or the files a scene names:
-// files_of), or of every file under the directory, instead of the path (nodes may keep their copies at different paths). Outputs are not
+// files_of), or of every file under the directory, instead of the path
+// (nodes may keep their copies at different paths). Outputs are not
 // fingerprinted (rank 0 writes them).
 std::vector<std::pair<std::string, std::uint64_t>> option_fingerprints(const CLI::App& command);
 
