@@ -20,6 +20,7 @@
 #include <atomic>
 #include <mutex>
 #include <thread>
+#include <type_traits>
 
 namespace qpreduce::python {
 
@@ -510,20 +511,16 @@ void bind_deformer_state(py::class_<PyDeformer>& cls) {
           "reconstruction_basis",
           [](PyDeformer& s) -> py::object {
             const auto lock = s.lock();
-            if (s.deformer.double_basis()) {
-              Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> B;
+            const auto copy = [](const auto& basis) {  // 3n·p floats or doubles
+              typename std::decay_t<decltype(basis)>::PlainObject B;
               {
-                py::gil_scoped_release release;  // 3n·p doubles
-                B = s.deformer.reconstruction_basis_double();
+                py::gil_scoped_release release;
+                B = basis;
               }
               return py::cast(std::move(B));
-            }
-            Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> B;
-            {
-              py::gil_scoped_release release;  // 3n·p floats
-              B = s.deformer.reconstruction_basis();
-            }
-            return py::cast(std::move(B));
+            };
+            return s.deformer.double_basis() ? copy(s.deformer.reconstruction_basis_double())
+                                             : copy(s.deformer.reconstruction_basis());
           },
           "A copy of B = P·[N UD] (3n, p) in the normalised frame, float32 (float64 with "
           "DeformerOptions.double_basis): V′ = c + σ·r₀·(B·w) with (c, σ) = normalization (for a GPU "
