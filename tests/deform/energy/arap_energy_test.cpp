@@ -293,6 +293,115 @@ TEST_CASE("fit_rotations fits every block as fit_rotation does, four at a time o
   CHECK(worst_trace < 1e-14);
 }
 
+TEST_CASE("fit_rotations_near gives fit_rotation's rotation from any start, "
+          "the same alone or in a group",
+          "[arap][phase2]") {
+  // Blocks of every kind fit_rotation takes (far from conformal, nearly
+  // conformal, reflected with distinct singular values, rank two as a flat
+  // cluster's covariance, nearly singular, tiny and huge), each from a start
+  // its rounds could have: the answer turned by 0 … 0.5 rad, scaled by 2.5;
+  // the identity; and starts it must hand to fit_rotation: turned by 3 rad,
+  // not a rotation, zero, NaN. Every result must be fit_rotation's to
+  // round-off, and a block's result the same bits alone and in a group.
+  const Index d = 23;
+  Eigen::VectorXd G(9 * d), start(9 * d), t(9 * d), expected(9 * d);
+  for (Index a = 0; a < d; ++a) {
+    const Eigen::VectorXd r = random_vector(14, static_cast<unsigned>(900 + a));
+    const Eigen::Matrix3d R = rotation(3.0 * r(0), r.segment<3>(1));
+    Eigen::Matrix3d E;
+    E << r(4), r(5), r(6), r(5), r(7), r(8), r(6), r(8), r(9);
+    Eigen::Matrix3d Ga;
+    switch (a % 7) {
+    case 0:
+      Ga = R * Eigen::Vector3d(3.0, 2.0, 1.0).asDiagonal();
+      break;
+    case 1:
+      Ga = R * (Eigen::Matrix3d::Identity() + 1e-3 * E / E.norm());
+      break;
+    case 2:
+      Ga = R * Eigen::Vector3d(3.0, 2.0, -1.0).asDiagonal();
+      break;
+    case 3:
+      Ga = R * Eigen::Vector3d(3.0, 2.0, 0.0).asDiagonal();
+      break;
+    case 4:
+      Ga = R * Eigen::Vector3d(1.0, 1.0, 1e-9).asDiagonal();
+      break;
+    case 5:
+      Ga = 1e-60 * R * Eigen::Vector3d(3.0, 1.0, 2.0).asDiagonal();
+      break;
+    default:
+      Ga = 1e40 * R * Eigen::Vector3d(1.0, 2.0, 4.0).asDiagonal();
+      break;
+    }
+    const Eigen::Matrix3d F = fit_rotation(Ga);
+    Eigen::Matrix3d S;
+    switch (a % 9) {
+    case 0:
+      S = F;
+      break;
+    case 1:
+      S = F * rotation(1e-8, r.segment<3>(10));
+      break;
+    case 2:
+      S = F * rotation(1e-3, r.segment<3>(10));
+      break;
+    case 3:
+      S = F * rotation(0.1, r.segment<3>(10));
+      break;
+    case 4:
+      S = 2.5 * F * rotation(0.5, r.segment<3>(10));
+      break;
+    case 5:
+      S = Eigen::Matrix3d::Identity();
+      break;
+    case 6:
+      S = F * rotation(3.0, r.segment<3>(10));
+      break;
+    case 7:
+      S = F + 0.01 * E;
+      break;
+    default:
+      S = a % 2 == 0 ? Eigen::Matrix3d::Zero()
+                     : Eigen::Matrix3d::Constant(std::nan(""));
+      break;
+    }
+    Eigen::Map<Eigen::Matrix3d>(G.data() + 9 * a) = Ga;
+    Eigen::Map<Eigen::Matrix3d>(start.data() + 9 * a) = S;
+    Eigen::Map<Eigen::Matrix3d>(expected.data() + 9 * a) = F;
+  }
+  // Blocks that must go to fit_rotation: starts 7 and 8, the tiny G (5);
+  // a start 3 rad away and the identity (the answer is a random rotation)
+  // may or may not.
+  Index must = 0, may = 0;
+  for (Index a = 0; a < d; ++a) {
+    if (a % 9 == 7 || a % 9 == 8 || a % 7 == 5)
+      ++must;
+    else if (a % 9 == 6 || a % 9 == 5)
+      ++may;
+  }
+  const Index fallbacks =
+      fit_rotations_near(G.data(), start.data(), t.data(), d);
+  CHECK(fallbacks >= must);
+  CHECK(fallbacks <= must + may);
+  double worst = 0.0;
+  for (Index a = 0; a < d; ++a) {
+    const Eigen::Map<const Eigen::Matrix3d> T(t.data() + 9 * a),
+        F(expected.data() + 9 * a);
+    INFO("block " << a);
+    CHECK((T - F).norm() < 1e-13);
+    CHECK((T.transpose() * T - Eigen::Matrix3d::Identity()).norm() < 1e-14);
+    worst = std::max(worst, (T - F).norm());
+    Eigen::Matrix3d alone;
+    const Index one_fallback = fit_rotations_near(
+        G.data() + 9 * a, start.data() + 9 * a, alone.data(), 1);
+    UNSCOPED_INFO("block " << a << " G kind " << a % 7 << " start kind "
+                           << a % 9 << " fallback " << one_fallback);
+    CHECK((alone - T).cwiseAbs().maxCoeff() == 0.0);
+  }
+  CHECK(worst < 1e-13);
+}
+
 TEST_CASE("fit_rotation returns a proper rotation even for reflected input", "[arap][phase2]") {
   for (unsigned seed = 0; seed < 50; ++seed) {
     const Eigen::VectorXd a = random_vector(4, seed);

@@ -78,6 +78,7 @@ class ScaledRotationProjection final : public ClusterProjection {
     denominator_ = g_.stiffness;
     proximal_.setZero(g_.d);
     trace_.setZero(g_.d);
+    fits_.setZero(9 * g_.d);
     if (gamma_ > 0.0)
       for (Index a = 0; a < g_.d; ++a)
         for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
@@ -175,12 +176,17 @@ class ScaledRotationProjection final : public ClusterProjection {
   double update(const Eigen::Ref<const Vector<double>>& g, Eigen::Ref<Vector<double>> y, Index first,
                 Index last) const {
     double change2 = 0.0;
+    // Without γ the blocks are independent: their rotations four at a time,
+    // each from its current s_a (fit_rotations_near).
+    if (gamma_ == 0.0)
+      fit_rotations_near(g.data() + 9 * first, y.data() + 9 * first, fits_.data() + 9 * first, last - first);
     for (Index a = first; a < last; ++a) {
       Eigen::Matrix3d G = Eigen::Map<const Eigen::Matrix3d>(g.data() + 9 * a);
       if (gamma_ > 0.0)
         for (SparseMatrix<double>::InnerIterator it(g_.coupling, a); it; ++it)
           G += 2.0 * gamma_ * it.value() * Eigen::Map<const Eigen::Matrix3d>(y.data() + 9 * it.row());
-      const Eigen::Matrix3d t = fit_rotation(G);
+      const Eigen::Matrix3d t = gamma_ == 0.0 ? Eigen::Matrix3d(Eigen::Map<const Eigen::Matrix3d>(fits_.data() + 9 * a))
+                                              : fit_rotation(G);
       double psi = 1.0;
       if (psi_max_ > 1.0 && !g_.rigid[static_cast<size_t>(a)]) {
         psi = std::clamp(t.cwiseProduct(G).sum() / (denominator_(a) + 3.0 * proximal_(a)), 1.0 / psi_max_, psi_max_);
@@ -198,6 +204,7 @@ class ScaledRotationProjection final : public ClusterProjection {
   Eigen::VectorXd denominator_;  // C_a + 6γ·Σ_b W_ab
   Eigen::VectorXd proximal_;     // w_a of set_proximal_weights (d): ½w_a‖s_a‖² = (3/2)·w_a·ψ_a²
   mutable Eigen::VectorXd trace_;  // retract's scratch: tr(tᵀs) per cluster (d)
+  mutable Eigen::VectorXd fits_;   // update's scratch without γ: t_a (9d; parallel rounds write disjoint blocks)
 };
 
 class ArapFamilyModel final : public DeformationModel {

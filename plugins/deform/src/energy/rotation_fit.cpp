@@ -10,6 +10,10 @@
 #include <array>
 #include <cmath>
 
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#endif
+
 namespace qpreduce::deform {
 
 namespace {
@@ -116,9 +120,11 @@ constexpr int kLanes = 4;
 using Lanes = double[9][kLanes];
 
 // GCC makes an AVX2 + FMA copy of the lane loops too and picks it at load
-// time (ifunc); elsewhere the compiler's default vector width.
+// time (ifunc) by the CPU's features (x86-64-v3; "arch=haswell" would test
+// for that Intel model and never pick it on an AMD CPU); elsewhere the
+// compiler's default vector width.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define QPREDUCE_LANE_CLONES __attribute__((target_clones("arch=haswell", "default")))
+#define QPREDUCE_LANE_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
 #else
 #define QPREDUCE_LANE_CLONES
 #endif
@@ -161,6 +167,140 @@ QPREDUCE_LANE_CLONES void conformality_lanes(const Lanes& x, double* norm2, doub
     e2[l] = r0 * r0 + r1 * r1 + r2 * r2 + 2.0 * s * s * (m01 * m01 + m02 * m02 + m12 * m12);
     norm2[l] = n2;
   }
+}
+
+// fit_rotations_near's step: Newton's method on SO(3) for max tr(RᵀG) in
+// each lane still active. With X = RᵀG, f(ω) = tr((R·exp[ω])ᵀG) =
+// f(0) + ωᵀb − ½ωᵀAω + O(ω³), b = axial(X − Xᵀ), A = tr(X)·I − sym(X): the
+// step ω = A⁻¹b, taken by the Cayley rotation C = (I − [h])⁻¹(I + [h]) =
+// I + 2([h] + [h]²)/(1 + |h|²), h = ω/2 (equal to exp[ω] to second order: the
+// convergence stays quadratic). A lane whose A is not positive definite
+// (det A ≤ kNearPd·tr(A)³: a start far from the maximum, or a G whose
+// nearest rotation is not unique) or whose step exceeds kNearStep² in |ω|²
+// is marked failed; a lane stops (active = 0) once |ω|² ≤ kNearDone, after
+// that step. Failed and stopped lanes take ω = 0, C = I exactly, so R keeps
+// its bits and a lane's result does not depend on the other lanes.
+constexpr double kNearPd = 1e-9;
+constexpr double kNearStep = 1.0;
+constexpr double kNearDone = 1e-22;
+
+void rotation_newton_scalar(const Lanes &g, Lanes &r, double *active, double *failed) {
+  for (int l = 0; l < kLanes; ++l) {
+    double x[9];  // X = RᵀG, column-major
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i)
+        x[i + 3 * j] =
+            r[3 * i][l] * g[3 * j][l] + r[3 * i + 1][l] * g[3 * j + 1][l] + r[3 * i + 2][l] * g[3 * j + 2][l];
+    const double tr = x[0] + x[4] + x[8];
+    const double b0 = x[5] - x[7], b1 = x[6] - x[2], b2 = x[1] - x[3];
+    const double a00 = tr - x[0], a11 = tr - x[4], a22 = tr - x[8];
+    const double a01 = -0.5 * (x[1] + x[3]), a02 = -0.5 * (x[2] + x[6]), a12 = -0.5 * (x[5] + x[7]);
+    const double c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+    const double c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+    const double det = a00 * c00 + a01 * c01 + a02 * c02, scale = a00 + a11 + a22;
+    const bool pd = a00 > 0.0 && c22 > 0.0 && det > kNearPd * scale * scale * scale;
+    const double inv = pd ? 1.0 / det : 0.0;
+    double w0 = (c00 * b0 + c01 * b1 + c02 * b2) * inv, w1 = (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+           w2 = (c02 * b0 + c12 * b1 + c22 * b2) * inv;
+    const double n2 = w0 * w0 + w1 * w1 + w2 * w2;
+    const bool ok = pd && n2 <= kNearStep * kNearStep;
+    const bool move = active[l] != 0.0 && ok;
+    failed[l] = active[l] != 0.0 && !ok ? 1.0 : failed[l];
+    active[l] = move && n2 > kNearDone ? 1.0 : 0.0;
+    const double m = move ? 0.5 : 0.0;  // h = ω/2, or 0
+    w0 *= m;
+    w1 *= m;
+    w2 *= m;
+    const double hh = w0 * w0 + w1 * w1 + w2 * w2, s = 2.0 / (1.0 + hh);
+    // C = I + s·([h] + hhᵀ − |h|²I), column-major.
+    const double c[9] = {1.0 + s * (w0 * w0 - hh), s * (w2 + w0 * w1),       s * (-w1 + w0 * w2),
+                         s * (-w2 + w0 * w1),      1.0 + s * (w1 * w1 - hh), s * (w0 + w1 * w2),
+                         s * (w1 + w0 * w2),       s * (-w0 + w1 * w2),      1.0 + s * (w2 * w2 - hh)};
+    double next[9];
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i)
+        next[i + 3 * j] = r[i][l] * c[3 * j] + r[i + 3][l] * c[3 * j + 1] + r[i + 6][l] * c[3 * j + 2];
+    for (int i = 0; i < 9; ++i) r[i][l] = next[i];
+  }
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define QPREDUCE_ROTATION_LANES_AVX2 1
+// a·b − c·d, and s·(q + l): rotation_newton_avx2's pieces.
+__attribute__((target("avx2,fma"))) inline __m256d msub(__m256d a, __m256d b, __m256d c, __m256d d) {
+  return _mm256_fmsub_pd(a, b, _mm256_mul_pd(c, d));
+}
+__attribute__((target("avx2,fma"))) inline __m256d entry(__m256d s, __m256d quadratic, __m256d linear) {
+  return _mm256_mul_pd(s, _mm256_add_pd(quadratic, linear));
+}
+
+// rotation_newton_scalar in AVX2 + FMA: one lane per vector entry.
+__attribute__((target("avx2,fma"))) void rotation_newton_avx2(const Lanes &g, Lanes &r, double *active,
+                                                              double *failed) {
+  __m256d G[9], R[9], x[9];
+  for (int i = 0; i < 9; ++i) {
+    G[i] = _mm256_load_pd(g[i]);
+    R[i] = _mm256_load_pd(r[i]);
+  }
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i)
+      x[i + 3 * j] = _mm256_fmadd_pd(R[3 * i + 2], G[3 * j + 2],
+                                     _mm256_fmadd_pd(R[3 * i + 1], G[3 * j + 1], _mm256_mul_pd(R[3 * i], G[3 * j])));
+  const __m256d half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1.0);
+  const __m256d tr = _mm256_add_pd(_mm256_add_pd(x[0], x[4]), x[8]);
+  const __m256d b0 = _mm256_sub_pd(x[5], x[7]), b1 = _mm256_sub_pd(x[6], x[2]), b2 = _mm256_sub_pd(x[1], x[3]);
+  const __m256d a00 = _mm256_sub_pd(tr, x[0]), a11 = _mm256_sub_pd(tr, x[4]), a22 = _mm256_sub_pd(tr, x[8]);
+  const __m256d a01 = _mm256_mul_pd(_mm256_set1_pd(-0.5), _mm256_add_pd(x[1], x[3]));
+  const __m256d a02 = _mm256_mul_pd(_mm256_set1_pd(-0.5), _mm256_add_pd(x[2], x[6]));
+  const __m256d a12 = _mm256_mul_pd(_mm256_set1_pd(-0.5), _mm256_add_pd(x[5], x[7]));
+  const __m256d c00 = msub(a11, a22, a12, a12), c01 = msub(a02, a12, a01, a22), c02 = msub(a01, a12, a02, a11);
+  const __m256d c11 = msub(a00, a22, a02, a02), c12 = msub(a01, a02, a00, a12), c22 = msub(a00, a11, a01, a01);
+  const __m256d det = _mm256_fmadd_pd(a02, c02, _mm256_fmadd_pd(a01, c01, _mm256_mul_pd(a00, c00)));
+  const __m256d scale = _mm256_add_pd(_mm256_add_pd(a00, a11), a22);
+  const __m256d floor = _mm256_mul_pd(_mm256_set1_pd(kNearPd), _mm256_mul_pd(scale, _mm256_mul_pd(scale, scale)));
+  const __m256d pd =
+      _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(a00, zero, _CMP_GT_OQ), _mm256_cmp_pd(c22, zero, _CMP_GT_OQ)),
+                    _mm256_cmp_pd(det, floor, _CMP_GT_OQ));
+  const __m256d inv = _mm256_and_pd(_mm256_div_pd(one, det), pd);
+  __m256d w0 = _mm256_mul_pd(_mm256_fmadd_pd(c02, b2, _mm256_fmadd_pd(c01, b1, _mm256_mul_pd(c00, b0))), inv);
+  __m256d w1 = _mm256_mul_pd(_mm256_fmadd_pd(c12, b2, _mm256_fmadd_pd(c11, b1, _mm256_mul_pd(c01, b0))), inv);
+  __m256d w2 = _mm256_mul_pd(_mm256_fmadd_pd(c22, b2, _mm256_fmadd_pd(c12, b1, _mm256_mul_pd(c02, b0))), inv);
+  const __m256d n2 = _mm256_fmadd_pd(w2, w2, _mm256_fmadd_pd(w1, w1, _mm256_mul_pd(w0, w0)));
+  const __m256d ok = _mm256_and_pd(pd, _mm256_cmp_pd(n2, _mm256_set1_pd(kNearStep * kNearStep), _CMP_LE_OQ));
+  const __m256d act = _mm256_cmp_pd(_mm256_load_pd(active), zero, _CMP_NEQ_OQ);
+  const __m256d move = _mm256_and_pd(act, ok);
+  _mm256_store_pd(failed, _mm256_blendv_pd(_mm256_load_pd(failed), one, _mm256_andnot_pd(ok, act)));
+  _mm256_store_pd(active,
+                  _mm256_and_pd(one, _mm256_and_pd(move, _mm256_cmp_pd(n2, _mm256_set1_pd(kNearDone), _CMP_GT_OQ))));
+  const __m256d m = _mm256_and_pd(half, move);
+  w0 = _mm256_mul_pd(w0, m);
+  w1 = _mm256_mul_pd(w1, m);
+  w2 = _mm256_mul_pd(w2, m);
+  const __m256d hh = _mm256_fmadd_pd(w2, w2, _mm256_fmadd_pd(w1, w1, _mm256_mul_pd(w0, w0)));
+  const __m256d sc = _mm256_div_pd(_mm256_set1_pd(2.0), _mm256_add_pd(one, hh));
+  const __m256d c[9] = {_mm256_add_pd(one, entry(sc, _mm256_mul_pd(w0, w0), _mm256_sub_pd(zero, hh))),
+                        entry(sc, _mm256_mul_pd(w0, w1), w2),
+                        entry(sc, _mm256_mul_pd(w0, w2), _mm256_sub_pd(zero, w1)),
+                        entry(sc, _mm256_mul_pd(w0, w1), _mm256_sub_pd(zero, w2)),
+                        _mm256_add_pd(one, entry(sc, _mm256_mul_pd(w1, w1), _mm256_sub_pd(zero, hh))),
+                        entry(sc, _mm256_mul_pd(w1, w2), w0),
+                        entry(sc, _mm256_mul_pd(w0, w2), w1),
+                        entry(sc, _mm256_mul_pd(w1, w2), _mm256_sub_pd(zero, w0)),
+                        _mm256_add_pd(one, entry(sc, _mm256_mul_pd(w2, w2), _mm256_sub_pd(zero, hh)))};
+  for (int j = 0; j < 3; ++j)
+    for (int i = 0; i < 3; ++i)
+      _mm256_store_pd(r[i + 3 * j],
+                      _mm256_fmadd_pd(R[i + 6], c[3 * j + 2],
+                                      _mm256_fmadd_pd(R[i + 3], c[3 * j + 1], _mm256_mul_pd(R[i], c[3 * j]))));
+}
+#endif
+
+void rotation_newton_lanes(const Lanes &g, Lanes &r, double *active, double *failed) {
+#ifdef QPREDUCE_ROTATION_LANES_AVX2
+  static const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  if (avx2) return rotation_newton_avx2(g, r, active, failed);
+#endif
+  rotation_newton_scalar(g, r, active, failed);
 }
 
 }  // namespace
@@ -230,6 +370,55 @@ Eigen::Matrix3d fit_rotation_planar(const Eigen::Matrix3d& G, const Eigen::Vecto
   Eigen::Matrix3d R = W.col(0) * t1.transpose() + W.col(1) * t2.transpose();
   R.noalias() += W.col(0).cross(W.col(1)) * n.transpose();
   return R;
+}
+
+Index fit_rotations_near(const double *G, const double *start, double *t, Index d) {
+  // Newton from the start until every lane has stopped or failed; at most
+  // kSteps steps (from a start within a tenth of a radian: three or four).
+  constexpr int kSteps = 8;
+  Index fallbacks = 0;
+  for (Index a0 = 0; a0 < d; a0 += kLanes) {
+    const int lanes = static_cast<int>(std::min<Index>(kLanes, d - a0));
+    alignas(32) Lanes g, r;
+    alignas(32) double active[kLanes], failed[kLanes];
+    for (int l = 0; l < kLanes; ++l) {
+      active[l] = 0.0;
+      failed[l] = 0.0;
+      for (int i = 0; i < 9; ++i) g[i][l] = r[i][l] = i % 4 == 0 ? 1.0 : 0.0;
+      if (l >= lanes) continue;
+      const Eigen::Map<const Eigen::Matrix3d> Ga(G + 9 * (a0 + l)), Sa(start + 9 * (a0 + l));
+      // The start's direction must be a rotation to round-off (a rotation
+      // or a scaled one, as the rounds keep them), G of moderate size (the
+      // adjugate above is quadratic, det A cubic in G), else fit_rotation.
+      const double gn2 = Ga.squaredNorm(), sn2 = Sa.squaredNorm();
+      const Eigen::Matrix3d R0 = Sa * std::sqrt(3.0 / sn2);
+      const bool usable = gn2 > 1e-100 && gn2 < 1e100 && sn2 > 0.0 && std::isfinite(sn2) && R0.determinant() > 0.0 &&
+                          (R0.transpose() * R0 - Eigen::Matrix3d::Identity()).squaredNorm() <= 1e-26;
+      if (!usable) {
+        failed[l] = 1.0;
+        continue;
+      }
+      active[l] = 1.0;
+      for (int i = 0; i < 9; ++i) {
+        g[i][l] = Ga(i);
+        r[i][l] = R0(i);
+      }
+    }
+    for (int step = 0; step < kSteps; ++step) {
+      rotation_newton_lanes(g, r, active, failed);
+      if (std::all_of(active, active + kLanes, [](double v) { return v == 0.0; })) break;
+    }
+    for (int l = 0; l < lanes; ++l) {
+      Eigen::Map<Eigen::Matrix3d> out(t + 9 * (a0 + l));
+      if (failed[l] != 0.0 || active[l] != 0.0) {
+        ++fallbacks;
+        out = fit_rotation(Eigen::Map<const Eigen::Matrix3d>(G + 9 * (a0 + l)));
+      } else {
+        for (int i = 0; i < 9; ++i) out(i) = r[i][l];
+      }
+    }
+  }
+  return fallbacks;
 }
 
 }  // namespace qpreduce::deform

@@ -160,6 +160,19 @@ Eigen::Matrix3d fit_rotation(const Eigen::Matrix3d& G);
 // No heap allocation.
 void fit_rotations(double* s, Index d, double* trace = nullptr);
 
+// Nearest rotations of d 3×3 blocks from starts near them, as Phase 2's
+// rounds have them: t_a = argmax tr(tᵀG_a) over SO(3) (fit_rotation's, to
+// round-off), by Newton's method on SO(3) from start_a's direction
+// (start_a·√3/‖start_a‖_F, a rotation or a scaled rotation), four blocks
+// at a time in SIMD lanes. A block whose start is not a rotation to
+// 10⁻¹³, whose G is beyond 10^±50 in norm, or whose steps do not converge
+// (a start far from the answer, a nearest rotation that is not unique)
+// goes to fit_rotation; either way a block's result does not depend on
+// the other blocks. G, start, t: 9·d entries, block a column-major at
+// 9a; t may not alias G or start. Returns how many blocks went to
+// fit_rotation. No heap allocation.
+Index fit_rotations_near(const double* G, const double* start, double* t, Index d);
+
 // The same rotation when G·n = 0 for a unit vector n, as for the covariance
 // G = Σ c e′eᵀ of an element whose rest edges e all lie in the plane n⊥
 // (flat parts of a surface), where fit_rotation has to take the SVD path.
