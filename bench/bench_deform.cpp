@@ -72,6 +72,7 @@
 #include <qpreduce/deform/refine/refine.h>
 #include <qpreduce/point_reconstruction.h>
 
+#include <qpreduce/util/cpu_features.h>
 #include <qpreduce/util/timer.h>
 
 #include <benchmark/benchmark.h>
@@ -414,7 +415,10 @@ void BM_RefineRound(benchmark::State& state, const ModelSpec* spec, Backend back
 }  // namespace
 
 int main(int argc, char** argv) {
+  qpreduce::restart_with_blas_core(argv);  // OpenBLAS's kernels for this CPU (cpu_features.h)
   benchmark::Initialize(&argc, argv);
+  // The BLAS kernels behind OP and the precompute (qpreduce/util/cpu_features.h).
+  benchmark::AddCustomContext("blas_core", qpreduce::blas_core());
   const std::string dir = bench::shared_data_dir();
   int found = 0;
   for (const ModelSpec& spec : kModels) {

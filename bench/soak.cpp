@@ -56,6 +56,7 @@
 #include <qpreduce/deform/mesh/shapes.h>
 
 #include <qpreduce/util/atomic_file.h>
+#include <qpreduce/util/cpu_features.h>
 #include <qpreduce/util/timer.h>
 
 #include <Eigen/Geometry>
@@ -582,6 +583,7 @@ int run(const Args& a) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  qpreduce::restart_with_blas_core(argv);  // OpenBLAS's kernels for this CPU (cpu_features.h)
   const Args a = parse(argc, argv);
   try {
     return run(a);

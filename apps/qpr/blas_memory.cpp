@@ -1,5 +1,7 @@
 #include "blas_memory.h"
 
+#include <qpreduce/util/cpu_features.h>
+
 #include <fmt/format.h>
 
 #include <dlfcn.h>
@@ -50,6 +52,7 @@ bool single_threaded_blas_under_limit(char** argv) {
   // (the engine's blocked solves call CHOLMOD from each OpenMP thread): one
   // thread too, unless the user chose.
   setenv("OMP_NUM_THREADS", "1", 0);
+  qpreduce::prefer_blas_core();  // one restart for both (cpu_features.h)
   execv("/proc/self/exe", argv);
   std::fprintf(stderr,
                "qpr: error: cannot restart with OPENBLAS_NUM_THREADS=1 under the address-space limit "

@@ -3,6 +3,8 @@
 #include "blas_memory.h"
 #include "commands.h"
 
+#include <qpreduce/util/cpu_features.h>
+
 #include <CLI/CLI.hpp>
 
 #include <fcntl.h>
@@ -21,6 +23,9 @@ int main(int argc, char** argv) {
   // and takes up front (blas_memory.h). The variable must be set before the
   // library loads, hence a fresh start of this program with it.
   if (qpr::single_threaded_blas_under_limit(argv)) return 2;
+  // Where Debian's OpenBLAS runs its generic kernels on a CPU newer than it
+  // knows, a fresh start with the kernels for this CPU (cpu_features.h).
+  qpreduce::restart_with_blas_core(argv);
   // Past a file-size limit a write then fails with EFBIG, which the writers
   // report (leaving the earlier file), instead of SIGXFSZ ending the process.
   std::signal(SIGXFSZ, SIG_IGN);

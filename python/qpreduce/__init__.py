@@ -16,7 +16,17 @@ outcomes come back as summaries with a ``status`` (``qpreduce.Status``), and
 
 import sys as _sys
 
-from . import _qpreduce
+# Before anything loads OpenBLAS (NumPy, _qpreduce): prefer its kernels for
+# this CPU where Debian's OpenBLAS would fall back to generic ones
+# (qpreduce/util/cpu_features.h; a set OPENBLAS_CORETYPE is kept). When NumPy
+# was imported first, OpenBLAS has chosen already: blas_core() says what runs.
+from . import _cpu
+
+if "numpy" not in _sys.modules:
+    _cpu.prefer_blas_core()
+blas_core = _cpu.blas_core
+
+from . import _qpreduce  # noqa: E402
 from ._qpreduce import (
     Backend,
     CompanionDemand,

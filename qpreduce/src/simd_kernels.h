@@ -9,11 +9,11 @@
 #pragma once
 
 #include "qpreduce/common.h"
+#include "qpreduce/util/cpu_features.h"
 
 #include <algorithm>
 #include <cassert>
 #include <cstdlib>
-#include <string>
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -296,17 +296,9 @@ __attribute__((target("avx2,fma"))) inline void rows3_dot_avx2(const float* B, I
   out[2] = hsum(_mm256_add_ps(a2, b2));
 }
 
-// True when the CPU has AVX2 and FMA and the environment variable
-// QPREDUCE_DISABLE_AVX2 is unset or "0" (set it to compare against Eigen's
-// baseline kernels in the same build). Read once.
-inline bool cpu_has_avx2_fma() {
-  static const bool yes = [] {
-    const char* off = std::getenv("QPREDUCE_DISABLE_AVX2");
-    if (off != nullptr && std::string(off) != "0") return false;
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }();
-  return yes;
-}
+// The one run-time test (qpreduce/util/cpu_features.h), honouring
+// QPREDUCE_DISABLE_AVX2.
+using qpreduce::cpu_has_avx2_fma;
 #endif
 
 // y += M·x for a column-major block M (rows × cols, leading dimension ld).

@@ -2,6 +2,7 @@
 // a 3 × 3 matrix by Newton's iteration with an SVD fallback, in SIMD lanes
 // for a batch of clusters, and the planar fit of flat elements.
 #include "qpreduce/deform/energy/arap_energy.h"
+#include "qpreduce/util/cpu_features.h"
 
 #include <Eigen/Dense>
 #include <Eigen/SVD>
@@ -184,7 +185,7 @@ constexpr double kNearPd = 1e-9;
 constexpr double kNearStep = 1.0;
 constexpr double kNearDone = 1e-22;
 
-void rotation_newton_scalar(const Lanes &g, Lanes &r, double *active, double *failed) {
+void rotation_newton_scalar(const Lanes& g, Lanes& r, double* active, double* failed) {
   for (int l = 0; l < kLanes; ++l) {
     double x[9];  // X = RᵀG, column-major
     for (int j = 0; j < 3; ++j)
@@ -235,8 +236,8 @@ __attribute__((target("avx2,fma"))) inline __m256d entry(__m256d s, __m256d quad
 }
 
 // rotation_newton_scalar in AVX2 + FMA: one lane per vector entry.
-__attribute__((target("avx2,fma"))) void rotation_newton_avx2(const Lanes &g, Lanes &r, double *active,
-                                                              double *failed) {
+__attribute__((target("avx2,fma"))) void rotation_newton_avx2(const Lanes& g, Lanes& r, double* active,
+                                                              double* failed) {
   __m256d G[9], R[9], x[9];
   for (int i = 0; i < 9; ++i) {
     G[i] = _mm256_load_pd(g[i]);
@@ -295,10 +296,9 @@ __attribute__((target("avx2,fma"))) void rotation_newton_avx2(const Lanes &g, La
 }
 #endif
 
-void rotation_newton_lanes(const Lanes &g, Lanes &r, double *active, double *failed) {
+void rotation_newton_lanes(const Lanes& g, Lanes& r, double* active, double* failed) {
 #ifdef QPREDUCE_ROTATION_LANES_AVX2
-  static const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  if (avx2) return rotation_newton_avx2(g, r, active, failed);
+  if (cpu_has_avx2_fma()) return rotation_newton_avx2(g, r, active, failed);
 #endif
   rotation_newton_scalar(g, r, active, failed);
 }
@@ -372,7 +372,7 @@ Eigen::Matrix3d fit_rotation_planar(const Eigen::Matrix3d& G, const Eigen::Vecto
   return R;
 }
 
-Index fit_rotations_near(const double *G, const double *start, double *t, Index d) {
+Index fit_rotations_near(const double* G, const double* start, double* t, Index d) {
   // Newton from the start until every lane has stopped or failed; at most
   // kSteps steps (from a start within a tenth of a radian: three or four).
   constexpr int kSteps = 8;
