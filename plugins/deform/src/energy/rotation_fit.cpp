@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
 #include <immintrin.h>
@@ -167,6 +168,34 @@ QPREDUCE_LANE_CLONES void conformality_lanes(const Lanes& x, double* norm2, doub
     const double r0 = s * m00 - 1.0, r1 = s * m11 - 1.0, r2 = s * m22 - 1.0;
     e2[l] = r0 * r0 + r1 * r1 + r2 * r2 + 2.0 * s * s * (m01 * m01 + m02 * m02 + m12 * m12);
     norm2[l] = n2;
+  }
+}
+
+// fit_rotations_near's start in each lane: r (the start s_a) scaled to a
+// rotation's size, r ← s·√(3/‖s‖²), and usable[l] = 1 when Newton's method
+// may start there, else 0: G of moderate size (the adjugate below is
+// quadratic, det A cubic in G) and the start's direction a rotation to
+// round-off (a rotation or a scaled one, as the rounds keep them).
+QPREDUCE_LANE_CLONES void start_lanes(const Lanes& g, Lanes& r, double* usable) {
+  for (int l = 0; l < kLanes; ++l) {
+    double gn2 = 0.0, sn2 = 0.0;
+    for (int i = 0; i < 9; ++i) {
+      gn2 += g[i][l] * g[i][l];
+      sn2 += r[i][l] * r[i][l];
+    }
+    const double scale = std::sqrt(3.0 / sn2);
+    for (int i = 0; i < 9; ++i) r[i][l] *= scale;
+    const double a = r[0][l], d = r[1][l], g0 = r[2][l], b = r[3][l], e = r[4][l], h = r[5][l], c = r[6][l],
+                 f = r[7][l], i = r[8][l];
+    const double det = a * (e * i - f * h) + b * (f * g0 - d * i) + c * (d * h - e * g0);
+    // ‖RᵀR − I‖²_F: column j of R is (r[3j], r[3j+1], r[3j+2]).
+    const double m00 = a * a + d * d + g0 * g0 - 1.0, m11 = b * b + e * e + h * h - 1.0,
+                 m22 = c * c + f * f + i * i - 1.0;
+    const double m01 = a * b + d * e + g0 * h, m02 = a * c + d * f + g0 * i, m12 = b * c + e * f + h * i;
+    const double off2 = m00 * m00 + m11 * m11 + m22 * m22 + 2.0 * (m01 * m01 + m02 * m02 + m12 * m12);
+    const bool ok = gn2 > 1e-100 && gn2 < 1e100 && sn2 > 0.0 && sn2 <= std::numeric_limits<double>::max() &&
+                    det > 0.0 && off2 <= 1e-26;
+    usable[l] = ok ? 1.0 : 0.0;
   }
 }
 
@@ -384,25 +413,22 @@ Index fit_rotations_near(const double* G, const double* start, double* t, Index 
     for (int l = 0; l < kLanes; ++l) {
       active[l] = 0.0;
       failed[l] = 0.0;
-      for (int i = 0; i < 9; ++i) g[i][l] = r[i][l] = i % 4 == 0 ? 1.0 : 0.0;
-      if (l >= lanes) continue;
-      const Eigen::Map<const Eigen::Matrix3d> Ga(G + 9 * (a0 + l)), Sa(start + 9 * (a0 + l));
-      // The start's direction must be a rotation to round-off (a rotation
-      // or a scaled one, as the rounds keep them), G of moderate size (the
-      // adjugate above is quadratic, det A cubic in G), else fit_rotation.
-      const double gn2 = Ga.squaredNorm(), sn2 = Sa.squaredNorm();
-      const Eigen::Matrix3d R0 = Sa * std::sqrt(3.0 / sn2);
-      const bool usable = gn2 > 1e-100 && gn2 < 1e100 && sn2 > 0.0 && std::isfinite(sn2) && R0.determinant() > 0.0 &&
-                          (R0.transpose() * R0 - Eigen::Matrix3d::Identity()).squaredNorm() <= 1e-26;
-      if (!usable) {
-        failed[l] = 1.0;
-        continue;
-      }
-      active[l] = 1.0;
       for (int i = 0; i < 9; ++i) {
-        g[i][l] = Ga(i);
-        r[i][l] = R0(i);
+        const bool used = l < lanes;
+        g[i][l] = used ? G[9 * (a0 + l) + i] : (i % 4 == 0 ? 1.0 : 0.0);
+        r[i][l] = used ? start[9 * (a0 + l) + i] : (i % 4 == 0 ? 1.0 : 0.0);
       }
+    }
+    // The idle lanes of a partial group hold identities: they stay inactive
+    // and are never read. An unusable lane takes identities too, so that no
+    // lane computes with a start or a G out of range.
+    alignas(32) double usable[kLanes];
+    start_lanes(g, r, usable);
+    for (int l = 0; l < lanes; ++l) {
+      active[l] = usable[l];
+      failed[l] = 1.0 - usable[l];
+      if (usable[l] == 0.0)
+        for (int i = 0; i < 9; ++i) g[i][l] = r[i][l] = i % 4 == 0 ? 1.0 : 0.0;
     }
     for (int step = 0; step < kSteps; ++step) {
       rotation_newton_lanes(g, r, active, failed);
