@@ -12,6 +12,7 @@
 #include <qpreduce/deform/io/mesh_io.h>
 #include <qpreduce/deform/io/tet_io.h>
 #include <qpreduce/deform/pipeline/run_scenario.h>
+#include <qpreduce/util/cpu_features.h>
 #include <qpreduce/util/timer.h>
 
 #include <CLI/CLI.hpp>
@@ -405,6 +406,7 @@ void report_precompute(const PrecomputeSummary& pre, bool cache_loaded, double p
   report["precompute_peak_mb"] = peak_mb;
   report["subspace_backend"] = to_string(pre.subspace.backend_used);
   report["kkt_residual"] = pre.subspace.kkt_residual;
+  report["blas_core"] = qpreduce::blas_core();  // the BLAS kernels behind it and OP (cpu_features.h)
 }
 
 // The report's per-frame keys: timings (medians), residuals, rounds, stops.
