@@ -24,7 +24,7 @@ bool cpu_has_avx2_fma() {
 
 const char* preferred_blas_core() {
 #if defined(__x86_64__) && defined(__GNUC__)
-  __builtin_cpu_init();  // may run before libgcc's own initialiser (a start-up hook)
+  __builtin_cpu_init();  // idempotent: safe however early the caller runs
   if (!__builtin_cpu_is("intel")) return "";
   if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512cd") &&
       __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl"))
