@@ -35,8 +35,8 @@ def run(qpr, mesh, sel, deff, iterations, tolerance, window, work):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     here = os.path.dirname(os.path.abspath(__file__))
-    ap.add_argument("--qpr", default=os.path.join(here, "..", "build", "bin", "qpr"))
-    ap.add_argument("--data", default=os.path.join(here, "..", "..", "shared", "data"))
+    ap.add_argument("--qpr", default=os.path.normpath(os.path.join(here, "..", "build", "bin", "qpr")))
+    ap.add_argument("--data", default=os.path.normpath(os.path.join(here, "..", "..", "shared", "data")))
     ap.add_argument("--tolerance", type=float, default=1e-6)
     ap.add_argument("--cap", type=int, default=20000)
     ap.add_argument("--windows", default="0,2,3,5,8")

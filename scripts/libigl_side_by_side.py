@@ -42,7 +42,7 @@ def write_off(path, V, F):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default="bumpy_plane")
-    ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
+    ap.add_argument("--data", default=os.path.normpath(os.path.join(os.path.abspath(__file__), "..", "..", "..", "shared", "data")))
     ap.add_argument("--harness", default=None, help="the built bench/external/libigl_arap.cpp")
     ap.add_argument("--cgal-harness", default=None, help="the built bench/external/cgal_arap.cpp")
     ap.add_argument("--max-rounds", type=int, default=20000, help="libigl's rounds at most")

@@ -46,7 +46,7 @@ def last_pose(mesh, scale, options, last_rounds=None, frames=4):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--data", default=os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data"))
+    ap.add_argument("--data", default=os.path.normpath(os.path.join(os.path.abspath(__file__), "..", "..", "..", "shared", "data")))
     ap.add_argument("--scales", default="1e-30,1e-20,1e6,1e9,1e25")
     ap.add_argument("--rounds", type=int, default=60)
     a = ap.parse_args()
